@@ -1,0 +1,43 @@
+# eegt_blender: `make demo` runs the main job on a bundled tangled mesh, `make test` runs
+# every test suite. Both create .venv (Python 3.11) on first use.
+SHELL := /bin/bash
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-stamp
+
+.PHONY: venv test lint test-core test-blender e2e demo demo-core build bench clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "Python 3.11 is needed (Blender 4.2-5.0 run 3.11), found " + sys.version.split()[0])'
+	@$(PYTHON) -m venv --help >/dev/null 2>&1 && $(PYTHON) -c 'import ensurepip' 2>/dev/null || \
+	  { [ "$$(id -u)" = 0 ] && apt-get update -q && apt-get install -y -q python3-venv; }
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q --group dev
+	touch $(STAMP)
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
+
+test-core: $(STAMP)
+	$(PY) -m pytest -q -m "not blender and not e2e" tests
+
+test-blender: $(STAMP)
+	$(PY) -m pytest -q -m blender tests
+
+test: lint
+	$(PY) -m pytest -q -m "not e2e" tests
+
+demo: demo-core
+
+demo-core: $(STAMP)
+	$(PY) -m bench.demo_core --out out
+
+bench: $(STAMP)
+	$(PY) -m bench.run
+
+clean:
+	rm -rf $(VENV) dist out .pytest_cache .ruff_cache
