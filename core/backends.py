@@ -1,0 +1,46 @@
+"""Backend choice: 'numpy' (reference), 'opencl', or 'auto' (OpenCL when usable, else NumPy)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .engine_numpy import NumpyEngine
+from .faces import FaceSet
+from .params import EEGTParams
+
+__all__ = ["BACKENDS", "make_engine"]
+
+BACKENDS = ("numpy", "opencl", "auto")
+_warned: set[str] = set()
+
+
+def _opencl_engine_class():
+    """The OpenCL engine class, or a one-line reason why it cannot be used."""
+    try:
+        from . import engine_opencl
+    except ImportError as exc:  # the backend module or pyopencl is missing
+        return None, f"OpenCL backend unavailable ({exc}); using NumPy"
+    return engine_opencl.available()
+
+
+def make_engine(
+    backend: str, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams
+):
+    """Build the engine for `backend`; returns (engine, name actually used)."""
+    if backend not in BACKENDS:
+        raise ValueError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
+    if backend in ("opencl", "auto"):
+        cls, why = _opencl_engine_class()
+        if cls is not None:
+            try:
+                return cls(points, faces, free, params), cls.name
+            except RuntimeError as exc:  # device refused the kernels: fall back, say why
+                why = f"OpenCL backend failed ({exc}); using NumPy"
+        name = "numpy"
+        if why and why not in _warned:
+            _warned.add(why)
+            import warnings
+
+            warnings.warn(why, RuntimeWarning, stacklevel=3)
+        return NumpyEngine(points, faces, free, params), f"{name} ({why})" if why else name
+    return NumpyEngine(points, faces, free, params), "numpy"

@@ -1,0 +1,143 @@
+"""The NumPy backend: one EEGT iteration over all elements at once (the reference engine).
+
+State is structure-of-arrays (x, y float64 node coordinates); faces are grouped by arity and
+each group's corner coordinates are gathered as (n, F) arrays. Stitching scatters the
+weighted corner moves to nodes with `np.bincount` over one precomputed corner->node array.
+Every update is a Jacobi update: all moves are computed from the old positions, then applied.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .distance import NearestBoundary
+from .faces import FaceSet
+from .params import EEGTParams
+from .quality import Stats, group_quality, stats_of
+from .transform import group_transform_delta
+
+__all__ = ["NumpyEngine"]
+
+_DIST_FLOOR = 1e-3  # d_j never below this fraction of the mean edge length
+
+
+class NumpyEngine:
+    """Holds the mesh state of one run; the pipeline drives it iteration by iteration."""
+
+    name = "numpy"
+
+    def __init__(self, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams):
+        self.params = params
+        self.faces = faces
+        self.x = np.ascontiguousarray(points[:, 0], dtype=np.float64).copy()
+        self.y = np.ascontiguousarray(points[:, 1], dtype=np.float64).copy()
+        self.n_nodes = self.x.size
+        self.free = np.ascontiguousarray(free, dtype=bool)
+        self.groups = faces.groups
+        self.corner_nodes = np.concatenate([g.nodes.ravel() for g in self.groups])
+        fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
+        self.nearest = NearestBoundary(self.x[fixed_idx], self.y[fixed_idx])
+        self.q = [group_quality(*self._gather(g)) for g in self.groups]
+        self.lbar = self._mean_edge_length()
+        self.inv_d_pow: list[np.ndarray] = []
+        self.iteration = 0
+        self._refresh_distances()
+        self.best_x = self.x.copy()
+        self.best_y = self.y.copy()
+
+    # -- helpers -------------------------------------------------------------------------
+    def _gather(self, g) -> tuple[np.ndarray, np.ndarray]:
+        return self.x[g.nodes], self.y[g.nodes]
+
+    def _mean_edge_length(self) -> float:
+        total, count = 0.0, 0
+        for g in self.groups:
+            X, Y = self._gather(g)
+            total += float(np.hypot(np.roll(X, -1, 0) - X, np.roll(Y, -1, 0) - Y).mean(0).sum())
+            count += g.size
+        lbar = total / count
+        if not np.isfinite(lbar) or lbar <= 0:
+            span = max(np.ptp(self.x), np.ptp(self.y))
+            lbar = span if span > 0 else 1.0
+        return lbar
+
+    def _refresh_distances(self) -> None:
+        """f_j = (lbar / d_j)^c from element vertex centroids to the nearest fixed node."""
+        c = self.params.c
+        floor = _DIST_FLOOR * self.lbar
+        self.inv_d_pow = []
+        for g in self.groups:
+            X, Y = self._gather(g)
+            d = np.maximum(self.nearest.query(X.mean(0), Y.mean(0)), floor)
+            self.inv_d_pow.append((self.lbar / d) ** c)
+
+    def _quality_all(self) -> list[np.ndarray]:
+        return [group_quality(*self._gather(g)) for g in self.groups]
+
+    # -- the iteration -------------------------------------------------------------------
+    def stats(self) -> Stats:
+        """Stats of the current positions."""
+        return stats_of(self.q)
+
+    def _node_moves(self) -> tuple[np.ndarray, np.ndarray]:
+        """Weighted mean of the transformed-corner moves at every free node (eq. 18)."""
+        p = self.params
+        wx, wy, ww = [], [], []
+        for g, q, f in zip(self.groups, self.q, self.inv_d_pow):
+            X, Y = self._gather(g)
+            DX, DY = group_transform_delta(X, Y, p.a * (1.0 - q), p.scaling)
+            gq = np.where(q > 0, (1.0 - q) ** p.eta, p.inverted_weight)
+            w = f * gq
+            wx.append((DX * w).ravel())
+            wy.append((DY * w).ravel())
+            ww.append(np.broadcast_to(w, DX.shape).ravel())
+        cat = np.concatenate if len(self.groups) > 1 else (lambda parts: parts[0])
+        n = self.n_nodes
+        sx = np.bincount(self.corner_nodes, cat(wx), minlength=n)
+        sy = np.bincount(self.corner_nodes, cat(wy), minlength=n)
+        sw = np.bincount(self.corner_nodes, cat(ww), minlength=n)
+        moving = self.free & (sw > 0)
+        dx = np.zeros(n)
+        dy = np.zeros(n)
+        np.divide(sx, sw, out=dx, where=moving)
+        np.divide(sy, sw, out=dy, where=moving)
+        return dx, dy
+
+    def step(self, phase: str) -> Stats:
+        """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back."""
+        self.iteration += 1
+        if self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0:
+            self._refresh_distances()
+        dx, dy = self._node_moves()
+        moving = self.free & ((dx != 0) | (dy != 0))
+        old_x, old_y = self.x.copy(), self.y.copy()
+        np.add(self.x, dx, out=self.x, where=moving)
+        np.add(self.y, dy, out=self.y, where=moving)
+        self.q = self._quality_all()
+        if phase == "smooth":
+            self._revert_inverted(old_x, old_y)
+        return self.stats()
+
+    def _revert_inverted(self, old_x: np.ndarray, old_y: np.ndarray) -> None:
+        """Move every node of a face that became inverted back, until none is inverted."""
+        while True:
+            back = np.zeros(self.n_nodes, dtype=bool)
+            for g, q in zip(self.groups, self.q):
+                back[g.nodes[:, q == 0.0].ravel()] = True
+            back &= (self.x != old_x) | (self.y != old_y)
+            if not back.any():
+                return
+            self.x[back] = old_x[back]
+            self.y[back] = old_y[back]
+            self.q = self._quality_all()
+
+    # -- best iterate --------------------------------------------------------------------
+    def save_best(self) -> None:
+        np.copyto(self.best_x, self.x)
+        np.copyto(self.best_y, self.y)
+
+    def best_points(self) -> np.ndarray:
+        return np.column_stack([self.best_x, self.best_y])
+
+    def points(self) -> np.ndarray:
+        return np.column_stack([self.x, self.y])

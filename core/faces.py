@@ -1,0 +1,140 @@
+"""Polygon faces grouped by arity: the one mesh-connectivity model the core works on.
+
+Any face list (Python lists, an (F, k) array, or Blender-style CSR arrays) becomes a
+`FaceSet`: one `ArityGroup` per polygon size, each holding its node indices as an (n, F_n)
+array (structure of arrays, so corner k of every face is one contiguous row) and the
+original face numbers, so per-face results can be returned in the caller's order.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ArityGroup", "FaceSet", "as_faceset", "faces_from_csr"]
+
+
+@dataclass(frozen=True)
+class ArityGroup:
+    """All faces with `n` corners: `nodes[k, j]` is corner k of face `ids[j]`."""
+
+    n: int
+    ids: np.ndarray  # (F_n,) original face numbers
+    nodes: np.ndarray  # (n, F_n) node indices, counterclockwise = valid
+
+    @property
+    def size(self) -> int:
+        return int(self.ids.size)
+
+
+class FaceSet:
+    """Validated polygon faces over `n_nodes` nodes, grouped by arity (ascending)."""
+
+    def __init__(self, offsets: np.ndarray, indices: np.ndarray, n_nodes: int | None = None):
+        offsets = np.asarray(offsets, dtype=np.int64)
+        indices = np.asarray(indices, dtype=np.int64)
+        if offsets.ndim != 1 or offsets.size < 1 or offsets[0] != 0:
+            raise ValueError("face offsets must be a 1D array starting at 0")
+        counts = np.diff(offsets)
+        if counts.size == 0:
+            raise ValueError("mesh has no faces")
+        if indices.ndim != 1 or offsets[-1] != indices.size:
+            raise ValueError("face offsets do not match the number of face corners")
+        small = np.flatnonzero(counts < 3)
+        if small.size:
+            f = int(small[0])
+            raise ValueError(f"face {f} has {int(counts[f])} vertices (at least 3 are needed)")
+        self.n_faces = int(counts.size)
+        self.offsets = offsets
+        self.indices = indices
+        self.counts = counts
+        groups = []
+        for n in np.unique(counts):
+            ids = np.flatnonzero(counts == n)
+            cols = offsets[ids][None, :] + np.arange(n)[:, None]
+            groups.append(ArityGroup(int(n), ids, np.ascontiguousarray(indices[cols])))
+        self.groups: tuple[ArityGroup, ...] = tuple(groups)
+        if n_nodes is not None:
+            self.check(n_nodes)
+
+    def check(self, n_nodes: int) -> None:
+        """Raise ValueError for an index outside [0, n_nodes) or a face repeating a node."""
+        if self.indices.size and (self.indices.min() < 0 or self.indices.max() >= n_nodes):
+            bad = np.flatnonzero((self.indices < 0) | (self.indices >= n_nodes))[0]
+            face = int(np.searchsorted(self.offsets, bad, side="right") - 1)
+            raise ValueError(
+                f"face {face} references node {int(self.indices[bad])}, "
+                f"but there are only {n_nodes} nodes"
+            )
+        for g in self.groups:
+            srt = np.sort(g.nodes, axis=0)
+            dup = np.flatnonzero((srt[1:] == srt[:-1]).any(axis=0))
+            if dup.size:
+                j = int(dup[0])
+                col = srt[:, j]
+                node = int(col[1:][col[1:] == col[:-1]][0])
+                raise ValueError(f"face {int(g.ids[j])} repeats node {node}")
+
+    @property
+    def n_corners(self) -> int:
+        return int(self.indices.size)
+
+    def used_nodes(self, n_nodes: int) -> np.ndarray:
+        """(n_nodes,) bool: nodes that belong to at least one face."""
+        used = np.zeros(n_nodes, dtype=bool)
+        used[self.indices] = True
+        return used
+
+    def reversed(self) -> FaceSet:
+        """The same faces with every corner order reversed (clockwise <-> counterclockwise)."""
+        starts = np.repeat(self.offsets[:-1], self.counts)
+        ends = np.repeat(self.offsets[1:], self.counts)
+        pos = np.arange(self.indices.size)
+        return FaceSet(self.offsets, self.indices[starts + ends - 1 - pos])
+
+    def to_lists(self) -> list[list[int]]:
+        return [self.indices[a:b].tolist() for a, b in zip(self.offsets[:-1], self.offsets[1:])]
+
+
+def faces_from_csr(loop_start, loop_total, corner_verts, n_nodes: int | None = None) -> FaceSet:
+    """Faces from Blender-style arrays: face i uses corner_verts[loop_start[i]:+loop_total[i]]."""
+    loop_start = np.asarray(loop_start, dtype=np.int64)
+    loop_total = np.asarray(loop_total, dtype=np.int64)
+    corner_verts = np.asarray(corner_verts, dtype=np.int64)
+    if loop_start.shape != loop_total.shape or loop_start.ndim != 1:
+        raise ValueError("loop_start and loop_total must be 1D arrays of the same length")
+    offsets = np.concatenate([[0], np.cumsum(loop_total)])
+    if loop_start.size and np.array_equal(loop_start, offsets[:-1]):
+        indices = corner_verts[: offsets[-1]]
+    else:  # faces not stored in corner order: gather them
+        pos = np.repeat(loop_start - offsets[:-1], loop_total) + np.arange(offsets[-1])
+        indices = corner_verts[pos]
+    return FaceSet(offsets, indices, n_nodes)
+
+
+def as_faceset(faces, n_nodes: int) -> FaceSet:
+    """Accept a FaceSet, an (F, k) integer array or a sequence of index sequences."""
+    if isinstance(faces, FaceSet):
+        faces.check(n_nodes)
+        return faces
+    if isinstance(faces, np.ndarray) and faces.ndim == 2:
+        if faces.size and not np.issubdtype(faces.dtype, np.integer):
+            raise ValueError("face indices must be integers")
+        f, k = faces.shape
+        if f == 0:
+            raise ValueError("mesh has no faces")
+        return FaceSet(np.arange(f + 1, dtype=np.int64) * k, faces.reshape(-1), n_nodes)
+    if not isinstance(faces, Sequence | np.ndarray):
+        raise ValueError("faces must be a sequence of vertex-index sequences")
+    if len(faces) == 0:
+        raise ValueError("mesh has no faces")
+    counts = np.fromiter((len(f) for f in faces), dtype=np.int64, count=len(faces))
+    flat = np.concatenate([np.asarray(f).reshape(-1) for f in faces])
+    if flat.size and not np.issubdtype(flat.dtype, np.integer):
+        if not np.all(np.isfinite(flat)) or np.any(flat != np.round(flat)):
+            raise ValueError("face indices must be integers")
+        flat = flat.astype(np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    return FaceSet(offsets, flat, n_nodes)

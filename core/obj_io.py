@@ -1,0 +1,40 @@
+"""Minimal Wavefront OBJ reading and writing (`v` and `f` lines) for tests, benches, demos."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .faces import FaceSet
+
+__all__ = ["read_obj", "write_obj"]
+
+
+def read_obj(path) -> tuple[np.ndarray, FaceSet]:
+    """(N, 3) float64 vertices and the faces (0-based) of an OBJ file."""
+    verts: list[list[float]] = []
+    counts: list[int] = []
+    flat: list[int] = []
+    for line in Path(path).read_text().splitlines():
+        parts = line.split()
+        if not parts:
+            continue
+        if parts[0] == "v":
+            verts.append([float(t) for t in parts[1:4]])
+        elif parts[0] == "f":
+            idx = [int(t.split("/")[0]) for t in parts[1:]]
+            n = len(verts)
+            flat.extend(i - 1 if i > 0 else n + i for i in idx)
+            counts.append(len(idx))
+    offsets = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
+    return np.array(verts, dtype=np.float64).reshape(-1, 3), FaceSet(offsets, np.array(flat))
+
+
+def write_obj(path, points, faces: FaceSet) -> None:
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[1] == 2:
+        p = np.column_stack([p, np.zeros(len(p))])
+    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in p]
+    lines += ["f " + " ".join(str(i + 1) for i in face) for face in faces.to_lists()]
+    Path(path).write_text("\n".join(lines) + "\n")

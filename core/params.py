@@ -1,0 +1,91 @@
+"""EEGT parameters: the paper's values and our defaults."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields, replace
+
+__all__ = ["EEGTParams"]
+
+
+@dataclass(frozen=True)
+class EEGTParams:
+    """Every knob of the method; field metadata gives a label and help for UIs and CLIs."""
+
+    a: float = field(
+        default=0.2, metadata={"help": "lambda = a (1 - q) per element (paper eq. 17)."}
+    )
+    eta: float = field(
+        default=2.0, metadata={"help": "Quality weight exponent: g = (1 - q)^eta (eq. 21)."}
+    )
+    c: float = field(
+        default=2.0, metadata={"help": "Distance weight exponent: f = (lbar / d)^c (eq. 20)."}
+    )
+    inverted_weight: float = field(
+        default=5.0, metadata={"help": "Quality weight g of an inverted element (eq. 21)."}
+    )
+    tol: float = field(
+        default=1e-3,
+        metadata={"help": "Smoothing stops when the mean quality improves by less than this."},
+    )
+    max_untangle_iterations: int = field(
+        default=5000, metadata={"help": "Untangling gives up after this many iterations."}
+    )
+    max_smooth_iterations: int = field(
+        default=1000, metadata={"help": "Smoothing stops after this many iterations."}
+    )
+    distance_refresh: int = field(
+        default=1,
+        metadata={"help": "Refresh element-to-boundary distances every this many iterations."},
+    )
+    scaling: str = field(
+        default="edge",
+        metadata={
+            "help": "Shrink step: 'edge' keeps the mean edge length (paper), 'area' the area."
+        },
+    )
+
+    def __post_init__(self) -> None:
+        checks = [
+            (self.a > 0, "a must be > 0"),
+            (self.eta >= 0, "eta must be >= 0"),
+            (self.c >= 0, "c must be >= 0"),
+            (self.inverted_weight > 0, "inverted_weight must be > 0"),
+            (self.tol >= 0, "tol must be >= 0"),
+            (self.max_untangle_iterations >= 0, "max_untangle_iterations must be >= 0"),
+            (self.max_smooth_iterations >= 0, "max_smooth_iterations must be >= 0"),
+            (self.distance_refresh >= 1, "distance_refresh must be >= 1"),
+            (self.scaling in ("edge", "area"), "scaling must be 'edge' or 'area'"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(f"invalid parameter: {message}")
+
+    @classmethod
+    def paper(cls) -> EEGTParams:
+        """Exactly the paper's settings (Section 3 and 4): a = 0.2, eta = c = 2, tol 1e-3."""
+        return cls(
+            a=0.2,
+            eta=2.0,
+            c=2.0,
+            inverted_weight=5.0,
+            tol=1e-3,
+            max_untangle_iterations=5000,
+            max_smooth_iterations=1000,
+            distance_refresh=1,
+            scaling="edge",
+        )
+
+    def with_(self, **changes) -> EEGTParams:
+        return replace(self, **changes)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def field_names(cls) -> list[str]:
+        return [f.name for f in fields(cls)]
+
+    @classmethod
+    def help(cls, name: str) -> str:
+        """One-line description of a field, for tooltips and --help."""
+        return {f.name: f.metadata.get("help", "") for f in fields(cls)}[name]

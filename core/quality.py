@@ -1,0 +1,111 @@
+"""Mean-ratio quality (SPEC section 3), one definition for every arity.
+
+For corner k of an n-gon, J_k = [p_{k+1} - p_k, p_{k-1} - p_k] and M_k = J_k W_n^{-1}, with
+W_n the same corner of the regular n-gon; q_k = 2 det(M_k) / |M_k|_F^2 and q(E) = mean_k q_k,
+or 0 when any det(J_k) <= 0 (inverted, reflex corner, degenerate).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .faces import as_faceset
+
+__all__ = ["Stats", "group_quality", "mesh_stats", "quality", "stats_of"]
+
+_SQRT3 = np.sqrt(3.0)
+
+
+@dataclass(frozen=True)
+class Stats:
+    """The paper's table columns for one mesh state."""
+
+    n_inverted: int
+    q_min: float
+    q_avg: float
+
+    def better_than(self, other: Stats) -> bool:
+        """Fewer inverted, then higher q_min, then higher q_avg (SPEC 2.7)."""
+        return (-self.n_inverted, self.q_min, self.q_avg) > (
+            -other.n_inverted,
+            other.q_min,
+            other.q_avg,
+        )
+
+    def as_dict(self) -> dict:
+        return {"n_inverted": self.n_inverted, "q_min": self.q_min, "q_avg": self.q_avg}
+
+
+def corner_constants(n: int) -> tuple[float, float]:
+    """(cos a, 1 / sin a) of the regular n-gon's interior angle a = (n - 2) pi / n."""
+    a = (n - 2) * np.pi / n
+    return float(np.cos(a)), float(1.0 / np.sin(a))
+
+
+def group_quality(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """Mean ratio of each face of one arity group; X, Y are (n, F) corner coordinates."""
+    n = X.shape[0]
+    EX = np.roll(X, -1, axis=0) - X  # edge k: p_{k+1} - p_k
+    EY = np.roll(Y, -1, axis=0) - Y
+    if n == 3:
+        two_area = EX[0] * EY[1] - EY[0] * EX[1]
+        ssq = (EX * EX + EY * EY).sum(axis=0)
+        ok = (two_area > 0) & (ssq > 0)
+        q = np.zeros(X.shape[1])
+        np.divide(2.0 * _SQRT3 * two_area, ssq, out=q, where=ok)
+        return q
+    # corner k: e1 = E_k, e2 = -E_{k-1}
+    PX = np.roll(EX, 1, axis=0)  # E_{k-1}
+    PY = np.roll(EY, 1, axis=0)
+    det = PX * EY - PY * EX  # det[e1, e2] = E_{k-1} x E_k
+    cos_a, inv_sin = corner_constants(n)
+    e1sq = EX * EX + EY * EY
+    if n == 4:
+        fro = e1sq + PX * PX + PY * PY
+        scale = 2.0
+    else:
+        mx = (-PX - cos_a * EX) * inv_sin
+        my = (-PY - cos_a * EY) * inv_sin
+        fro = e1sq + mx * mx + my * my
+        scale = 2.0 * inv_sin
+    ok = (det > 0).all(axis=0) & (fro > 0).all(axis=0)
+    qk = np.zeros_like(det)
+    np.divide(scale * det, fro, out=qk, where=det > 0)
+    return np.where(ok, qk.mean(axis=0), 0.0)
+
+
+def stats_of(qs: list[np.ndarray]) -> Stats:
+    """Stats over the per-group quality arrays (inverted faces count as 0)."""
+    total = sum(q.size for q in qs)
+    n_inv = sum(int(np.count_nonzero(q == 0.0)) for q in qs)
+    q_min = min(float(q.min()) for q in qs if q.size)
+    q_avg = sum(float(q.sum()) for q in qs) / total
+    return Stats(n_inv, q_min, q_avg)
+
+
+def _check_points(points) -> np.ndarray:
+    p = np.array(points, dtype=np.float64)  # always a copy: callers' arrays stay untouched
+    if p.ndim != 2 or p.shape[1] != 2:
+        raise ValueError(f"points must be an (N, 2) array, got shape {p.shape}")
+    bad = ~np.isfinite(p).all(axis=1)
+    if bad.any():
+        raise ValueError(f"node {int(np.flatnonzero(bad)[0])} has a NaN or infinite coordinate")
+    return p
+
+
+def quality(points, faces) -> np.ndarray:
+    """(F,) mean ratio per face in the given face order, 0 for inverted faces."""
+    p = _check_points(points)
+    fs = as_faceset(faces, p.shape[0])
+    out = np.empty(fs.n_faces)
+    for g in fs.groups:
+        out[g.ids] = group_quality(p[g.nodes, 0], p[g.nodes, 1])
+    return out
+
+
+def mesh_stats(points, faces) -> Stats:
+    """n_inverted, q_min, q_avg of a mesh."""
+    q = quality(points, faces)
+    return stats_of([q])
