@@ -30,6 +30,7 @@ test-blender: $(STAMP)
 
 test: lint
 	$(PY) -m pytest -q -m "not e2e" tests
+	$(MAKE) e2e
 
 demo: demo-core
 
@@ -38,6 +39,10 @@ demo-core: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m bench.run
+
+# Real Blender 4.3 in a Debian 13 chroot (root needed; cached in .e2e-root/): tests/e2e/.
+e2e:
+	bash tests/e2e/run_e2e.sh
 
 clean:
 	rm -rf $(VENV) dist out .pytest_cache .ruff_cache

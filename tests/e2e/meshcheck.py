@@ -1,0 +1,114 @@
+"""Independent mesh checks for the e2e tests (NumPy only; runs in Blender's Python 3.13 / NumPy 2.2
+and in any Python 3.11+). Deliberately does NOT import the project's core: it re-implements the
+SPEC section 3 quality so the e2e tests check the extension against a second implementation.
+
+Command line:  python3 meshcheck.py stats FILE.obj            -> JSON stats
+               python3 meshcheck.py compare IN.obj OUT.obj    -> JSON: topology same? boundary kept?
+"""
+import json
+import math
+import sys
+
+import numpy as np
+
+
+def read_obj(path):
+    """Return (verts float64 (N,3), faces list of int arrays, 0-based). Only v and f lines."""
+    verts, faces = [], []
+    with open(path) as fh:
+        for line in fh:
+            parts = line.split()
+            if not parts:
+                continue
+            if parts[0] == "v":
+                verts.append([float(x) for x in parts[1:4]])
+            elif parts[0] == "f":
+                # "f 1/2/3 ..." -> vertex index only; negative = relative to the end
+                idx = [int(p.split("/")[0]) for p in parts[1:]]
+                faces.append(np.array([i - 1 if i > 0 else len(verts) + i for i in idx]))
+    return np.asarray(verts, dtype=np.float64).reshape(-1, 3), faces
+
+
+def plane_2d(verts, faces):
+    """Project to 2D in the mesh plane (normal = vector area, SPEC 5), valid orientation = CCW."""
+    n = np.zeros(3)
+    for f in faces:  # Newell: sum of face area vectors
+        p = verts[f]
+        n += 0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+    n /= np.linalg.norm(n)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    c = verts.mean(axis=0)
+    xy = np.stack([(verts - c) @ u, (verts - c) @ v], axis=1)
+    off_plane = np.abs((verts - c) @ n).max() if len(verts) else 0.0
+    return xy, off_plane
+
+
+def face_quality(xy, f):
+    """Mean ratio of one n-gon (SPEC 3): mean of corner q_k, 0 if any corner det <= 0."""
+    p = xy[f]
+    nn = len(f)
+    a = (nn - 2) * math.pi / nn
+    w_inv = np.linalg.inv(np.array([[1.0, math.cos(a)], [0.0, math.sin(a)]]))
+    e1 = np.roll(p, -1, axis=0) - p  # p_{k+1} - p_k
+    e2 = np.roll(p, 1, axis=0) - p  # p_{k-1} - p_k
+    det_j = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    if np.any(det_j <= 0):
+        return 0.0
+    qs = []
+    for k in range(nn):
+        m = np.column_stack([e1[k], e2[k]]) @ w_inv
+        qs.append(2.0 * np.linalg.det(m) / np.sum(m * m))
+    return float(np.mean(qs))
+
+
+def stats(verts, faces):
+    xy, off_plane = plane_2d(verts, faces)
+    q = np.array([face_quality(xy, f) for f in faces])
+    size = float(np.ptp(verts, axis=0).max()) if len(verts) else 0.0
+    return {
+        "n_nodes": len(verts),
+        "n_faces": len(faces),
+        "n_inverted": int(np.sum(q <= 0.0)),
+        "q_min": float(q.min()),
+        "q_avg": float(q.mean()),
+        "finite": bool(np.isfinite(verts).all()),
+        "off_plane_rel": float(off_plane / size) if size else 0.0,
+    }
+
+
+def boundary_nodes(faces):
+    """Nodes on edges used by exactly one face (topological boundary)."""
+    count = {}
+    for f in faces:
+        for a, b in zip(f, np.roll(f, -1)):
+            key = (min(a, b), max(a, b))
+            count[key] = count.get(key, 0) + 1
+    return sorted({int(i) for e, c in count.items() if c == 1 for i in e})
+
+
+def compare(path_in, path_out):
+    """Same topology? Boundary nodes bit-identical (as written)? How far did interior nodes move?"""
+    vi, fi = read_obj(path_in)
+    vo, fo = read_obj(path_out)
+    same_topo = len(fi) == len(fo) and all(np.array_equal(a, b) for a, b in zip(fi, fo))
+    res = {"same_topology": bool(same_topo and len(vi) == len(vo))}
+    if res["same_topology"]:
+        b = boundary_nodes(fi)
+        # OBJ text round trip: allow float32 print precision on the fixed nodes
+        res["boundary_max_move"] = float(np.abs(vi[b] - vo[b]).max()) if b else 0.0
+        res["max_move"] = float(np.abs(vi - vo).max())
+    res["in"] = stats(vi, fi)
+    res["out"] = stats(vo, fo)
+    return res
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "stats":
+        print(json.dumps(stats(*read_obj(sys.argv[2]))))
+    elif sys.argv[1] == "compare":
+        print(json.dumps(compare(sys.argv[2], sys.argv[3])))
+    else:
+        sys.exit("usage: meshcheck.py stats FILE | compare IN OUT")
