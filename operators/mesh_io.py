@@ -1,0 +1,174 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Bulk NumPy reads and writes of Blender mesh data (no per-element Python loops).
+
+Positions go through ``attributes["position"]`` with float32 buffers, topology through the
+polygons' ``loop_start``/``loop_total`` and the ``.corner_vert`` attribute (falling back to
+``loops.vertex_index`` where that internal name is missing).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+PIN_NAME = "eegt_pinned"
+QUALITY_NAME = "eegt_quality"
+QUALITY_COLOR_NAME = "eegt_quality_color"
+
+
+@dataclass
+class MeshArrays:
+    """Topology of a mesh as flat arrays (Blender's own CSR layout)."""
+
+    n_verts: int
+    loop_start: np.ndarray  # (F,) int32
+    loop_total: np.ndarray  # (F,) int32
+    corner_verts: np.ndarray  # (L,) int32
+
+
+def read_topology(me: bpy.types.Mesh) -> MeshArrays:
+    """Face offsets and corner vertices of ``me``."""
+    nf, nl = len(me.polygons), len(me.loops)
+    loop_start = np.empty(nf, dtype=np.int32)
+    loop_total = np.empty(nf, dtype=np.int32)
+    me.polygons.foreach_get("loop_start", loop_start)
+    me.polygons.foreach_get("loop_total", loop_total)
+    corner_verts = np.empty(nl, dtype=np.int32)
+    attr = me.attributes.get(".corner_vert")
+    if attr is not None and attr.domain == "CORNER" and attr.data_type == "INT" and nl:
+        attr.data.foreach_get("value", corner_verts)
+    elif nl:
+        me.loops.foreach_get("vertex_index", corner_verts)
+    return MeshArrays(len(me.vertices), loop_start, loop_total, corner_verts)
+
+
+def read_positions(me: bpy.types.Mesh) -> np.ndarray:
+    """Vertex positions as a (N, 3) float32 array (a copy)."""
+    co = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    if co.size:
+        me.attributes["position"].data.foreach_get("vector", co)
+    return co.reshape(-1, 3)
+
+
+def write_positions(me: bpy.types.Mesh, co: np.ndarray) -> None:
+    """Set every vertex position from a (N, 3) array (converted to float32)."""
+    buf = np.ascontiguousarray(co, dtype=np.float32).ravel()
+    me.attributes["position"].data.foreach_set("vector", buf)
+    me.update()
+
+
+def read_key_positions(key_block: bpy.types.ShapeKey) -> np.ndarray:
+    """Positions of one shape key as (N, 3) float32."""
+    co = np.empty(len(key_block.data) * 3, dtype=np.float32)
+    if co.size:
+        key_block.data.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
+def write_key_positions(key_block: bpy.types.ShapeKey, co: np.ndarray) -> None:
+    """Set the positions of one shape key from (N, 3)."""
+    key_block.data.foreach_set("co", np.ascontiguousarray(co, dtype=np.float32).ravel())
+
+
+def read_bool_attribute(me: bpy.types.Mesh, name: str, domain: str = "POINT") -> np.ndarray | None:
+    """A boolean attribute as a bool array, or None when absent / of another type."""
+    attr = me.attributes.get(name)
+    if attr is None or attr.domain != domain or attr.data_type != "BOOLEAN":
+        return None
+    out = np.zeros(len(attr.data), dtype=bool)
+    if out.size:
+        attr.data.foreach_get("value", out)
+    return out
+
+
+def read_vertex_selection(me: bpy.types.Mesh) -> np.ndarray:
+    """Selected vertices (bool (N,))."""
+    sel = np.zeros(len(me.vertices), dtype=bool)
+    if sel.size:
+        me.vertices.foreach_get("select", sel)
+    return sel
+
+
+def read_face_selection(me: bpy.types.Mesh) -> np.ndarray:
+    """Selected faces (bool (F,))."""
+    sel = np.zeros(len(me.polygons), dtype=bool)
+    if sel.size:
+        me.polygons.foreach_get("select", sel)
+    return sel
+
+
+def read_face_hidden(me: bpy.types.Mesh) -> np.ndarray:
+    """Hidden faces (bool (F,))."""
+    hide = np.zeros(len(me.polygons), dtype=bool)
+    if hide.size:
+        me.polygons.foreach_get("hide", hide)
+    return hide
+
+
+def vertex_group_pins(obj: bpy.types.Object, n_verts: int) -> np.ndarray | None:
+    """Vertices with a weight > 0 in the ``eegt_pinned`` vertex group, or None without one.
+
+    Blender has no bulk read of vertex-group weights; this loop only runs when the group
+    exists (the boolean attribute is the fast path, ~10^4 times quicker).
+    """
+    vg = obj.vertex_groups.get(PIN_NAME)
+    if vg is None:
+        return None
+    idx = vg.index
+    pinned = np.zeros(n_verts, dtype=bool)
+    me = obj.data
+    hits = [v.index for v in me.vertices for g in v.groups if g.group == idx and g.weight > 0.0]
+    if hits:
+        pinned[np.asarray(hits, dtype=np.int64)] = True
+    return pinned
+
+
+def read_pins(obj: bpy.types.Object) -> np.ndarray:
+    """User-pinned vertices: the ``eegt_pinned`` boolean attribute or vertex group (bool (N,))."""
+    me = obj.data
+    n = len(me.vertices)
+    pinned = np.zeros(n, dtype=bool)
+    attr = read_bool_attribute(me, PIN_NAME)
+    if attr is not None:
+        pinned |= attr
+    vg = vertex_group_pins(obj, n)
+    if vg is not None:
+        pinned |= vg
+    return pinned
+
+
+def corner_faces(topo: MeshArrays) -> np.ndarray:
+    """Face index of every corner (L,), whatever the order of the face offsets."""
+    out = np.empty(topo.corner_verts.size, dtype=np.int64)
+    nf = topo.loop_start.size
+    if nf == 0:
+        return out
+    faces = np.repeat(np.arange(nf), topo.loop_total)
+    within = np.arange(faces.size) - np.repeat(np.cumsum(topo.loop_total) - topo.loop_total,
+                                               topo.loop_total)
+    out[np.repeat(topo.loop_start, topo.loop_total) + within] = faces
+    return out
+
+
+def loose_edge_vertices(me: bpy.types.Mesh) -> np.ndarray | None:
+    """Vertices of edges used by no face (bool (N,)), or None when there is no loose edge."""
+    ne, nl = len(me.edges), len(me.loops)
+    if ne == 0:
+        return None
+    corner_edges = np.empty(nl, dtype=np.int32)
+    attr = me.attributes.get(".corner_edge")
+    if attr is not None and attr.domain == "CORNER" and attr.data_type == "INT" and nl:
+        attr.data.foreach_get("value", corner_edges)
+    elif nl:
+        me.loops.foreach_get("edge_index", corner_edges)
+    used = np.zeros(ne, dtype=bool)
+    used[corner_edges] = True
+    if used.all():
+        return None
+    edge_verts = np.empty(2 * ne, dtype=np.int32)
+    me.edges.foreach_get("vertices", edge_verts)
+    out = np.zeros(len(me.vertices), dtype=bool)
+    out[edge_verts.reshape(-1, 2)[~used].ravel()] = True
+    return out

@@ -1,0 +1,116 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""``mesh.eegt_pin`` / ``mesh.eegt_unpin``: mark vertices that the EEGT operator never moves.
+
+Pins live in the boolean point attribute ``eegt_pinned``. A vertex group of that name also
+pins; Blender refuses an attribute whose name equals a vertex group's, so when the group
+exists the pins are written to the group instead.
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty
+
+from . import mesh_io, modes, runner
+
+
+def set_pins(obj: bpy.types.Object, mask: np.ndarray, value: bool) -> str | None:
+    """Pin (value=True) or unpin the vertices in ``mask``; returns an error line or None."""
+    me = obj.data
+    idx = np.flatnonzero(mask)
+    vg = obj.vertex_groups.get(mesh_io.PIN_NAME)
+    attr = me.attributes.get(mesh_io.PIN_NAME)
+    if attr is not None and (attr.data_type != "BOOLEAN" or attr.domain != "POINT"):
+        return (f"attribute '{mesh_io.PIN_NAME}' exists as {attr.data_type} on "
+                f"{attr.domain}, expected a boolean point attribute")
+    if vg is not None:
+        if value:
+            vg.add(idx.tolist(), 1.0, "REPLACE")
+        else:
+            vg.remove(idx.tolist())
+    if attr is None and value and vg is None:
+        attr = me.attributes.new(mesh_io.PIN_NAME, "BOOLEAN", "POINT")
+        if attr is None:
+            return f"Blender refused to create the attribute '{mesh_io.PIN_NAME}'"
+    if attr is not None:
+        cur = mesh_io.read_bool_attribute(me, mesh_io.PIN_NAME)
+        cur[idx] = value
+        attr.data.foreach_set("value", cur)
+    me.update()
+    return None
+
+
+class _PinBase:
+    value = True
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        return context.mode in ("OBJECT", "EDIT_MESH") and bool(modes.target_objects(context))
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        objs = modes.target_objects(context)
+        modes.sync_from_edit_mode(objs)
+        everything = bool(getattr(self, "all", False))
+        todo = []
+        for obj in objs:
+            why = runner.refusal(obj)
+            if why:
+                self.report({"WARNING"}, f"{obj.name}: {why}")
+                continue
+            n = len(obj.data.vertices)
+            mask = np.ones(n, bool) if everything else mesh_io.read_vertex_selection(obj.data)
+            if mask.any():
+                todo.append((obj, mask))
+        if not todo:
+            self.report({"WARNING"}, "No vertices selected")
+            return {"CANCELLED"}
+        done = False
+        with modes.object_mode(context):
+            for obj, mask in todo:
+                err = set_pins(obj, mask, self.value)
+                if err:
+                    self.report({"WARNING"}, f"{obj.name}: {err}")
+                    continue
+                done = True
+                total = int(mesh_io.read_pins(obj).sum())
+                verb = "pinned" if self.value else "unpinned"
+                self.report({"INFO"}, f"{obj.name}: {int(mask.sum())} vertices {verb}, "
+                                      f"{total} pinned in all")
+        return {"FINISHED"} if done else {"CANCELLED"}
+
+
+class MESH_OT_eegt_pin(_PinBase, bpy.types.Operator):
+    """Pin the selected vertices: EEGT never moves them (eegt_pinned attribute)"""
+
+    bl_idname = "mesh.eegt_pin"
+    bl_label = "Pin Selected"
+    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
+    value = True
+
+
+class MESH_OT_eegt_unpin(_PinBase, bpy.types.Operator):
+    """Unpin the selected vertices (or all vertices)"""
+
+    bl_idname = "mesh.eegt_unpin"
+    bl_label = "Unpin"
+    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
+    value = False
+
+    all: BoolProperty(  # type: ignore[valid-type]
+        name="All", default=False, description="Unpin every vertex, not only the selected ones")
+
+
+classes = (MESH_OT_eegt_pin, MESH_OT_eegt_unpin)
+
+
+def register() -> None:
+    """Register the pin operators."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the pin operators."""
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

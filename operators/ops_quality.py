@@ -1,0 +1,190 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""``mesh.eegt_analyze`` and ``mesh.eegt_select_inverted``: per-face mean ratio quality."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, FloatProperty
+
+from ..core import faces_from_csr, quality
+from ..core.plane import PlaneFrame
+from . import mesh_io, modes, runner
+
+
+def face_quality(obj: bpy.types.Object) -> np.ndarray:
+    """Mean ratio of every face of ``obj`` (Blender face order); ValueError on bad input."""
+    me = obj.data
+    topo = mesh_io.read_topology(me)
+    if topo.loop_start.size == 0:
+        raise ValueError("mesh has no faces")
+    key = obj.active_shape_key if me.shape_keys is not None else None
+    co = mesh_io.read_key_positions(key) if key is not None else mesh_io.read_positions(me)
+    pts3d = co.astype(np.float64)
+    used = np.zeros(len(co), dtype=bool)
+    used[topo.corner_verts] = True
+    if not np.isfinite(pts3d[used]).all():
+        raise ValueError("vertices with NaN or infinite coordinates")
+    faces = faces_from_csr(topo.loop_start, topo.loop_total, topo.corner_verts)
+    frame = PlaneFrame.fit(pts3d, faces, used=used, tol=runner.PLANE_TOL)
+    return np.asarray(quality(frame.to_2d(pts3d), faces), dtype=np.float64)
+
+
+def heat_colors(q: np.ndarray) -> np.ndarray:
+    """RGBA per face: inverted = pure red, then red -> yellow -> green as q goes 0 -> 1."""
+    q = np.clip(q, 0.0, 1.0)
+    rgba = np.empty((q.size, 4), dtype=np.float32)
+    rgba[:, 0] = np.clip(2.0 * (1.0 - q), 0.0, 1.0)
+    rgba[:, 1] = np.clip(2.0 * q, 0.0, 1.0)
+    rgba[:, 2] = 0.1
+    rgba[:, 3] = 1.0
+    rgba[q <= 0.0] = (1.0, 0.0, 0.0, 1.0)
+    return rgba
+
+
+def _fresh_attribute(me: bpy.types.Mesh, name: str, data_type: str, domain: str):
+    attr = me.attributes.get(name)
+    if attr is not None and (attr.data_type != data_type or attr.domain != domain):
+        me.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = me.attributes.new(name, data_type, domain)
+    return attr
+
+
+def write_quality_attributes(obj: bpy.types.Object, q: np.ndarray) -> str | None:
+    """Store ``eegt_quality`` (face float) and ``eegt_quality_color`` (corner color).
+
+    Returns an error line when Blender refuses a name (a vertex group of the same name).
+    """
+    me = obj.data
+    had_colors = len(me.color_attributes) > 0
+    attr = _fresh_attribute(me, mesh_io.QUALITY_NAME, "FLOAT", "FACE")
+    if attr is None:
+        return f"cannot create attribute '{mesh_io.QUALITY_NAME}' (name in use)"
+    attr.data.foreach_set("value", q.astype(np.float32))
+    col = _fresh_attribute(me, mesh_io.QUALITY_COLOR_NAME, "FLOAT_COLOR", "CORNER")
+    if col is None:
+        return f"cannot create attribute '{mesh_io.QUALITY_COLOR_NAME}' (name in use)"
+    corner_face = mesh_io.corner_faces(mesh_io.read_topology(me))
+    col.data.foreach_set("color", heat_colors(q)[corner_face].ravel())
+    if not had_colors:
+        me.color_attributes.active_color = col
+    me.update()
+    return None
+
+
+def _stats_line(name: str, q: np.ndarray) -> str:
+    s = runner.stats_from_quality(q)
+    return (f"{name}: {q.size} faces, {s['n_inverted']} inverted, q_min {s['q_min']:.3f}, "
+            f"q_avg {s['q_avg']:.3f}")
+
+
+class MESH_OT_eegt_analyze(bpy.types.Operator):
+    """Measure the mean ratio quality of every face; store it as the eegt_quality face attribute and a heat-map color attribute"""  # noqa: E501
+
+    bl_idname = "mesh.eegt_analyze"
+    bl_label = "Analyze Quality"
+    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
+
+    store: BoolProperty(  # type: ignore[valid-type]
+        name="Store Attributes", default=True,
+        description="Write the eegt_quality and eegt_quality_color attributes")
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        return context.mode in ("OBJECT", "EDIT_MESH") and bool(modes.target_objects(context))
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        objs = modes.target_objects(context)
+        modes.sync_from_edit_mode(objs)
+        found: list[tuple[bpy.types.Object, np.ndarray]] = []
+        for obj in objs:
+            try:
+                q = face_quality(obj)
+            except ValueError as exc:
+                self.report({"WARNING"}, f"{obj.name}: {str(exc).splitlines()[0]}")
+                continue
+            found.append((obj, q))
+            self.report({"INFO"}, _stats_line(obj.name, q))
+        written = False
+        if self.store and found:
+            with modes.object_mode(context):
+                for obj, q in found:
+                    if runner.refusal(obj):
+                        self.report({"WARNING"}, f"{obj.name}: {runner.refusal(obj)}")
+                        continue
+                    err = write_quality_attributes(obj, q)
+                    if err:
+                        self.report({"WARNING"}, f"{obj.name}: {err}")
+                    else:
+                        written = True
+        return {"FINISHED"} if written else {"CANCELLED"}
+
+
+class MESH_OT_eegt_select_inverted(bpy.types.Operator):
+    """Select the faces whose mean ratio quality is at most the threshold (0 = inverted faces only)"""  # noqa: E501
+
+    bl_idname = "mesh.eegt_select_inverted"
+    bl_label = "Select Inverted / Poor"
+    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
+
+    threshold: FloatProperty(  # type: ignore[valid-type]
+        name="Threshold", default=0.0, min=0.0, max=1.0,
+        description="Select faces with quality <= this (0 selects inverted faces only)")
+    extend: BoolProperty(  # type: ignore[valid-type]
+        name="Extend", default=False, description="Keep the current selection")
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        return context.mode in ("OBJECT", "EDIT_MESH") and bool(modes.target_objects(context))
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        objs = modes.target_objects(context)
+        modes.sync_from_edit_mode(objs)
+        found = []
+        for obj in objs:
+            try:
+                q = face_quality(obj)
+            except ValueError as exc:
+                self.report({"WARNING"}, f"{obj.name}: {str(exc).splitlines()[0]}")
+                continue
+            found.append((obj, q <= self.threshold))
+        if not found:
+            return {"CANCELLED"}
+        with modes.object_mode(context):
+            for obj, sel in found:
+                me = obj.data
+                if self.extend:
+                    sel = sel | mesh_io.read_face_selection(me)
+                sel &= ~mesh_io.read_face_hidden(me)
+                topo = mesh_io.read_topology(me)
+                vsel = np.zeros(len(me.vertices), dtype=bool)
+                vsel[topo.corner_verts[sel[mesh_io.corner_faces(topo)]]] = True
+                if self.extend:
+                    vsel |= mesh_io.read_vertex_selection(me)
+                ev = np.empty(2 * len(me.edges), dtype=np.int32)
+                me.edges.foreach_get("vertices", ev)
+                esel = vsel[ev.reshape(-1, 2)].all(axis=1) if ev.size else np.zeros(0, bool)
+                me.polygons.foreach_set("select", sel)
+                me.vertices.foreach_set("select", vsel)
+                me.edges.foreach_set("select", esel)
+                me.update()
+                self.report({"INFO"}, f"{obj.name}: {int(sel.sum())} faces with quality <= "
+                                      f"{self.threshold:g} selected")
+        return {"FINISHED"}
+
+
+classes = (MESH_OT_eegt_analyze, MESH_OT_eegt_select_inverted)
+
+
+def register() -> None:
+    """Register the quality operators."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the quality operators."""
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

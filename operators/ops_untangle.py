@@ -1,0 +1,230 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""``mesh.eegt_untangle_smooth``: untangle and smooth the selected planar meshes.
+
+In the UI the core runs in a worker thread (NumPy only, no bpy) while a modal timer shows
+progress; ESC cancels and leaves every mesh as it was. In background mode, and from
+``EXEC_DEFAULT`` calls and the redo panel, the same work runs synchronously to the end.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty
+
+from . import modes, props, runner
+from .prefs import resolve_backend
+
+# The results of the last run, newest last (read by the tests and the CLI).
+LAST_RESULTS: list[runner.ObjectResult] = []
+
+
+def _annotations() -> dict[str, Any]:
+    ann = props.param_annotations()
+    ann["backend"] = EnumProperty(name="Backend", items=props.BACKEND_ITEMS, default="PREFS",
+                                  description="Compute backend")
+    ann["use_pinned"] = BoolProperty(
+        name="Use Pinned", default=True,
+        description="Keep vertices of the eegt_pinned attribute or vertex group fixed")
+    ann["project"] = BoolProperty(
+        name="Project to Plane", default=False,
+        description="Project a slightly non-planar mesh onto its plane instead of refusing it")
+    return ann
+
+
+EXTRA_OPTIONS = ("backend", "use_pinned", "project")
+
+
+class _Worker:
+    """Runs ``runner.compute`` for every job in a thread; cancellable between iterations."""
+
+    def __init__(self, jobs: list[runner.Job], params: Any, backend: str,
+                 device: str | None) -> None:
+        self.jobs, self.params, self.backend, self.device = jobs, params, backend, device
+        self.cancel = False
+        self.index = 0
+        self.iteration = 0
+        self.phase = ""
+        self.n_inverted: int | None = None
+        self.error: BaseException | None = None
+        self.thread = threading.Thread(target=self._run, name="eegt-worker", daemon=True)
+
+    def _progress(self, iteration: int, phase: str, stats: Any) -> bool:
+        self.iteration, self.phase = iteration, phase
+        self.n_inverted = getattr(stats, "n_inverted", None)
+        return not self.cancel
+
+    def _run(self) -> None:
+        try:
+            for i, job in enumerate(self.jobs):
+                self.index = i
+                if self.cancel:
+                    break
+                runner.compute(job, self.params, self.backend, self._progress, self.device)
+        except BaseException as exc:  # reported on the main thread
+            self.error = exc
+
+
+class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
+    """Untangle inverted faces and smooth a planar mesh (EEGT). Boundary and pinned vertices stay; in Edit Mode only the selected faces move"""  # noqa: E501
+
+    bl_idname = "mesh.eegt_untangle_smooth"
+    bl_label = "Untangle & Smooth"
+    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
+    __annotations__ = _annotations()
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        if context.mode not in ("OBJECT", "EDIT_MESH"):
+            cls.poll_message_set("Needs Object Mode or mesh Edit Mode")
+            return False
+        if not modes.target_objects(context):
+            cls.poll_message_set("Select a mesh object")
+            return False
+        return True
+
+    # -- shared steps ---------------------------------------------------------------------
+    def _fill_from_scene(self, context: bpy.types.Context) -> None:
+        settings = getattr(context.scene, "eegt_settings", None)
+        if settings is None:
+            return
+        for name in [f.name for f in props.param_fields()] + list(EXTRA_OPTIONS):
+            if not self.properties.is_property_set(name):
+                setattr(self, name, getattr(settings, name))
+
+    def _prepare(
+        self, context: bpy.types.Context
+    ) -> tuple[list[bpy.types.Object], list[runner.Job]]:
+        objs = modes.target_objects(context)
+        edit = modes.is_edit_mode(context)
+        if edit:
+            modes.sync_from_edit_mode(objs)
+        jobs = [runner.prepare(o, selected_only=edit, use_pinned=self.use_pinned,
+                               project=self.project) for o in objs]
+        return objs, jobs
+
+    def _finish(self, context: bpy.types.Context, objs: list[bpy.types.Object],
+                jobs: list[runner.Job]) -> set[str]:
+        needs_write = any(j.new_co is not None for j in jobs)
+        results = []
+        if needs_write:
+            with modes.object_mode(context):
+                results = [runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
+        else:
+            results = [runner.apply(o, j, write=False) for o, j in zip(objs, jobs, strict=True)]
+        LAST_RESULTS[:] = results
+        for obj, res in zip(objs, results, strict=True):
+            runner.store_last_run(obj, res)
+            self.report({"INFO"} if res.ok and res.status != "error" else {"WARNING"},
+                        res.line())
+        if not any(r.written for r in results):
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    # -- synchronous path (background, EXEC_DEFAULT, redo panel) ---------------------------
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        self._fill_from_scene(context)
+        try:
+            params = props.params_from(self)
+        except ValueError as exc:
+            self.report({"WARNING"}, str(exc))
+            return {"CANCELLED"}
+        backend, device = resolve_backend(self.backend, context)
+        objs, jobs = self._prepare(context)
+        verbose = bpy.app.background
+        for job in jobs:
+            progress = _printer(job.object) if verbose else None
+            runner.compute(job, params, backend, progress, device)
+        return self._finish(context, objs, jobs)
+
+    # -- modal path (UI) ---------------------------------------------------------------------
+    def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
+        self._fill_from_scene(context)
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            params = props.params_from(self)
+        except ValueError as exc:
+            self.report({"WARNING"}, str(exc))
+            return {"CANCELLED"}
+        backend, device = resolve_backend(self.backend, context)
+        self._objs, self._jobs = self._prepare(context)
+        self._worker = _Worker(self._jobs, params, backend, device)
+        self._worker.thread.start()
+        self._t0 = time.perf_counter()
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.progress_begin(0, 1000)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _status(self, context: bpy.types.Context, text: str | None) -> None:
+        ws = getattr(context, "workspace", None)
+        if ws is not None:
+            ws.status_text_set(text)
+        if context.area is not None:
+            context.area.header_text_set(text)
+
+    def _cleanup(self, context: bpy.types.Context) -> None:
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        self._status(context, None)
+
+    def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
+        w = self._worker
+        if event.type == "ESC":
+            w.cancel = True
+            w.thread.join()
+            self._cleanup(context)
+            self.report({"INFO"}, "EEGT cancelled: no mesh changed")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"RUNNING_MODAL"}
+        if w.thread.is_alive():
+            n = max(len(self._jobs), 1)
+            job = self._jobs[min(w.index, n - 1)]
+            inv = "" if w.n_inverted is None else f", {w.n_inverted} inverted"
+            self._status(context, f"EEGT {job.object} ({w.index + 1}/{n}): {w.phase} iteration "
+                                  f"{w.iteration}{inv} - Esc to cancel")
+            context.window_manager.progress_update(int(1000 * w.index / n) + w.iteration % 100)
+            return {"RUNNING_MODAL"}
+        self._cleanup(context)
+        if w.error is not None:
+            self.report({"WARNING"}, f"EEGT internal error: {w.error!r}; no mesh changed")
+            return {"CANCELLED"}
+        return self._finish(context, self._objs, self._jobs)
+
+
+def _printer(name: str) -> runner.Progress:
+    """Background progress: one line when a phase starts and every 100 iterations."""
+    state = {"phase": None}
+
+    def progress(iteration: int, phase: str, stats: Any) -> bool:
+        if phase != state["phase"] or iteration % 100 == 0:
+            state["phase"] = phase
+            print(f"EEGT {name}: {phase} iteration {iteration}: "
+                  f"inverted {getattr(stats, 'n_inverted', '?')}, "
+                  f"q_min {getattr(stats, 'q_min', float('nan')):.3f}, "
+                  f"q_avg {getattr(stats, 'q_avg', float('nan')):.3f}", flush=True)
+        return True
+
+    return progress
+
+
+classes = (MESH_OT_eegt_untangle_smooth,)
+
+
+def register() -> None:
+    """Register the operator."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the operator."""
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,101 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The "EEGT" tab of the 3D View sidebar."""
+
+from __future__ import annotations
+
+import bpy
+
+from . import props
+
+
+class VIEW3D_PT_eegt(bpy.types.Panel):
+    """Parameters, pins, analysis and the Untangle & Smooth button"""
+
+    bl_label = "EEGT Untangle & Smooth"
+    bl_idname = "VIEW3D_PT_eegt"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "EEGT"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        layout = self.layout
+        settings = context.scene.eegt_settings
+        col = layout.column(align=True)
+        row = col.row(align=True)
+        row.scale_y = 1.4
+        row.operator("mesh.eegt_untangle_smooth", icon="MOD_SMOOTH")
+        row = col.row(align=True)
+        row.operator("mesh.eegt_analyze", icon="VIEWZOOM")
+        row.operator("mesh.eegt_select_inverted", text="Select Inverted",
+                     icon="RESTRICT_SELECT_OFF")
+        layout.prop(settings, "backend")
+        row = layout.row(align=True)
+        row.operator("mesh.eegt_pin", icon="PINNED")
+        row.operator("mesh.eegt_unpin", icon="UNPINNED")
+        row = layout.row(align=True)
+        row.prop(settings, "use_pinned")
+        row.prop(settings, "project")
+
+
+class VIEW3D_PT_eegt_params(bpy.types.Panel):
+    """Every EEGT parameter (defaults of the operator)"""
+
+    bl_label = "Parameters"
+    bl_idname = "VIEW3D_PT_eegt_params"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "EEGT"
+    bl_parent_id = "VIEW3D_PT_eegt"
+    bl_options = {"DEFAULT_CLOSED"}  # noqa: RUF012
+
+    def draw(self, context: bpy.types.Context) -> None:
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        settings = context.scene.eegt_settings
+        for f in props.param_fields():
+            layout.prop(settings, f.name)
+
+
+class VIEW3D_PT_eegt_last_run(bpy.types.Panel):
+    """Statistics of the last run on the active object"""
+
+    bl_label = "Last Run"
+    bl_idname = "VIEW3D_PT_eegt_last_run"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "EEGT"
+    bl_parent_id = "VIEW3D_PT_eegt"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        layout = self.layout
+        obj = context.active_object
+        lr = getattr(obj, "eegt_last_run", None) if obj is not None else None
+        if lr is None or not lr.has_run:
+            layout.label(text="No run on the active object yet")
+            return
+        col = layout.column(align=True)
+        col.label(text=f"{obj.name}: {lr.status}")
+        if lr.status not in ("error", "cancelled"):
+            col.label(text=f"Inverted: {lr.inverted_before} -> {lr.inverted_after}")
+            col.label(text=f"q min: {lr.q_min_before:.3f} -> {lr.q_min_after:.3f}")
+            col.label(text=f"q avg: {lr.q_avg_before:.3f} -> {lr.q_avg_after:.3f}")
+            col.label(text=f"Iterations: {lr.untangle_iterations} + {lr.smooth_iterations}")
+            col.label(text=f"{lr.seconds:.2f} s, {lr.backend}")
+        else:
+            col.label(text=lr.message)
+
+
+classes = (VIEW3D_PT_eegt, VIEW3D_PT_eegt_params, VIEW3D_PT_eegt_last_run)
+
+
+def register() -> None:
+    """Register the sidebar panels."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the sidebar panels."""
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

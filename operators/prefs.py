@@ -1,0 +1,104 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Add-on preferences: default backend and OpenCL device."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import bpy
+from bpy.props import EnumProperty
+
+from .. import __package__ as base_package
+from .. import core
+
+DEFAULT_BACKEND_ITEMS = (
+    ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
+    ("AUTO", "Auto", "OpenCL when a device is available, else NumPy"),
+    ("OPENCL", "OpenCL", "OpenCL (falls back to NumPy when pyopencl or a device is missing)"),
+)
+
+# Blender needs Python to keep the strings of dynamic enum items alive.
+_device_items_cache: list[tuple[str, str, str]] = []
+
+
+def _list_devices() -> list[tuple[str, str]]:
+    """(id, label) of OpenCL devices from the core helper when the core provides one."""
+    for name in ("list_opencl_devices", "opencl_devices"):
+        fn = getattr(core, name, None)
+        if callable(fn):
+            try:
+                found = fn()
+            except Exception:  # an OpenCL driver may fail in many ways; never break the UI
+                return []
+            out = []
+            for dev in found:
+                if isinstance(dev, tuple | list) and len(dev) >= 2:
+                    out.append((str(dev[0]), str(dev[1])))
+                else:
+                    out.append((str(dev), str(dev)))
+            return out
+    return []
+
+
+def device_items(_self: Any, _context: Any) -> list[tuple[str, str, str]]:
+    """Enum items: Automatic, then every OpenCL device the core can see."""
+    items = [("AUTO", "Automatic", "GPU first, then any other OpenCL device")]
+    items += [(ident, label, label) for ident, label in _list_devices()]
+    _device_items_cache[:] = items
+    return _device_items_cache
+
+
+class EEGT_AddonPreferences(bpy.types.AddonPreferences):
+    """Defaults used by the sidebar and the batch command."""
+
+    bl_idname = base_package
+
+    default_backend: EnumProperty(  # type: ignore[valid-type]
+        name="Default Backend", items=DEFAULT_BACKEND_ITEMS, default="NUMPY",
+        description="Backend used when the operator's backend is 'Default'")
+    opencl_device: EnumProperty(  # type: ignore[valid-type]
+        name="OpenCL Device", items=device_items,
+        description="OpenCL device for the OpenCL backend")
+
+    def draw(self, _context: bpy.types.Context) -> None:
+        layout = self.layout
+        layout.prop(self, "default_backend")
+        layout.prop(self, "opencl_device")
+
+
+def get_prefs(context: bpy.types.Context | None = None) -> Any | None:
+    """The add-on preferences, or None when the code runs outside the extension system."""
+    ctx = context or bpy.context
+    addon = ctx.preferences.addons.get(base_package)
+    return addon.preferences if addon is not None else None
+
+
+def resolve_backend(
+    choice: str, context: bpy.types.Context | None = None
+) -> tuple[str, str | None]:
+    """Map a backend enum value to the core's name, plus the OpenCL device (or None)."""
+    prefs = get_prefs(context)
+    if choice == "PREFS":
+        choice = prefs.default_backend if prefs is not None else "NUMPY"
+    device = None
+    if prefs is not None and choice in ("OPENCL", "AUTO"):
+        try:
+            device = prefs.opencl_device
+        except (TypeError, ValueError):
+            device = None
+    return {"NUMPY": "numpy", "OPENCL": "opencl", "AUTO": "auto"}.get(choice, "numpy"), device
+
+
+classes = (EEGT_AddonPreferences,)
+
+
+def register() -> None:
+    """Register the preferences class."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the preferences class."""
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,183 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Blender properties generated from the fields of ``core.EEGTParams``.
+
+The scene settings, the operator's redo panel and the command-line flags all come from
+``dataclasses.fields(EEGTParams)``, so a new core parameter shows up everywhere by itself.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+
+from ..core import EEGTParams
+
+# Choices of string parameters (dataclass fields carry no choice list).
+STRING_CHOICES: dict[str, tuple[tuple[str, str, str], ...]] = {
+    "scaling": (
+        ("edge", "Edge", "Shrink keeps the mean edge length (paper)"),
+        ("area", "Area", "Shrink keeps the mean area"),
+    ),
+}
+
+LABELS: dict[str, str] = {
+    "a": "Stretch Factor a",
+    "eta": "Quality Exponent",
+    "c": "Distance Exponent",
+    "inverted_weight": "Inverted Weight",
+    "tol": "Tolerance",
+    "max_untangle_iterations": "Max Untangle Iterations",
+    "max_smooth_iterations": "Max Smooth Iterations",
+    "distance_refresh": "Distance Refresh",
+    "scaling": "Scaling",
+}
+
+# Lower bounds matching EEGTParams.__post_init__ (soft_max keeps the sliders usable).
+BOUNDS: dict[str, dict[str, float]] = {
+    "a": {"min": 1e-6, "soft_max": 1.0},
+    "eta": {"min": 0.0, "soft_max": 8.0},
+    "c": {"min": 0.0, "soft_max": 8.0},
+    "inverted_weight": {"min": 1e-6, "soft_max": 50.0},
+    "tol": {"min": 0.0, "soft_max": 0.1},
+    "max_untangle_iterations": {"min": 0, "soft_max": 20000},
+    "max_smooth_iterations": {"min": 0, "soft_max": 5000},
+    "distance_refresh": {"min": 1, "soft_max": 100},
+}
+
+BACKEND_ITEMS: tuple[tuple[str, str, str], ...] = (
+    ("PREFS", "Default", "Use the default backend of the add-on preferences"),
+    ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
+    ("OPENCL", "OpenCL", "OpenCL device (NumPy when pyopencl or a device is missing)"),
+    ("AUTO", "Auto", "OpenCL when available, else NumPy"),
+)
+
+
+def param_fields() -> list[dataclasses.Field]:
+    """The EEGTParams fields, in declaration order."""
+    return list(dataclasses.fields(EEGTParams))
+
+
+def field_label(name: str) -> str:
+    """Human label of a parameter (falls back to the field name)."""
+    return LABELS.get(name, name.replace("_", " ").title())
+
+
+def field_help(f: dataclasses.Field) -> str:
+    """Tooltip of a parameter: the field's ``help`` metadata."""
+    return str(f.metadata.get("help", "")).rstrip(".") or field_label(f.name)
+
+
+def _default(f: dataclasses.Field) -> Any:
+    if f.default is not dataclasses.MISSING:
+        return f.default
+    if f.default_factory is not dataclasses.MISSING:  # pragma: no cover - not used today
+        return f.default_factory()
+    return getattr(EEGTParams(), f.name)
+
+
+def blender_property(f: dataclasses.Field) -> Any:
+    """A bpy property definition for one EEGTParams field (type taken from its default)."""
+    default = _default(f)
+    name, desc = field_label(f.name), field_help(f)
+    bounds = BOUNDS.get(f.name, {})
+    if isinstance(default, bool):
+        return BoolProperty(name=name, description=desc, default=default)
+    if isinstance(default, int):
+        return IntProperty(name=name, description=desc, default=default,
+                           min=int(bounds.get("min", 0)),
+                           soft_max=int(bounds.get("soft_max", 2**31 - 1)))
+    if isinstance(default, float):
+        return FloatProperty(name=name, description=desc, default=default,
+                             min=bounds.get("min", -3.4e38),
+                             soft_max=bounds.get("soft_max", 3.4e38),
+                             precision=4 if default and abs(default) < 0.01 else 3)
+    if isinstance(default, str) and f.name in STRING_CHOICES:
+        return EnumProperty(name=name, description=desc, items=STRING_CHOICES[f.name],
+                            default=default)
+    return StringProperty(name=name, description=desc, default=str(default))
+
+
+def param_annotations() -> dict[str, Any]:
+    """Annotations (name -> bpy property) for every EEGTParams field."""
+    return {f.name: blender_property(f) for f in param_fields()}
+
+
+def params_from(owner: Any, fallback: Any = None) -> EEGTParams:
+    """Build EEGTParams from an operator or property group.
+
+    For an operator, a parameter that was not set explicitly comes from ``fallback`` (the
+    scene settings) when given.
+    """
+    values: dict[str, Any] = {}
+    props = getattr(owner, "properties", None)
+    for f in param_fields():
+        src = owner
+        if fallback is not None and props is not None and not props.is_property_set(f.name):
+            src = fallback
+        values[f.name] = getattr(src, f.name)
+    return EEGTParams(**values)
+
+
+def set_params(owner: Any, params: EEGTParams) -> None:
+    """Copy EEGTParams values onto an operator or property group."""
+    for f in param_fields():
+        setattr(owner, f.name, getattr(params, f.name))
+
+
+def _settings_class() -> type:
+    annotations = param_annotations()
+    annotations["backend"] = EnumProperty(
+        name="Backend", description="Compute backend", items=BACKEND_ITEMS, default="PREFS")
+    annotations["use_pinned"] = BoolProperty(
+        name="Use Pinned", default=True,
+        description="Keep vertices of the eegt_pinned attribute or vertex group fixed")
+    annotations["project"] = BoolProperty(
+        name="Project to Plane", default=False,
+        description="Project a slightly non-planar mesh onto its plane instead of refusing it")
+    return type("EEGT_PG_settings", (bpy.types.PropertyGroup,), {
+        "__annotations__": annotations,
+        "__doc__": "EEGT parameters of this scene (defaults for the operator)",
+    })
+
+
+EEGT_PG_settings = _settings_class()
+
+
+class EEGT_PG_last_run(bpy.types.PropertyGroup):
+    """Statistics of the last EEGT run on an object (shown in the sidebar)."""
+
+    has_run: BoolProperty(default=False)  # type: ignore[valid-type]
+    status: StringProperty(default="")  # type: ignore[valid-type]
+    message: StringProperty(default="")  # type: ignore[valid-type]
+    backend: StringProperty(default="")  # type: ignore[valid-type]
+    inverted_before: IntProperty(default=0)  # type: ignore[valid-type]
+    inverted_after: IntProperty(default=0)  # type: ignore[valid-type]
+    q_min_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    q_min_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    q_avg_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    q_avg_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    untangle_iterations: IntProperty(default=0)  # type: ignore[valid-type]
+    smooth_iterations: IntProperty(default=0)  # type: ignore[valid-type]
+    seconds: FloatProperty(default=0.0)  # type: ignore[valid-type]
+
+
+classes = (EEGT_PG_settings, EEGT_PG_last_run)
+
+
+def register() -> None:
+    """Register the property groups and attach them to Scene and Object."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.eegt_settings = bpy.props.PointerProperty(type=EEGT_PG_settings)
+    bpy.types.Object.eegt_last_run = bpy.props.PointerProperty(type=EEGT_PG_last_run)
+
+
+def unregister() -> None:
+    """Remove what :func:`register` added."""
+    del bpy.types.Object.eegt_last_run
+    del bpy.types.Scene.eegt_settings
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

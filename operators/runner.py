@@ -1,0 +1,316 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Glue between one Blender mesh object and the core: prepare, compute, apply.
+
+``prepare`` reads the mesh (main thread), ``compute`` only runs the core on NumPy arrays (safe
+in a worker thread: no bpy), ``apply`` writes the result back (main thread, Object Mode).
+No algorithm lives here.
+"""
+
+from __future__ import annotations
+
+import inspect
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import bpy
+import numpy as np
+
+from ..core import EEGTParams, faces_from_csr, quality, untangle_and_smooth
+from ..core.plane import PlaneFrame
+from . import mesh_io
+
+Progress = Callable[[int, str, Any], bool]
+
+PLANE_TOL = 1e-5
+
+
+def stats_dict(stats: Any) -> dict[str, Any] | None:
+    """Core Stats as a JSON-ready dict."""
+    if stats is None:
+        return None
+    return {"n_inverted": int(stats.n_inverted), "q_min": float(stats.q_min),
+            "q_avg": float(stats.q_avg)}
+
+
+def stats_from_quality(q: np.ndarray) -> dict[str, Any]:
+    """n_inverted / q_min / q_avg of per-face mean ratios (inverted faces count as 0)."""
+    return {"n_inverted": int(np.count_nonzero(q <= 0.0)),
+            "q_min": float(q.min()) if q.size else 0.0,
+            "q_avg": float(q.mean()) if q.size else 0.0}
+
+
+@dataclass
+class ObjectResult:
+    """Outcome of one object's run, for reports, the sidebar and the JSON report."""
+
+    object: str
+    mesh: str = ""
+    status: str = "error"  # valid | untangled | failed | cancelled | error
+    message: str = ""
+    written: bool = False
+    before: dict[str, Any] | None = None
+    after: dict[str, Any] | None = None
+    untangle_iterations: int = 0
+    smooth_iterations: int = 0
+    seconds: float = 0.0
+    backend: str = ""
+    n_nodes: int = 0
+    n_faces: int = 0
+    n_free: int = 0
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        """True when the mesh ended with no inverted face."""
+        return self.status in ("valid", "untangled")
+
+    def line(self) -> str:
+        """The one report line of this object."""
+        if self.status == "error":
+            return f"{self.object}: not changed: {self.message}"
+        if self.status == "cancelled":
+            return f"{self.object}: cancelled, not changed"
+        b, a = self.before or {}, self.after or {}
+        text = (f"{self.object}: inverted {b.get('n_inverted')} -> {a.get('n_inverted')}, "
+                f"q_min {b.get('q_min', 0):.3f} -> {a.get('q_min', 0):.3f}, "
+                f"q_avg {b.get('q_avg', 0):.3f} -> {a.get('q_avg', 0):.3f}, "
+                f"{self.untangle_iterations}+{self.smooth_iterations} iterations, "
+                f"{self.seconds:.2f} s, {self.backend}")
+        if self.status == "failed":
+            text += f"; FAILED to untangle: {self.message}"
+        if not self.written:
+            text += "; nothing written" if self.status != "failed" else "; not written"
+        if self.notes:
+            text += "; " + "; ".join(self.notes)
+        return text
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (the per-object entry of the CLI report)."""
+        return {
+            "object": self.object, "mesh": self.mesh, "status": self.status,
+            "message": self.message, "written": self.written,
+            "before": self.before, "after": self.after,
+            "untangle_iterations": self.untangle_iterations,
+            "smooth_iterations": self.smooth_iterations,
+            "seconds": round(self.seconds, 6), "backend": self.backend,
+            "n_nodes": self.n_nodes, "n_faces": self.n_faces, "n_free": self.n_free,
+            "notes": list(self.notes),
+        }
+
+
+@dataclass
+class Job:
+    """Everything the core needs for one mesh, read from Blender on the main thread."""
+
+    object: str
+    mesh: str
+    co: np.ndarray  # (N, 3) float32, the positions being edited (mesh or active shape key)
+    key_name: str | None = None
+    nodes: np.ndarray | None = None  # (n,) global indices of the nodes used by the faces
+    faces: Any = None  # core FaceSet over local node numbers
+    fixed: np.ndarray | None = None  # (n,) extra pinned nodes (boundary is added by the core)
+    frame: Any = None
+    points2d: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)
+    error: str | None = None
+    result: Any = None
+    new_co: np.ndarray | None = None  # (N, 3) float32 to write, None when nothing changed
+    after: dict[str, Any] | None = None
+
+
+def refusal(obj: bpy.types.Object) -> str | None:
+    """Why this object's mesh cannot be written (linked, library override), or None."""
+    me = obj.data
+    if obj.library is not None or me.library is not None:
+        lib = (me.library or obj.library).filepath
+        return f"mesh is linked from a library ({lib}), make it local first"
+    if getattr(me, "override_library", None) is not None:
+        return "mesh is a library override (its geometry cannot be saved), make it local first"
+    if not getattr(me, "is_editable", True):
+        return "mesh data is not editable"
+    return None
+
+
+def _fail(job: Job, message: str) -> Job:
+    job.error = message
+    return job
+
+
+def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: bool = True,
+            project: bool = False) -> Job:
+    """Read one mesh object into a :class:`Job` (sets ``job.error`` for bad input).
+
+    ``selected_only``: only the selected faces move; vertices of unselected faces (the
+    selection border and everything outside) stay fixed. Loose vertices and the vertices of
+    loose edges never move.
+    """
+    me = obj.data
+    job = Job(object=obj.name, mesh=me.name, co=np.zeros((0, 3), np.float32))
+    why = refusal(obj)
+    if why:
+        return _fail(job, why)
+    key = obj.active_shape_key if me.shape_keys is not None else None
+    if key is not None:
+        job.key_name = key.name
+        job.co = mesh_io.read_key_positions(key)
+        job.notes.append(f"acted on shape key '{key.name}'")
+    else:
+        job.co = mesh_io.read_positions(me)
+    if any(m.show_viewport for m in obj.modifiers):
+        job.notes.append("base mesh (modifiers not applied)")
+    topo = mesh_io.read_topology(me)
+    if topo.loop_start.size == 0:
+        return _fail(job, "mesh has no faces")
+    face_mask = np.ones(topo.loop_start.size, dtype=bool)
+    if selected_only:
+        face_mask = mesh_io.read_face_selection(me)
+        if not face_mask.any():
+            return _fail(job, "no faces selected")
+    corner_face = mesh_io.corner_faces(topo)
+    corner_in = face_mask[corner_face]
+    order = np.argsort(topo.loop_start[face_mask], kind="stable")
+    starts = topo.loop_start[face_mask][order]
+    totals = topo.loop_total[face_mask][order]
+    n_all = topo.n_verts
+    if topo.corner_verts.size and (topo.corner_verts.min() < 0
+                                   or topo.corner_verts.max() >= n_all):
+        return _fail(job, "a face uses a vertex index out of range")
+    # Corner vertex lists of the chosen faces, face by face (offsets are sorted in Blender).
+    idx = np.repeat(starts, totals) + (np.arange(int(totals.sum()))
+                                       - np.repeat(np.cumsum(totals) - totals, totals))
+    sub_corners = topo.corner_verts[idx].astype(np.int64)
+    nodes, local = np.unique(sub_corners, return_inverse=True)
+    job.nodes = nodes
+    pts3d = job.co[nodes].astype(np.float64)
+    if not np.isfinite(pts3d).all():
+        bad = int(np.count_nonzero(~np.isfinite(pts3d).all(axis=1)))
+        return _fail(job, f"{bad} vertices have NaN or infinite coordinates")
+    fixed_all = np.zeros(n_all, dtype=bool)
+    if use_pinned:
+        fixed_all |= mesh_io.read_pins(obj)
+    if selected_only:
+        fixed_all[topo.corner_verts[~corner_in]] = True
+    loose = mesh_io.loose_edge_vertices(me)
+    if loose is not None:
+        fixed_all |= loose
+    job.fixed = fixed_all[nodes]
+    try:
+        offsets = np.zeros(totals.size + 1, dtype=np.int64)
+        np.cumsum(totals, out=offsets[1:])
+        job.faces = faces_from_csr(offsets[:-1], totals, local.reshape(-1))
+        job.frame = PlaneFrame.fit(pts3d, job.faces, tol=PLANE_TOL, project=project)
+        job.points2d = job.frame.to_2d(pts3d)
+    except ValueError as exc:
+        return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    return job
+
+
+def _backend_kwargs(device: str | None) -> dict[str, Any]:
+    """Extra keyword arguments for the core when it accepts an OpenCL device choice."""
+    if device and device != "AUTO":
+        params = inspect.signature(untangle_and_smooth).parameters
+        if "device" in params:
+            return {"device": device}
+    return {}
+
+
+def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Progress | None = None,
+            device: str | None = None) -> None:
+    """Run the core on a prepared job (no bpy here: safe in a worker thread)."""
+    if job.error:
+        return
+    try:
+        res = untangle_and_smooth(job.points2d, job.faces, fixed=job.fixed, params=params,
+                                  backend=backend, progress=progress, **_backend_kwargs(device))
+    except ValueError as exc:
+        job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        return
+    job.result = res
+    if res.status == "cancelled":
+        return
+    new3d = job.frame.to_3d(res.points).astype(np.float32)
+    moved = np.asarray(res.moved, dtype=bool)
+    rows = job.nodes[moved]
+    changed = np.any(new3d[moved] != job.co[rows], axis=1)
+    if changed.any():
+        out = job.co.copy()
+        out[rows[changed]] = new3d[moved][changed]
+        job.new_co = out
+        written2d = job.frame.to_2d(out[job.nodes].astype(np.float64))
+        job.after = stats_from_quality(np.asarray(quality(written2d, job.faces)))
+    else:
+        job.after = stats_dict(res.before)
+
+
+def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResult:
+    """Write a computed job back (Object Mode) and describe the outcome."""
+    out = ObjectResult(object=job.object, mesh=job.mesh, notes=list(job.notes))
+    if job.error:
+        out.message = job.error
+        return out
+    res = job.result
+    out.n_nodes = int(job.nodes.size)
+    out.n_faces = int(job.faces.n_faces) if hasattr(job.faces, "n_faces") else 0
+    out.n_free = int(np.count_nonzero(np.asarray(res.moved)))
+    out.status = res.status
+    out.message = str(res.message)
+    out.before = stats_dict(res.before)
+    out.after = job.after if job.after is not None else stats_dict(res.after)
+    out.untangle_iterations = int(res.untangle_iterations)
+    out.smooth_iterations = int(res.smooth_iterations)
+    out.seconds = float(res.seconds)
+    out.backend = str(res.backend)
+    if res.status == "cancelled":
+        out.after = out.before
+        return out
+    if job.new_co is not None and write:
+        me = obj.data
+        if job.key_name is not None:
+            key = me.shape_keys.key_blocks[job.key_name]
+            mesh_io.write_key_positions(key, job.new_co)
+            if key == me.shape_keys.reference_key:
+                mesh_io.write_positions(me, job.new_co)
+            me.update()
+        else:
+            mesh_io.write_positions(me, job.new_co)
+        out.written = True
+    if not out.written:
+        out.after = out.before if job.new_co is not None else out.after
+    return out
+
+
+def store_last_run(obj: bpy.types.Object, result: ObjectResult) -> None:
+    """Keep the stats of the last run on the object, for the sidebar."""
+    lr = getattr(obj, "eegt_last_run", None)
+    if lr is None:
+        return
+    lr.has_run = True
+    lr.status = result.status
+    lr.message = result.line()
+    lr.backend = result.backend
+    b, a = result.before or {}, result.after or {}
+    lr.inverted_before = int(b.get("n_inverted", 0))
+    lr.inverted_after = int(a.get("n_inverted", 0))
+    lr.q_min_before = float(b.get("q_min", 0.0))
+    lr.q_min_after = float(a.get("q_min", 0.0))
+    lr.q_avg_before = float(b.get("q_avg", 0.0))
+    lr.q_avg_after = float(a.get("q_avg", 0.0))
+    lr.untangle_iterations = result.untangle_iterations
+    lr.smooth_iterations = result.smooth_iterations
+    lr.seconds = result.seconds
+
+
+def run_object(obj: bpy.types.Object, params: EEGTParams, *, backend: str = "numpy",
+               device: str | None = None, selected_only: bool = False, use_pinned: bool = True,
+               project: bool = False, progress: Progress | None = None,
+               write: bool = True) -> ObjectResult:
+    """Prepare, compute and apply in one call (Object Mode, main thread)."""
+    t0 = time.perf_counter()
+    job = prepare(obj, selected_only=selected_only, use_pinned=use_pinned, project=project)
+    compute(job, params, backend, progress, device)
+    result = apply(obj, job, write=write)
+    if result.seconds == 0.0:
+        result.seconds = time.perf_counter() - t0
+    return result
