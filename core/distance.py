@@ -4,7 +4,8 @@ Boundary nodes never move, so the search structure is built once per run: a unif
 over the boundary's bounding square, refined level by level like a quadtree. Each cell keeps
 only the boundary nodes that can be the nearest one for some point of the cell (a node whose
 distance to the cell box exceeds the smallest "farthest distance" of any node cannot win).
-A query then scans the short candidate list of its leaf cell. Queries outside the grid (a
+Cells with more than a few candidates are split (an adaptive quadtree), so a query scans
+a short list wherever the boundary is dense. Queries outside the grid (a
 tangled node can leave the domain) are answered by brute force.
 """
 
@@ -31,7 +32,17 @@ def _ragged_arange(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
 class NearestBoundary:
     """Distance from query points to the nearest of a fixed set of boundary points."""
 
-    def __init__(self, bx: np.ndarray, by: np.ndarray, leaf_cells: int | None = None):
+    def __init__(
+        self,
+        bx: np.ndarray,
+        by: np.ndarray,
+        hint_x: np.ndarray | None = None,
+        hint_y: np.ndarray | None = None,
+        min_cell: float = 0.0,
+        leaf_size: int = 8,
+    ):
+        """Build over boundary points (bx, by). Cells are refined only where the hint points
+        (the queries expected, e.g. element centroids) lie, down to about `min_cell`."""
         self.bx = np.ascontiguousarray(bx, dtype=np.float64)
         self.by = np.ascontiguousarray(by, dtype=np.float64)
         nb = self.bx.size
@@ -39,31 +50,72 @@ class NearestBoundary:
             raise ValueError("no boundary nodes to measure distances to")
         lo = np.array([self.bx.min(), self.by.min()])
         side = float(max(self.bx.max() - lo[0], self.by.max() - lo[1]))
-        side = side * (1 + 1e-9) + 1e-300 if side > 0 else 1.0
-        self.origin = lo
-        self.side = side
-        target = leaf_cells if leaf_cells is not None else max(16, 4 * nb)
-        self.levels = int(np.clip(np.ceil(np.log(target) / np.log(4)), 0, 11))
-        self._build()
+        side = side if side > 0 else 1.0
+        # a margin of half the size on every side: tangled centroids may leave the domain
+        self.side = 2.0 * side
+        self.origin = lo - 0.5 * side
+        finest = min_cell if min_cell > 0 else self.side / 4096
+        self.depth = int(np.clip(np.ceil(np.log2(self.side / finest)), 1, 30))
+        if hint_x is None:
+            hx = hy = None
+        else:
+            hx, hy = self._cell_coords(np.asarray(hint_x), np.asarray(hint_y))
+        self._build(leaf_size, hx, hy)
 
-    def _build(self) -> None:
+    def _cell_coords(self, qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Integer cell coordinates at the finest level (clipped into the root square)."""
+        scale = (1 << self.depth) / self.side
+        top = (1 << self.depth) - 1
+        ix = np.clip(np.floor((qx - self.origin[0]) * scale), 0, top).astype(np.int64)
+        iy = np.clip(np.floor((qy - self.origin[1]) * scale), 0, top).astype(np.int64)
+        return ix, iy
+
+    def _build(self, leaf_size: int, hx: np.ndarray | None, hy: np.ndarray | None) -> None:
+        """Split cells with more than `leaf_size` candidates that hold a hint point."""
         nb = self.bx.size
-        # level 0: one cell, every boundary node a candidate
         cell_ix = np.zeros(1, dtype=np.int64)
         cell_iy = np.zeros(1, dtype=np.int64)
         seg_len = np.array([nb], dtype=np.int64)
         cand = np.arange(nb, dtype=np.int64)
-        for level in range(1, self.levels + 1):
-            h = self.side / (1 << level)
-            # each parent segment is repeated for its 4 children, child-major inside parent
-            starts = np.cumsum(seg_len) - seg_len
-            child_start = np.repeat(starts, 4)
-            child_len = np.repeat(seg_len, 4)
-            quad = np.tile(np.arange(4), seg_len.size)
-            c_ix = np.repeat(cell_ix, 4) * 2 + (quad & 1)
-            c_iy = np.repeat(cell_iy, 4) * 2 + (quad >> 1)
-            pc = cand[_ragged_arange(child_start, child_len)]
-            owner = np.repeat(np.arange(c_ix.size), child_len)
+        self.child: list[np.ndarray] = []  # per level: first child's index, or -1 for a leaf
+        self.leaf_start: list[np.ndarray] = []  # per level: leaf segment in self.cand
+        self.leaf_len: list[np.ndarray] = []
+        leaf_parts: list[np.ndarray] = []
+        n_leaf_pairs = 0
+        for level in range(self.depth + 1):
+            seg_first = np.cumsum(seg_len) - seg_len
+            split = seg_len > leaf_size if level < self.depth else np.zeros(seg_len.size, bool)
+            if hx is not None and split.any():
+                shift = self.depth - level
+                keys = cell_iy * (1 << level) + cell_ix
+                order = np.argsort(keys)
+                hk = (hy >> shift) * (1 << level) + (hx >> shift)
+                pos = np.minimum(np.searchsorted(keys[order], hk), keys.size - 1)
+                hit = keys[order][pos] == hk
+                occupied = np.zeros(seg_len.size, dtype=bool)
+                occupied[order[pos[hit]]] = True
+                split &= occupied
+            child = np.full(seg_len.size, -1, dtype=np.int64)
+            child[split] = 4 * np.arange(int(split.sum()))
+            leaf_start = np.full(seg_len.size, -1, dtype=np.int64)
+            leaf = ~split
+            leaf_start[leaf] = n_leaf_pairs + np.cumsum(seg_len[leaf]) - seg_len[leaf]
+            n_leaf_pairs += int(seg_len[leaf].sum())
+            leaf_parts.append(cand[_ragged_arange(seg_first[leaf], seg_len[leaf])])
+            self.child.append(child)
+            self.leaf_start.append(leaf_start)
+            self.leaf_len.append(np.where(leaf, seg_len, 0))
+            if not split.any():
+                break
+            # children of split cells, 4 per parent, each starting from the parent's list
+            p_first, p_len = seg_first[split], seg_len[split]
+            quad = np.tile(np.arange(4), p_len.size)
+            c_ix = np.repeat(cell_ix[split], 4) * 2 + (quad & 1)
+            c_iy = np.repeat(cell_iy[split], 4) * 2 + (quad >> 1)
+            c_len = np.repeat(p_len, 4)
+            pc = cand[_ragged_arange(np.repeat(p_first, 4), c_len)]
+            owner = np.repeat(np.arange(c_ix.size), c_len)
+            h = self.side / (1 << (level + 1))
             x0 = self.origin[0] + c_ix[owner] * h
             y0 = self.origin[1] + c_iy[owner] * h
             px, py = self.bx[pc], self.by[pc]
@@ -73,39 +125,54 @@ class NearestBoundary:
             dy_far = np.maximum(np.abs(py - y0), np.abs(py - (y0 + h)))
             near2 = dx_near * dx_near + dy_near * dy_near
             far2 = dx_far * dx_far + dy_far * dy_far
-            seg_first = np.cumsum(child_len) - child_len
-            bound = np.minimum.reduceat(far2, seg_first)
+            bound = np.minimum.reduceat(far2, np.cumsum(c_len) - c_len)
             keep = near2 <= bound[owner] * (1 + 1e-12)
             cand = pc[keep]
             seg_len = np.bincount(owner[keep], minlength=c_ix.size).astype(np.int64)
             cell_ix, cell_iy = c_ix, c_iy
-        g = 1 << self.levels
-        self.grid = g
-        self.cell_size = self.side / g
-        seg_start = np.cumsum(seg_len) - seg_len
-        self.leaf_start = np.empty(g * g, dtype=np.int64)
-        self.leaf_len = np.empty(g * g, dtype=np.int64)
-        flat = cell_iy * g + cell_ix
-        self.leaf_start[flat] = seg_start
-        self.leaf_len[flat] = seg_len
-        self.cand = cand
-        self.n_candidate_pairs = int(cand.size)
+        self.cand = np.concatenate(leaf_parts)
+        self.n_candidate_pairs = int(self.cand.size)
+
+    def _locate(self, qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Leaf candidate segment (start, length) of each query inside the root square."""
+        ix, iy = self._cell_coords(qx, qy)
+        node = np.zeros(qx.size, dtype=np.int64)
+        start = np.empty(qx.size, dtype=np.int64)
+        length = np.empty(qx.size, dtype=np.int64)
+        active = np.arange(qx.size)
+        for level, child in enumerate(self.child):
+            ch = child[node]
+            leaf = ch < 0
+            start[active[leaf]] = self.leaf_start[level][node[leaf]]
+            length[active[leaf]] = self.leaf_len[level][node[leaf]]
+            keep = ~leaf
+            active, ch = active[keep], ch[keep]
+            if active.size == 0:
+                break
+            shift = self.depth - level - 1
+            quad = ((ix[active] >> shift) & 1) + 2 * ((iy[active] >> shift) & 1)
+            node = ch + quad
+        return start, length
 
     def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
         """(Q,) Euclidean distance from each (qx, qy) to its nearest boundary point."""
         qx = np.asarray(qx, dtype=np.float64)
         qy = np.asarray(qy, dtype=np.float64)
         out = np.empty(qx.size)
-        g = self.grid
-        fx = np.floor((qx - self.origin[0]) / self.cell_size)
-        fy = np.floor((qy - self.origin[1]) / self.cell_size)
-        inside = (fx >= 0) & (fx < g) & (fy >= 0) & (fy < g)
+        lim = self.side * (1 - 1e-12)
+        inside = (
+            (qx >= self.origin[0])
+            & (qx - self.origin[0] < lim)
+            & (qy >= self.origin[1])
+            & (qy - self.origin[1] < lim)
+        )
         qin = np.flatnonzero(inside)
-        cell = fy[qin].astype(np.int64) * g + fx[qin].astype(np.int64)
-        lens = self.leaf_len[cell]
-        starts = self.leaf_start[cell]
-        bounds = np.searchsorted(np.cumsum(lens), np.arange(0, lens.sum() + 1, _CHUNK_PAIRS)[1:])
-        edges = np.unique(np.concatenate([[0], bounds, [qin.size]]))
+        starts, lens = self._locate(qx[qin], qy[qin])
+        csum = np.cumsum(lens)
+        cuts = np.searchsorted(
+            csum, np.arange(_CHUNK_PAIRS, int(csum[-1]) if csum.size else 0, _CHUNK_PAIRS)
+        )
+        edges = np.unique(np.concatenate([[0], cuts, [qin.size]]))
         for a, b in pairwise(edges):
             ln = lens[a:b]
             pc = self.cand[_ragged_arange(starts[a:b], ln)]
@@ -114,8 +181,9 @@ class NearestBoundary:
             d2 = dx * dx + dy * dy
             out[qin[a:b]] = np.minimum.reduceat(d2, np.cumsum(ln) - ln)
         qout = np.flatnonzero(~inside)
-        for a in range(0, qout.size, max(1, _CHUNK_PAIRS // self.bx.size)):
-            sel = qout[a : a + max(1, _CHUNK_PAIRS // self.bx.size)]
+        step = max(1, _CHUNK_PAIRS // self.bx.size)
+        for a in range(0, qout.size, step):
+            sel = qout[a : a + step]
             dx = self.bx[None, :] - qx[sel, None]
             dy = self.by[None, :] - qy[sel, None]
             out[sel] = (dx * dx + dy * dy).min(axis=1)

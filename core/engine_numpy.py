@@ -35,10 +35,13 @@ class NumpyEngine:
         self.free = np.ascontiguousarray(free, dtype=bool)
         self.groups = faces.groups
         self.corner_nodes = np.concatenate([g.nodes.ravel() for g in self.groups])
-        fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
-        self.nearest = NearestBoundary(self.x[fixed_idx], self.y[fixed_idx])
         self.q = [group_quality(*self._gather(g)) for g in self.groups]
-        self.lbar = self._mean_edge_length()
+        self.lbar, min_edge = self._edge_lengths()
+        fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
+        cx, cy = self._centroids()
+        self.nearest = NearestBoundary(
+            self.x[fixed_idx], self.y[fixed_idx], cx, cy, min_cell=0.25 * min_edge
+        )
         self.inv_d_pow: list[np.ndarray] = []
         self.iteration = 0
         self._refresh_distances()
@@ -49,27 +52,34 @@ class NumpyEngine:
     def _gather(self, g) -> tuple[np.ndarray, np.ndarray]:
         return self.x[g.nodes], self.y[g.nodes]
 
-    def _mean_edge_length(self) -> float:
-        total, count = 0.0, 0
+    def _centroids(self) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex centroids of all elements, groups concatenated."""
+        cs = [self._gather(g) for g in self.groups]
+        return np.concatenate([X.mean(0) for X, _ in cs]), np.concatenate(
+            [Y.mean(0) for _, Y in cs]
+        )
+
+    def _edge_lengths(self) -> tuple[float, float]:
+        """(lbar, smallest element mean edge length > 0) of the current positions."""
+        means = []
         for g in self.groups:
             X, Y = self._gather(g)
-            total += float(np.hypot(np.roll(X, -1, 0) - X, np.roll(Y, -1, 0) - Y).mean(0).sum())
-            count += g.size
-        lbar = total / count
+            means.append(np.hypot(np.roll(X, -1, 0) - X, np.roll(Y, -1, 0) - Y).mean(0))
+        m = np.concatenate(means)
+        lbar = float(m.mean())
+        positive = m[m > 0]
+        span = float(max(np.ptp(self.x), np.ptp(self.y))) or 1.0
         if not np.isfinite(lbar) or lbar <= 0:
-            span = max(np.ptp(self.x), np.ptp(self.y))
-            lbar = span if span > 0 else 1.0
-        return lbar
+            lbar = span
+        return lbar, float(positive.min()) if positive.size else span
 
     def _refresh_distances(self) -> None:
         """f_j = (lbar / d_j)^c from element vertex centroids to the nearest fixed node."""
         c = self.params.c
         floor = _DIST_FLOOR * self.lbar
-        self.inv_d_pow = []
-        for g in self.groups:
-            X, Y = self._gather(g)
-            d = np.maximum(self.nearest.query(X.mean(0), Y.mean(0)), floor)
-            self.inv_d_pow.append((self.lbar / d) ** c)
+        cx, cy = self._centroids()
+        f = (self.lbar / np.maximum(self.nearest.query(cx, cy), floor)) ** c
+        self.inv_d_pow = np.split(f, np.cumsum([g.size for g in self.groups])[:-1])
 
     def _quality_all(self) -> list[np.ndarray]:
         return [group_quality(*self._gather(g)) for g in self.groups]
