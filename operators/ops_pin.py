@@ -50,7 +50,10 @@ class _PinBase:
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         objs = modes.target_objects(context)
-        modes.sync_from_edit_mode(objs)
+        with modes.object_mode(context):
+            return self._run(objs)
+
+    def _run(self, objs: list[bpy.types.Object]) -> set[str]:
         everything = bool(getattr(self, "all", False))
         todo = []
         for obj in objs:
@@ -66,17 +69,16 @@ class _PinBase:
             self.report({"WARNING"}, "No vertices selected")
             return {"CANCELLED"}
         done = False
-        with modes.object_mode(context):
-            for obj, mask in todo:
-                err = set_pins(obj, mask, self.value)
-                if err:
-                    self.report({"WARNING"}, f"{obj.name}: {err}")
-                    continue
-                done = True
-                total = int(mesh_io.read_pins(obj).sum())
-                verb = "pinned" if self.value else "unpinned"
-                self.report({"INFO"}, f"{obj.name}: {int(mask.sum())} vertices {verb}, "
-                                      f"{total} pinned in all")
+        for obj, mask in todo:
+            err = set_pins(obj, mask, self.value)
+            if err:
+                self.report({"WARNING"}, f"{obj.name}: {err}")
+                continue
+            done = True
+            total = int(mesh_io.read_pins(obj).sum())
+            verb = "pinned" if self.value else "unpinned"
+            self.report({"INFO"}, f"{obj.name}: {int(mask.sum())} vertices {verb}, "
+                                  f"{total} pinned in all")
         return {"FINISHED"} if done else {"CANCELLED"}
 
 

@@ -97,7 +97,10 @@ class MESH_OT_eegt_analyze(bpy.types.Operator):
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         objs = modes.target_objects(context)
-        modes.sync_from_edit_mode(objs)
+        with modes.object_mode(context):
+            return self._run(objs)
+
+    def _run(self, objs: list[bpy.types.Object]) -> set[str]:
         found: list[tuple[bpy.types.Object, np.ndarray]] = []
         for obj in objs:
             try:
@@ -109,16 +112,15 @@ class MESH_OT_eegt_analyze(bpy.types.Operator):
             self.report({"INFO"}, _stats_line(obj.name, q))
         written = False
         if self.store and found:
-            with modes.object_mode(context):
-                for obj, q in found:
-                    if runner.refusal(obj):
-                        self.report({"WARNING"}, f"{obj.name}: {runner.refusal(obj)}")
-                        continue
-                    err = write_quality_attributes(obj, q)
-                    if err:
-                        self.report({"WARNING"}, f"{obj.name}: {err}")
-                    else:
-                        written = True
+            for obj, q in found:
+                if runner.refusal(obj):
+                    self.report({"WARNING"}, f"{obj.name}: {runner.refusal(obj)}")
+                    continue
+                err = write_quality_attributes(obj, q)
+                if err:
+                    self.report({"WARNING"}, f"{obj.name}: {err}")
+                else:
+                    written = True
         return {"FINISHED"} if written else {"CANCELLED"}
 
 
@@ -141,7 +143,14 @@ class MESH_OT_eegt_select_inverted(bpy.types.Operator):
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         objs = modes.target_objects(context)
-        modes.sync_from_edit_mode(objs)
+        if modes.is_edit_mode(context):
+            # Face select mode keeps exactly the chosen faces (vertex mode would also select
+            # every face whose vertices all happen to be selected).
+            context.tool_settings.mesh_select_mode = (False, False, True)
+        with modes.object_mode(context):
+            return self._run(objs)
+
+    def _run(self, objs: list[bpy.types.Object]) -> set[str]:
         found = []
         for obj in objs:
             try:
@@ -152,26 +161,25 @@ class MESH_OT_eegt_select_inverted(bpy.types.Operator):
             found.append((obj, q <= self.threshold))
         if not found:
             return {"CANCELLED"}
-        with modes.object_mode(context):
-            for obj, sel in found:
-                me = obj.data
-                if self.extend:
-                    sel = sel | mesh_io.read_face_selection(me)
-                sel &= ~mesh_io.read_face_hidden(me)
-                topo = mesh_io.read_topology(me)
-                vsel = np.zeros(len(me.vertices), dtype=bool)
-                vsel[topo.corner_verts[sel[mesh_io.corner_faces(topo)]]] = True
-                if self.extend:
-                    vsel |= mesh_io.read_vertex_selection(me)
-                ev = np.empty(2 * len(me.edges), dtype=np.int32)
-                me.edges.foreach_get("vertices", ev)
-                esel = vsel[ev.reshape(-1, 2)].all(axis=1) if ev.size else np.zeros(0, bool)
-                me.polygons.foreach_set("select", sel)
-                me.vertices.foreach_set("select", vsel)
-                me.edges.foreach_set("select", esel)
-                me.update()
-                self.report({"INFO"}, f"{obj.name}: {int(sel.sum())} faces with quality <= "
-                                      f"{self.threshold:g} selected")
+        for obj, sel in found:
+            me = obj.data
+            if self.extend:
+                sel = sel | mesh_io.read_face_selection(me)
+            sel &= ~mesh_io.read_face_hidden(me)
+            topo = mesh_io.read_topology(me)
+            vsel = np.zeros(len(me.vertices), dtype=bool)
+            vsel[topo.corner_verts[sel[mesh_io.corner_faces(topo)]]] = True
+            if self.extend:
+                vsel |= mesh_io.read_vertex_selection(me)
+            ev = np.empty(2 * len(me.edges), dtype=np.int32)
+            me.edges.foreach_get("vertices", ev)
+            esel = vsel[ev.reshape(-1, 2)].all(axis=1) if ev.size else np.zeros(0, bool)
+            me.polygons.foreach_set("select", sel)
+            me.vertices.foreach_set("select", vsel)
+            me.edges.foreach_set("select", esel)
+            me.update()
+            self.report({"INFO"}, f"{obj.name}: {int(sel.sum())} faces with quality <= "
+                                  f"{self.threshold:g} selected")
         return {"FINISHED"}
 
 

@@ -98,28 +98,19 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
     def _prepare(
         self, context: bpy.types.Context
     ) -> tuple[list[bpy.types.Object], list[runner.Job]]:
-        objs = modes.target_objects(context)
-        edit = modes.is_edit_mode(context)
-        if edit:
-            modes.sync_from_edit_mode(objs)
-        jobs = [runner.prepare(o, selected_only=edit, use_pinned=self.use_pinned,
+        """Read every target mesh (call in Object Mode: Edit Mode data is flushed by then)."""
+        objs = self._targets
+        jobs = [runner.prepare(o, selected_only=self._edit, use_pinned=self.use_pinned,
                                project=self.project) for o in objs]
         return objs, jobs
 
-    def _finish(self, context: bpy.types.Context, objs: list[bpy.types.Object],
-                jobs: list[runner.Job]) -> set[str]:
-        needs_write = any(j.new_co is not None for j in jobs)
-        results = []
-        if needs_write:
-            with modes.object_mode(context):
-                results = [runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
-        else:
-            results = [runner.apply(o, j, write=False) for o, j in zip(objs, jobs, strict=True)]
+    def _finish(self, objs: list[bpy.types.Object], jobs: list[runner.Job]) -> set[str]:
+        """Write results back (call in Object Mode), report one line per object."""
+        results = [runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
         LAST_RESULTS[:] = results
         for obj, res in zip(objs, results, strict=True):
             runner.store_last_run(obj, res)
-            self.report({"INFO"} if res.ok and res.status != "error" else {"WARNING"},
-                        res.line())
+            self.report({"INFO"} if res.ok else {"WARNING"}, res.line())
         if not any(r.written for r in results):
             return {"CANCELLED"}
         return {"FINISHED"}
@@ -133,12 +124,15 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
             self.report({"WARNING"}, str(exc))
             return {"CANCELLED"}
         backend, device = resolve_backend(self.backend, context)
-        objs, jobs = self._prepare(context)
+        self._targets = modes.target_objects(context)
+        self._edit = modes.is_edit_mode(context)
         verbose = bpy.app.background
-        for job in jobs:
-            progress = _printer(job.object) if verbose else None
-            runner.compute(job, params, backend, progress, device)
-        return self._finish(context, objs, jobs)
+        with modes.object_mode(context):
+            objs, jobs = self._prepare(context)
+            for job in jobs:
+                progress = _printer(job.object) if verbose else None
+                runner.compute(job, params, backend, progress, device)
+            return self._finish(objs, jobs)
 
     # -- modal path (UI) ---------------------------------------------------------------------
     def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
@@ -151,7 +145,10 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
             self.report({"WARNING"}, str(exc))
             return {"CANCELLED"}
         backend, device = resolve_backend(self.backend, context)
-        self._objs, self._jobs = self._prepare(context)
+        self._targets = modes.target_objects(context)
+        self._edit = modes.is_edit_mode(context)
+        with modes.object_mode(context):
+            self._objs, self._jobs = self._prepare(context)
         self._worker = _Worker(self._jobs, params, backend, device)
         self._worker.thread.start()
         self._t0 = time.perf_counter()
@@ -196,7 +193,10 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
         if w.error is not None:
             self.report({"WARNING"}, f"EEGT internal error: {w.error!r}; no mesh changed")
             return {"CANCELLED"}
-        return self._finish(context, self._objs, self._jobs)
+        if not any(j.new_co is not None for j in self._jobs):
+            return self._finish(self._objs, self._jobs)
+        with modes.object_mode(context):
+            return self._finish(self._objs, self._jobs)
 
 
 def _printer(name: str) -> runner.Progress:
