@@ -1,0 +1,129 @@
+"""The ``eegt`` command handler called with argv lists (as ``blender -b -c eegt`` would)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from .conftest import DATA, import_obj, positions
+
+pytestmark = pytest.mark.blender
+
+
+def cli(ext):
+    return ext.operators.cli
+
+
+def read_obj_vertices(path) -> np.ndarray:
+    rows = [line.split()[1:4] for line in open(path) if line.startswith("v ")]
+    return np.array(rows, dtype=np.float64)
+
+
+def test_obj_in_obj_out_with_report(bpy, ext, tmp_path):
+    out, rep = tmp_path / "out.obj", tmp_path / "r.json"
+    code = cli(ext).execute([str(DATA / "quad_hole.obj"), "-o", str(out), "--report", str(rep),
+                             "--quiet"])
+    assert code == 0
+    report = json.loads(rep.read_text())
+    assert report["exit_code"] == 0 and report["written"] is True
+    assert report["params"]["a"] == pytest.approx(0.2)
+    (o,) = report["objects"]
+    assert o["object"] == "quad_hole" and o["status"] == "untangled" and o["written"]
+    assert o["before"]["n_inverted"] == 23 and o["after"]["n_inverted"] == 0
+    assert o["after"]["q_min"] > 0.5 and o["after"]["q_avg"] > o["before"]["q_avg"]
+    assert o["untangle_iterations"] > 0 and o["seconds"] > 0 and o["backend"] == "numpy"
+    assert (o["n_nodes"], o["n_faces"]) == (168, 140)
+    # the written OBJ has the same vertex count, boundary where it was, no inverted face
+    src, dst = read_obj_vertices(DATA / "quad_hole.obj"), read_obj_vertices(out)
+    assert src.shape == dst.shape
+    assert np.allclose(dst[:, 2], 0.0)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    obj = import_obj(bpy, "out", out)
+    from .conftest import mesh_quality
+    assert (mesh_quality(ext, obj) > 0).all()
+
+
+def test_failed_mesh_exit_3_best_written_unless_no_write(bpy, ext, tmp_path):
+    inp = str(DATA / "quad_hole.obj")
+    out, rep = tmp_path / "out.blend", tmp_path / "r.json"
+    args = ["--max-untangle-iterations", "1", "--report", str(rep), "--quiet"]
+    assert cli(ext).execute([inp, "-o", str(out), *args]) == 3
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert o["status"] == "failed" and o["written"] is True
+    assert 0 < o["after"]["n_inverted"] < 23 and "failed" in o["message"]
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    written = positions(bpy.data.objects["quad_hole"])
+    assert json.loads(rep.read_text())["exit_code"] == 3
+    # --no-write-on-fail leaves the mesh as it was
+    out2 = tmp_path / "out2.blend"
+    assert cli(ext).execute([inp, "-o", str(out2), "--no-write-on-fail", *args]) == 3
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert o["written"] is False and o["status"] == "failed"
+    bpy.ops.wm.open_mainfile(filepath=str(out2))
+    kept = positions(bpy.data.objects["quad_hole"])
+    src = read_obj_vertices(DATA / "quad_hole.obj").astype(np.float32)
+    assert np.array_equal(kept, src)
+    assert not np.array_equal(written, src)
+
+
+def test_blend_input_object_filter_and_bad_mesh(bpy, ext, tmp_path):
+    a = import_obj(bpy, "quad_hole")
+    b = import_obj(bpy, "tilted_plane")
+    co = positions(b)
+    co[0, 2] += 1.0  # no longer planar
+    b.data.attributes["position"].data.foreach_set("vector", co.ravel())
+    a.name, b.name = "good", "bent"
+    src = tmp_path / "in.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    rep = tmp_path / "r.json"
+    out = tmp_path / "out.blend"
+    code = cli(ext).execute([str(src), "-o", str(out), "--report", str(rep), "--quiet"])
+    assert code == 3
+    objs = {o["object"]: o for o in json.loads(rep.read_text())["objects"]}
+    assert objs["good"]["status"] == "untangled" and objs["good"]["after"]["n_inverted"] == 0
+    assert objs["bent"]["status"] == "error" and "not planar" in objs["bent"]["message"]
+    assert objs["bent"]["written"] is False
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    assert np.array_equal(positions(bpy.data.objects["bent"]), co)
+    # --object picks one mesh; the input file itself is never modified without -o
+    code = cli(ext).execute([str(src), "--object", "good", "--report", str(rep), "--quiet"])
+    assert code == 0
+    report = json.loads(rep.read_text())
+    assert [o["object"] for o in report["objects"]] == ["good"] and report["written"] is False
+    bpy.ops.wm.open_mainfile(filepath=str(src))
+    assert bpy.data.objects["good"].eegt_last_run.has_run is False
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["/nonexistent/file.obj"], "no such file"),
+    (["{tmp}/mesh.txt"], "unsupported input type"),
+    (["{data}/quad_hole.obj", "--a", "-1"], "a must be > 0"),
+    (["{data}/quad_hole.obj", "--scaling", "volume"], "invalid choice"),
+    (["{data}/quad_hole.obj", "--bogus"], "unrecognized arguments"),
+    (["{data}/quad_hole.obj", "--object", "nope"], "no mesh object named 'nope'"),
+    ([], "the following arguments are required"),
+])
+def test_usage_errors_exit_2(bpy, ext, tmp_path, capfd, argv, needle):
+    (tmp_path / "mesh.txt").write_text("v 0 0 0\n")
+    argv = [a.format(data=DATA, tmp=tmp_path) for a in argv]
+    rep = tmp_path / "r.json"
+    assert cli(ext).execute([*argv, "--report", str(rep)] if argv else argv) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert needle in err[-1]
+    if argv and "--bogus" not in argv and "--scaling" not in argv:
+        report = json.loads(rep.read_text())
+        assert report["exit_code"] == 2 and needle in report["error"]
+
+
+def test_help_exit_0_lists_every_parameter(bpy, ext, capfd):
+    assert cli(ext).execute(["--help"]) == 0
+    out = capfd.readouterr().out
+    for f in ext.core.EEGTParams.field_names():
+        assert "--" + f.replace("_", "-") in out
+    assert "--no-write-on-fail" in out and "--report" in out
+
+
+def test_command_is_registered(bpy, ext):
+    assert cli(ext)._handle is not None
