@@ -91,7 +91,7 @@ def main() -> None:
         same = bool(np.array_equal(out[~free], pts[~free]))
         print(f"{name:16s} in: inv {q0[2]:5d} q {q0[0]:.3f}/{q0[1]:.3f} | out: inv {q1[2]:4d} "
               f"q_min {q1[0]:.3f} q_avg {q1[1]:.3f} | {dt:6.2f} s, {info['iterations']} it "
-              f"({1e3 * info['seconds_per_iter']:.2f} ms/it), outer {info['outer']}, "
+              f"({1e3 * info['seconds_per_iter']:.2f} ms/it), rounds {info['rounds']}, "
               f"fixed same {same}, eps {[f'{e:.1e}' for e in info['eps_history']]}", flush=True)
         if args.perturb:
             span = float(np.ptp(pts, axis=0).max())
