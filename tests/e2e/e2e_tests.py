@@ -197,16 +197,29 @@ def t_cli_impossible_exit3():
     check(best >= 1, "the 'impossible' mesh can be untangled after all")
     out_obj, rep, _, _ = run_cli("impossible", IMPOSSIBLE, expect=3)
     check(os.path.isfile(out_obj), "best result not written (default is to write)")
-    s = meshcheck.stats(*meshcheck.read_obj(out_obj))
-    check(s["finite"] and s["n_inverted"] >= 1, f"output stats {s}")
+    c = meshcheck.compare(IMPOSSIBLE, out_obj)
+    s = c["out"]
+    check(c["same_topology"] and s["finite"], f"output broken: {c}")
+    check(1 <= s["n_inverted"] <= c["in"]["n_inverted"],
+          f"best iterate has {s['n_inverted']} inverted, input {c['in']['n_inverted']}")
     _, entries = report_entries(rep)
-    check(len(entries) == 1 and entries[0]["status"] == "failed",
+    check(len(entries) == 1 and entries[0]["status"] == "failed" and entries[0]["written"],
           f"report entries {entries}")
-    # --no-write-on-fail: same exit code, no output file
-    out_obj2, _, _, _ = run_cli("impossible_nowrite", IMPOSSIBLE, ["--no-write-on-fail"],
-                                expect=3)
-    check(not os.path.exists(out_obj2), "--no-write-on-fail still wrote the output")
-    return f"exit 3, best iterate has {s['n_inverted']} inverted (grid minimum {best})"
+    check(entries[0]["after"]["n_inverted"] == s["n_inverted"],
+          f"report after {entries[0]['after']} != file {s['n_inverted']} inverted")
+    # --no-write-on-fail: same exit code; the failed mesh is left as it was (the output file
+    # is still saved, with the input geometry) and the report says it was not written.
+    out_obj2, rep2, _, _ = run_cli("impossible_nowrite", IMPOSSIBLE, ["--no-write-on-fail"],
+                                   expect=3)
+    _, entries2 = report_entries(rep2)
+    check(len(entries2) == 1 and entries2[0]["written"] is False,
+          f"--no-write-on-fail: report entries {entries2}")
+    if os.path.exists(out_obj2):
+        c2 = meshcheck.compare(IMPOSSIBLE, out_obj2)
+        check(c2["same_topology"] and c2["max_move"] == 0.0,
+              f"--no-write-on-fail changed the mesh (max move {c2.get('max_move')})")
+    return (f"exit 3, best iterate {c['in']['n_inverted']} -> {s['n_inverted']} inverted "
+            f"(grid minimum {best}); --no-write-on-fail leaves it unchanged")
 
 
 def _grid():
@@ -278,12 +291,25 @@ def t_batch_python_script():
 def t_opencl_parity():
     """pyopencl + pocl inside the real Blender: OpenCL result vs NumPy (or the fallback)."""
     rc, out = blender(["-b", "--python-exit-code", "1", "--python", f"{HERE}/bl_opencl.py",
-                       "--", f"{DATA}/quad_hole.obj", f"{ART}/opencl.json"],
+                       "--", f"{DATA}/quad_hole.obj", f"{OUT}/opencl.json", "device"],
                       timeout=300, log="opencl")
     check(rc == 0, f"exit code {rc}: {tail(out)}")
-    with open(f"{ART}/opencl.json") as fh:
-        r = json.load(fh)
-    return r["summary"]
+    with open(f"{OUT}/opencl.json") as fh:
+        return json.load(fh)["summary"]
+
+
+@test
+def t_opencl_no_device_fallback():
+    """No OpenCL device (empty ICD list): OPENCL asked for, NumPy used, and the run says so."""
+    empty = f"{WORK}/no_icds"
+    os.makedirs(empty, exist_ok=True)
+    rc, out = blender(["-b", "--python-exit-code", "1", "--python", f"{HERE}/bl_opencl.py",
+                       "--", f"{DATA}/quad_hole.obj", f"{OUT}/opencl_nodevice.json",
+                       "nodevice"], timeout=300, env={"OCL_ICD_VENDORS": empty},
+                      log="opencl_nodevice")
+    check(rc == 0, f"exit code {rc}: {tail(out)}")
+    with open(f"{OUT}/opencl_nodevice.json") as fh:
+        return json.load(fh)["summary"]
 
 
 # ---------------------------------------------------------------- GUI --------------------

@@ -90,7 +90,7 @@ fi
 # --- 4. tests ------------------------------------------------------------------------------
 t0=$SECONDS
 chroot "$R" env -i PATH=/usr/local/bin:/usr/bin:/bin LANG=C.UTF-8 \
-    E2E_WORK=$W E2E_DISPLAY="${DISP:+:$DISP}" E2E_ONLY="${E2E_ONLY:-}" \
+    E2E_WORK=$W E2E_DISPLAY="${DISP:+:$DISP}" E2E_ONLY="${E2E_ONLY:-}" E2E_GUI_DEBUG="${E2E_GUI_DEBUG:-}" \
     python3 -u /work/tests/e2e/e2e_tests.py 2>&1 | tee "$ART/e2e.log"
 RC=${PIPESTATUS[0]}
 T_TESTS=$((SECONDS - t0))

@@ -1,0 +1,311 @@
+"""GUI test, run inside the real Blender under Xvfb (1600x900, window at 0,0):
+    blender --window-geometry 0 0 1600 900 gui_input.blend --python bl_gui.py -- ARTIFACT_DIR
+
+Real X input events (xdotool) do the user's part:
+  1. click the sidebar's "EEGT" tab, 2. click the "Untangle & Smooth" button, 3. set the
+  redo panel's "Stretch Factor a" field (paste with Ctrl+V over it), 4. Ctrl+Z, 5. Ctrl+Shift+Z.
+Python only prepares the view, finds where things are, and reads the mesh to check:
+valid after the click, different after the redo-panel change, every vertex exactly back
+after Ctrl+Z, exactly the redo-panel result after Ctrl+Shift+Z. Screenshots (ImageMagick
+`import -window root`) go to ARTIFACT_DIR. Prints E2E-GUI-OK / E2E-GUI-FAIL and exits.
+
+Finding buttons: Blender has no Python API for button positions, so we hover candidate
+positions and press Ctrl+Shift+C ("Copy Python Command" of the button under the mouse) or
+Ctrl+C (copy the value of the field under the mouse) and read the clipboard.
+"""
+import os
+import subprocess
+import sys
+import time
+import traceback
+
+import bpy
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import meshcheck
+
+ART = sys.argv[sys.argv.index("--") + 1]
+SCREEN_H = 900
+OBJ = "Tangled"
+OP_ID = "MESH_OT_eegt_untangle_smooth"
+NEW_A = 0.35  # the redo-panel change: Stretch Factor a 0.2 -> 0.35
+T0 = time.time()
+
+
+def log(msg):
+    print(f"E2E-GUI {time.time() - T0:6.1f}s {msg}", flush=True)
+
+
+def finish(ok, msg):
+    print(f"E2E-GUI-{'OK' if ok else 'FAIL'} {msg}", flush=True)
+    sys.stdout.flush()
+    os._exit(0 if ok else 1)  # a raise inside a timer would leave Blender running
+
+
+def xdo(*args):
+    subprocess.run(["xdotool", *map(str, args)], check=True, timeout=10)
+
+
+def to_x11(wx, wy):
+    """Blender window coordinates (origin bottom-left) -> X11 screen (origin top-left)."""
+    return int(wx), int(SCREEN_H - wy)
+
+
+def shot(name, region=None):
+    """Screenshot of the whole screen, or cropped to a region."""
+    cmd = ["import", "-window", "root"]
+    if region is not None:
+        x, y = to_x11(region.x, region.y + region.height)
+        cmd += ["-crop", f"{region.width}x{region.height}+{x}+{y}"]
+    subprocess.run([*cmd, f"{ART}/{name}.png"], check=True, timeout=30)
+
+
+def shot_mesh(name, margin=24):
+    """Screenshot cropped to the test mesh's on-screen bounding box (for the README pair)."""
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+    from mathutils import Vector
+
+    _, area, rg = view3d()
+    w = rg["WINDOW"]
+    ob = bpy.data.objects[OBJ]
+    pts = [location_3d_to_region_2d(w, area.spaces.active.region_3d,
+                                    ob.matrix_world @ Vector(c)) for c in ob.bound_box]
+    xs = [p.x + w.x for p in pts if p is not None]
+    ys = [p.y + w.y for p in pts if p is not None]
+    x0, y0 = to_x11(min(xs) - margin, max(ys) + margin)
+    x1, y1 = to_x11(max(xs) + margin, min(ys) - margin)
+    subprocess.run(["import", "-window", "root", "-crop", f"{x1 - x0}x{y1 - y0}+{x0}+{y0}",
+                    f"{ART}/{name}.png"], check=True, timeout=30)
+
+
+def positions():
+    """Vertex positions of the test object (looked up again: undo replaces the datablock)."""
+    me = bpy.data.objects[OBJ].data
+    co = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.attributes["position"].data.foreach_get("vector", co)
+    return co.reshape(-1, 3)
+
+
+def faces():
+    return [np.array(p.vertices) for p in bpy.data.objects[OBJ].data.polygons]
+
+
+def n_inverted(co):
+    return meshcheck.stats(co.astype(np.float64), faces())["n_inverted"]
+
+
+def view3d():
+    win = bpy.context.window_manager.windows[0]
+    area = max((a for a in win.screen.areas if a.type == "VIEW_3D"),
+               key=lambda a: a.width * a.height)
+    regions = {r.type: r for r in area.regions}
+    return win, area, regions
+
+
+def last_op():
+    ops = bpy.context.window_manager.operators
+    return ops[-1] if len(ops) else None
+
+
+def wait_until(cond, timeout, step=0.2):
+    """Generator helper: yield until cond() is true; returns whether it became true."""
+    end = time.time() + timeout
+    while time.time() < end:
+        if cond():
+            return True
+        yield step
+    return cond()
+
+
+def probe(points, key, match):
+    """Hover each (x11) point, press `key`, and return the first point whose clipboard text
+    satisfies match(text). Generator: yields between events so Blender handles them."""
+    wm = bpy.context.window_manager
+    for x, y in points:
+        wm.clipboard = ""
+        xdo("mousemove", x, y)
+        yield 0.12
+        xdo("key", key)
+        yield 0.12
+        text = wm.clipboard
+        if os.environ.get("E2E_GUI_DEBUG"):
+            log(f"probe {key} at {x},{y}: {text!r}")
+        if text and match(text):
+            return (x, y), text
+    return None, None
+
+
+def as_float(text):
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def steps():
+    win, area, rg = view3d()
+    # Prepare the view (not part of what is tested): object mode, top view framed on the
+    # mesh, wireframe + face orientation overlay (inverted triangles show red), sidebar open.
+    with bpy.context.temp_override(window=win, area=area, region=rg["WINDOW"]):
+        if bpy.context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        bpy.ops.view3d.view_axis(type="TOP")
+        bpy.ops.view3d.view_selected()
+    space = area.spaces.active
+    space.show_region_ui = True
+    space.overlay.show_wireframes = True
+    space.overlay.wireframe_threshold = 1.0  # all edges (the mesh is flat: default hides some)
+    space.overlay.wireframe_opacity = 1.0
+    space.overlay.show_face_orientation = True
+    space.shading.type = "SOLID"
+    obj = bpy.data.objects[OBJ]
+    check(obj.select_get() and bpy.context.view_layer.objects.active == obj,
+          "the tangled object is not selected and active")
+    yield 1.0
+    before = positions().copy()
+    n_before = n_inverted(before)
+    check(n_before > 0, "the input mesh is not tangled")
+    area.tag_redraw()
+    yield 0.5
+    shot("gui_before")
+    shot_mesh("gui_before_mesh")
+    log(f"before: {n_before} inverted faces")
+
+    # 1. Click the EEGT tab: the tab strip is the sidebar's right edge; click down it until
+    #    the active category is EEGT.
+    win, area, rg = view3d()
+    ui = rg["UI"]
+    tab_x = ui.x + ui.width - 10
+    clicks = 0
+    for wy in range(ui.y + ui.height - 15, ui.y + 20, -14):
+        if ui.active_panel_category == "EEGT":
+            break
+        xdo("mousemove", *to_x11(tab_x, wy), "click", 1)
+        clicks += 1
+        yield 0.25
+    check(ui.active_panel_category == "EEGT",
+          f"no click on the tab strip opened the EEGT tab (now {ui.active_panel_category!r})")
+    log(f"EEGT tab open after {clicks} clicks on the tab strip")
+    yield 0.5
+    shot("gui_panel", ui)
+
+    # 2. Find the Untangle & Smooth button (its Python command) and click it.
+    bx = ui.x + (ui.width - 24) // 2
+    pts = [to_x11(bx, wy) for wy in range(ui.y + ui.height - 30, ui.y + 10, -10)]
+    pt, _ = yield from probe(pts, "ctrl+c", lambda t: "eegt_untangle_smooth" in t)
+    check(pt, "no button with bpy.ops.mesh.eegt_untangle_smooth found in the EEGT tab")
+    n_ops = len(bpy.context.window_manager.operators)
+    xdo("mousemove", *pt, "click", 1)
+    log(f"clicked Untangle & Smooth at {pt}")
+    done = yield from wait_until(
+        lambda: len(bpy.context.window_manager.operators) > n_ops
+        and last_op().bl_idname == OP_ID, 120)
+    check(done, "the operator did not finish (no new registered operator) within 120 s")
+    yield 0.5
+    res_a = positions().copy()
+    inv_a = n_inverted(res_a)
+    check(inv_a == 0, f"after the click: {inv_a} inverted faces")
+    check(not np.array_equal(res_a, before), "the click changed nothing")
+    b = meshcheck.boundary_nodes(faces())
+    bmove = float(np.abs(res_a[b] - before[b]).max())
+    check(bmove == 0.0, f"boundary vertices moved by {bmove:.3e}")
+    win, area, rg = view3d()
+    area.tag_redraw()
+    yield 0.5
+    shot("gui_after")
+    shot_mesh("gui_after_mesh")
+    log(f"after click: 0 inverted (was {n_before}), boundary unchanged")
+
+    # 3. Redo panel: find the "Stretch Factor a" field (value 0.2) with Ctrl+C, paste 0.35.
+    hud = rg.get("HUD")
+    check(hud is not None and hud.width > 1 and hud.height > 1, "no redo panel (HUD) shown")
+    a_old = last_op().properties.a
+
+    def hud_points():
+        _, _, r = view3d()
+        h = r["HUD"]
+        return [to_x11(h.x + int(h.width * 0.7), wy)
+                for wy in range(h.y + h.height - 8, h.y + 4, -6)]
+    def is_a(text):
+        return as_float(text) is not None and abs(as_float(text) - a_old) < 1e-6
+
+    pt, _ = yield from probe(hud_points(), "ctrl+c", is_a)
+    if pt is None:  # the panel may start collapsed: click its header, probe again
+        _, _, r = view3d()
+        h = r["HUD"]
+        xdo("mousemove", *to_x11(h.x + 40, h.y + h.height - 10), "click", 1)
+        yield 0.5
+        pt, _ = yield from probe(hud_points(), "ctrl+c", is_a)
+    check(pt, f"no field with the value a={a_old} in the redo panel")
+    bpy.context.window_manager.clipboard = f"{NEW_A}"
+    xdo("mousemove", *pt)
+    yield 0.15
+    xdo("key", "ctrl+v")
+    changed = yield from wait_until(
+        lambda: abs(last_op().properties.a - NEW_A) < 1e-6
+        and not np.array_equal(positions(), res_a), 120)
+    check(changed, f"redo panel: a is {last_op().properties.a}, mesh changed: "
+                   f"{not np.array_equal(positions(), res_a)}")
+    yield 1.0  # let a redo that is still writing settle
+    res_b = positions().copy()
+    inv_b = n_inverted(res_b)
+    diff = float(np.abs(res_b - res_a).max())
+    check(diff > 1e-5, f"redo with a={NEW_A} changed the mesh by only {diff:.2e}")
+    win, area, rg = view3d()
+    area.tag_redraw()
+    yield 0.5
+    shot("gui_redo_panel")
+    shot("gui_redo_panel_crop", rg["HUD"])
+    log(f"redo panel a {a_old:.3f} -> {NEW_A}: max vertex change {diff:.3e}, {inv_b} inverted")
+
+    # 4. Ctrl+Z over the viewport: every vertex exactly as before the click.
+    w = rg["WINDOW"]
+    xdo("mousemove", *to_x11(w.x + w.width // 2, w.y + w.height // 2))
+    yield 0.2
+    xdo("key", "ctrl+z")
+    back = yield from wait_until(lambda: np.array_equal(positions(), before), 30)
+    now = positions()
+    check(back, f"Ctrl+Z: {int(np.any(now != before, axis=1).sum())} vertices not back, "
+                f"max error {float(np.abs(now - before).max()):.3e}")
+    log("Ctrl+Z: every vertex exactly back")
+
+    # 5. Ctrl+Shift+Z: exactly the redo-panel result again.
+    xdo("key", "ctrl+shift+z")
+    again = yield from wait_until(lambda: np.array_equal(positions(), res_b), 30)
+    check(again, "Ctrl+Shift+Z did not restore the redo-panel result exactly")
+    log("Ctrl+Shift+Z: redo-panel result exactly back")
+    finish(True, f"click: inverted {n_before} -> 0; redo panel a={NEW_A} changed the result "
+                 f"(max {diff:.2e}); Ctrl+Z exact on {len(before)} vertices; redo exact")
+
+
+class CheckFailed(Exception):
+    pass
+
+
+def check(cond, msg):
+    if not cond:
+        raise CheckFailed(msg)
+
+
+GEN = steps()
+
+
+def tick():
+    try:
+        return next(GEN)
+    except StopIteration:
+        finish(False, "test ended without a verdict")
+    except CheckFailed as e:
+        shot("gui_failure")
+        finish(False, str(e))
+    except Exception:
+        finish(False, traceback.format_exc().replace("\n", " | "))
+
+
+def watchdog():
+    finish(False, "watchdog: GUI test took more than 240 s")
+
+
+bpy.app.timers.register(tick, first_interval=2.0)
+bpy.app.timers.register(watchdog, first_interval=240.0)
