@@ -1,0 +1,178 @@
+"""Tests of core.global_untangle (foldover-free energy + L-BFGS), self-contained helpers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.global_untangle import untangle_global
+
+DATA = Path(__file__).parent / "data"
+
+
+def load_obj(path: Path) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """Minimal OBJ reader: `v x y z`, `f i j k ...` (1-based)."""
+    verts: list[tuple[float, float]] = []
+    faces: dict[int, list[list[int]]] = {}
+    for line in path.read_text().splitlines():
+        parts = line.split()
+        if parts and parts[0] == "v":
+            verts.append((float(parts[1]), float(parts[2])))
+        elif parts and parts[0] == "f":
+            idx = [int(p.split("/")[0]) - 1 for p in parts[1:]]
+            faces.setdefault(len(idx), []).append(idx)
+    return np.array(verts), {n: np.array(f, dtype=np.int64) for n, f in faces.items()}
+
+
+def boundary_mask(n_nodes: int, groups: dict[int, np.ndarray]) -> np.ndarray:
+    """Nodes of edges used by exactly one face."""
+    e = np.concatenate(
+        [np.stack([f.ravel(), np.roll(f, -1, axis=1).ravel()], 1) for f in groups.values()]
+    )
+    e = np.sort(e, axis=1)
+    uniq, cnt = np.unique(e[:, 0] * n_nodes + e[:, 1], return_counts=True)
+    mask = np.zeros(n_nodes, dtype=bool)
+    mask[uniq[cnt == 1] // n_nodes] = True
+    mask[uniq[cnt == 1] % n_nodes] = True
+    return mask
+
+
+def quality(points: np.ndarray, groups: dict[int, np.ndarray]) -> tuple[float, float, int]:
+    """SPEC section 3 mean ratio: q_min, q_avg (inverted = 0), number of inverted elements."""
+    qs, n_inv = [], 0
+    for n, f in groups.items():
+        p = points[f]
+        a = (n - 2) * np.pi / n
+        winv = np.linalg.inv(np.array([[1.0, np.cos(a)], [0.0, np.sin(a)]]))
+        jac = np.stack([np.roll(p, -1, axis=1) - p, np.roll(p, 1, axis=1) - p], axis=-1)
+        det_j = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
+        m = jac @ winv
+        det_m = m[..., 0, 0] * m[..., 1, 1] - m[..., 0, 1] * m[..., 1, 0]
+        qk = 2.0 * det_m / np.maximum(np.sum(m * m, axis=(-1, -2)), 1e-300)
+        bad = np.any(det_j <= 0, axis=1)
+        n_inv += int(bad.sum())
+        qs.append(np.where(bad, 0.0, qk.mean(axis=1)))
+    q = np.concatenate(qs)
+    return float(q.min()), float(q.mean()), n_inv
+
+
+def load_case(name: str) -> tuple[np.ndarray, dict[int, np.ndarray], np.ndarray]:
+    pts, groups = load_obj(DATA / f"{name}.obj")
+    return pts, groups, ~boundary_mask(len(pts), groups)
+
+
+def check_result(pts, groups, free, out, info) -> tuple[float, float, int]:
+    assert out.shape == pts.shape and out.dtype == np.float64
+    assert np.all(np.isfinite(out))
+    assert np.array_equal(out[~free], pts[~free])  # bit-identical non-free rows
+    q = quality(out, groups)
+    assert info["n_inverted_out"] == q[2]
+    assert info["iterations"] <= 3000
+    return q
+
+
+@pytest.mark.parametrize("name", ["two_holes_twist", "naca_deform"])
+def test_deformation_folds_untangled(name: str) -> None:
+    pts, groups, free = load_case(name)
+    assert quality(pts, groups)[2] > 0
+    out, info = untangle_global(pts, groups, free)
+    q_min, q_avg, n_inv = check_result(pts, groups, free, out, info)
+    assert n_inv == 0 and info["status"] == "untangled"
+    assert q_min > 0.02 and q_avg > 0.7
+    assert info["eps_history"] and info["seconds"] > 0
+
+
+def test_naca_perturbed_untangled() -> None:
+    pts, groups, free = load_case("naca_deform")
+    span = float(np.ptp(pts, axis=0).max())
+    for seed in (101, 202):
+        rng = np.random.default_rng(seed)
+        p2 = pts.copy()
+        p2[free] += 1e-9 * span * rng.standard_normal((int(free.sum()), 2))
+        out, info = untangle_global(p2, groups, free)
+        assert check_result(p2, groups, free, out, info)[2] == 0
+
+
+@pytest.mark.parametrize("name", ["quad_hole", "mixed_quad_tri", "polygon_voronoi"])
+def test_polygons_untangled(name: str) -> None:
+    pts, groups, free = load_case(name)
+    out, info = untangle_global(pts, groups, free)
+    q_min, q_avg, n_inv = check_result(pts, groups, free, out, info)
+    assert n_inv == 0
+    assert q_min > 0.5 and q_avg > 0.85
+
+
+def test_deterministic_and_input_untouched() -> None:
+    pts, groups, free = load_case("polygon_voronoi")
+    before = pts.copy()
+    a, ia = untangle_global(pts, groups, free)
+    b, ib = untangle_global(pts.copy(), {n: f.copy() for n, f in groups.items()}, free.copy())
+    assert np.array_equal(pts, before)
+    assert a.tobytes() == b.tobytes()
+    assert ia["iterations"] == ib["iterations"] and ia["eps_history"] == ib["eps_history"]
+
+
+def grid(n: int) -> tuple[np.ndarray, dict[int, np.ndarray], np.ndarray]:
+    """Unit square, (n+1)^2 nodes, 2 n^2 counterclockwise triangles; boundary fixed."""
+    t = np.linspace(0.0, 1.0, n + 1)
+    xx, yy = np.meshgrid(t, t)
+    pts = np.stack([xx.ravel(), yy.ravel()], 1)
+    ij = np.arange((n + 1) ** 2).reshape(n + 1, n + 1)
+    a, b, c, d = ij[:-1, :-1].ravel(), ij[:-1, 1:].ravel(), ij[1:, 1:].ravel(), ij[1:, :-1].ravel()
+    tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    free = (pts[:, 0] > 0) & (pts[:, 0] < 1) & (pts[:, 1] > 0) & (pts[:, 1] < 1)
+    return pts, {3: tris}, free
+
+
+def test_synthetic_fold() -> None:
+    pts, groups, free = grid(8)
+    folded = pts.copy()
+    # push a column of interior nodes across its neighbours: a fold of several triangles
+    col = free & np.isclose(pts[:, 0], 0.375)
+    folded[col, 0] += 0.3
+    assert quality(folded, groups)[2] > 4
+    out, info = untangle_global(folded, groups, free)
+    q_min, _, n_inv = check_result(folded, groups, free, out, info)
+    assert n_inv == 0 and q_min > 0.5
+
+
+def test_collapsed_nodes_pulled_apart() -> None:
+    pts, groups, free = grid(6)
+    collapsed = pts.copy()
+    collapsed[free] = [0.3, 0.6]  # every free node at one point (zero-area elements)
+    out, info = untangle_global(collapsed, groups, free)
+    _, _, n_inv = check_result(collapsed, groups, free, out, info)
+    assert n_inv == 0
+
+
+def test_valid_mesh_stays_valid_and_nothing_to_do() -> None:
+    pts, groups, free = grid(5)
+    out, info = untangle_global(pts, groups, free)
+    assert check_result(pts, groups, free, out, info)[2] == 0
+    out2, info2 = untangle_global(pts, groups, np.zeros(len(pts), dtype=bool))
+    assert info2["status"] == "nothing to do" and np.array_equal(out2, pts)
+
+
+def test_progress_can_cancel() -> None:
+    pts, groups, free = load_case("quad_hole")
+    calls: list[tuple[int, int, int]] = []
+
+    def cb(it: int, total: int, n_inv: int) -> bool:
+        calls.append((it, total, n_inv))
+        return False
+
+    out, info = untangle_global(pts, groups, free, progress=cb)
+    assert len(calls) == 1 and info["status"] == "cancelled"
+    assert np.array_equal(out[~free], pts[~free]) and np.all(np.isfinite(out))
+
+
+def test_bad_input_rejected() -> None:
+    pts, groups, free = grid(3)
+    bad = pts.copy()
+    bad[5, 0] = np.nan
+    with pytest.raises(ValueError):
+        untangle_global(bad, groups, free)
+    with pytest.raises(ValueError):
+        untangle_global(pts, groups, free[:-1])
