@@ -6,7 +6,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: venv test lint test-core test-blender e2e demo demo-core build bench clean
+.PHONY: venv test lint test-core test-blender test-compat e2e demo demo-core build bench clean
 
 venv: $(STAMP)
 
@@ -27,6 +27,21 @@ test-core: $(STAMP)
 
 test-blender: $(STAMP)
 	$(PY) -m pytest -q -m blender tests
+
+# Pure zip + per-platform zips bundling pyopencl for CPython 3.11/3.13 (downloads into
+# build/wheels), each checked with Blender's own validator.
+build: $(STAMP)
+	$(PY) scripts/build_extension.py --platforms
+
+# The Blender tests against the bpy wheels of the 4.2 and 4.5 LTS series (separate venvs).
+COMPAT_BPY ?= 4.2.23 4.5.15
+test-compat:
+	@set -e; for v in $(COMPAT_BPY); do \
+	  d=build/compat/bpy-$$v; \
+	  [ -x $$d/bin/python ] || { $(PYTHON) -m venv $$d && \
+	    $$d/bin/pip install -q "bpy==$$v" "numpy<2" pytest; }; \
+	  echo "== bpy $$v"; $$d/bin/python -m pytest -q -p no:cacheprovider tests/blender; \
+	done
 
 test: lint
 	$(PY) -m pytest -q -m "not e2e" tests

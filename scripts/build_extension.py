@@ -5,7 +5,7 @@
 * ``dist/eegt_blender-<version>.zip``: the pure package (NumPy only, every platform).
 * ``--platforms``: per-platform zips that also bundle pyopencl and its dependencies for
   CPython 3.11 (Blender 4.2-5.0) and 3.13 (Blender 5.1+), downloaded unmodified from the
-  package index into ``wheels/`` (never NumPy: Blender ships it).
+  package index into ``build/wheels/`` (git-ignored; never NumPy: Blender ships it).
 
 Every zip is checked with the builder's ``validate``.
 """
@@ -91,7 +91,10 @@ def download_wheels(wheel_dir: str) -> list[str]:
                 print(f"build: no pyopencl wheels for {plat} / Python {py}: {last}")
     cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps", "--only-binary=:all:",
            "-d", wheel_dir, *PURE]
-    subprocess.run(cmd, check=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stderr)
+        sys.exit("build: cannot download " + ", ".join(PURE))
     return sorted(glob.glob(os.path.join(wheel_dir, "*.whl")))
 
 
@@ -134,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(ROOT, "dist"))
     ap.add_argument("--platforms", action="store_true", help="also per-platform zips (network)")
-    ap.add_argument("--wheels", default=os.path.join(ROOT, "wheels"))
+    ap.add_argument("--wheels", default=os.path.join(ROOT, "build", "wheels"))
     ns = ap.parse_args(argv)
     os.makedirs(ns.out, exist_ok=True)
     print(build_pure(ns.out))
