@@ -267,6 +267,9 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
         return out
     if job.new_co is not None and write:
         me = obj.data
+        if len(me.vertices) != len(job.co):
+            out.status, out.message = "error", "mesh changed during the run, not written"
+            return out
         if job.key_name is not None:
             key = me.shape_keys.key_blocks[job.key_name]
             mesh_io.write_key_positions(key, job.new_co)
