@@ -39,19 +39,14 @@ def target_objects(context: bpy.types.Context) -> list[bpy.types.Object]:
     return unique
 
 
-def sync_from_edit_mode(objs: list[bpy.types.Object]) -> None:
-    """Copy Edit Mode changes into the mesh data so bulk reads see them."""
-    for obj in objs:
-        if obj.mode == "EDIT":
-            obj.update_from_editmode()
-
-
 @contextmanager
 def object_mode(context: bpy.types.Context) -> Iterator[None]:
     """Leave Edit Mode for the body (mesh writes need Object Mode), then enter it again.
 
-    Measured against writing through bmesh: leaving and re-entering Edit Mode is done in C
-    and costs far less than any per-vertex bmesh write.
+    Measured with bpy 5.0.1 on a 251k-vertex grid (2 cores): leave + bulk read + bulk write +
+    re-enter 0.19 s; ``update_from_editmode`` alone 0.07 s but it only helps reads (Edit Mode
+    ``mesh.attributes`` shows the BMesh layers, no "position"); a per-vertex bmesh write
+    0.54 s.
     """
     was_edit = is_edit_mode(context)
     if was_edit:
