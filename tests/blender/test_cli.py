@@ -127,3 +127,19 @@ def test_help_exit_0_lists_every_parameter(bpy, ext, capfd):
 
 def test_command_is_registered(bpy, ext):
     assert cli(ext)._handle is not None
+
+
+@pytest.mark.parametrize("fmt", ["ply", "stl"])
+def test_ply_and_stl_inputs(bpy, ext, tmp_path, fmt):
+    import_obj(bpy, "quad_hole")
+    src = tmp_path / f"in.{fmt}"
+    export = getattr(bpy.ops.wm, f"{fmt}_export")
+    export(filepath=str(src), forward_axis="Y", up_axis="Z")
+    rep = tmp_path / "r.json"
+    code = cli(ext).execute([str(src), "-o", str(tmp_path / f"out.{fmt}"), "--report", str(rep),
+                             "--quiet"])
+    assert code == 0
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert o["n_nodes"] == 168 and o["n_faces"] == (140 if fmt == "ply" else 280)
+    assert o["before"]["n_inverted"] > 0 and o["after"]["n_inverted"] == 0
+    assert (tmp_path / f"out.{fmt}").stat().st_size > 0
