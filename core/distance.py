@@ -40,6 +40,7 @@ class NearestBoundary:
         hint_y: np.ndarray | None = None,
         min_cell: float = 0.0,
         leaf_size: int = 8,
+        leaf_hints: int = 4,
     ):
         """Build over boundary points (bx, by). Cells are refined only where the hint points
         (the queries expected, e.g. element centroids) lie, down to about `min_cell`."""
@@ -60,7 +61,7 @@ class NearestBoundary:
             hx = hy = None
         else:
             hx, hy = self._cell_coords(np.asarray(hint_x), np.asarray(hint_y))
-        self._build(leaf_size, hx, hy)
+        self._build(leaf_size, leaf_hints, hx, hy)
 
     def _cell_coords(self, qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Integer cell coordinates at the finest level (clipped into the root square)."""
@@ -70,8 +71,10 @@ class NearestBoundary:
         iy = np.clip(np.floor((qy - self.origin[1]) * scale), 0, top).astype(np.int64)
         return ix, iy
 
-    def _build(self, leaf_size: int, hx: np.ndarray | None, hy: np.ndarray | None) -> None:
-        """Split cells with more than `leaf_size` candidates that hold a hint point."""
+    def _build(
+        self, leaf_size: int, leaf_hints: int, hx: np.ndarray | None, hy: np.ndarray | None
+    ) -> None:
+        """Split cells with more than `leaf_size` candidates and more than `leaf_hints` hints."""
         nb = self.bx.size
         cell_ix = np.zeros(1, dtype=np.int64)
         cell_iy = np.zeros(1, dtype=np.int64)
@@ -92,9 +95,8 @@ class NearestBoundary:
                 hk = (hy >> shift) * (1 << level) + (hx >> shift)
                 pos = np.minimum(np.searchsorted(keys[order], hk), keys.size - 1)
                 hit = keys[order][pos] == hk
-                occupied = np.zeros(seg_len.size, dtype=bool)
-                occupied[order[pos[hit]]] = True
-                split &= occupied
+                n_hints = np.bincount(order[pos[hit]], minlength=seg_len.size)
+                split &= n_hints > leaf_hints
             child = np.full(seg_len.size, -1, dtype=np.int64)
             child[split] = 4 * np.arange(int(split.sum()))
             leaf_start = np.full(seg_len.size, -1, dtype=np.int64)

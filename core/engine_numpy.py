@@ -40,7 +40,7 @@ class NumpyEngine:
         fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
         cx, cy = self._centroids()
         self.nearest = NearestBoundary(
-            self.x[fixed_idx], self.y[fixed_idx], cx, cy, min_cell=0.25 * min_edge
+            self.x[fixed_idx], self.y[fixed_idx], cx, cy, min_cell=0.5 * min_edge
         )
         self.inv_d_pow: list[np.ndarray] = []
         self.iteration = 0

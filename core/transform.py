@@ -20,17 +20,34 @@ def stretch_radius(n: int) -> int:
 
 
 def _stretch(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Stretch vectors n_k of every corner, as (n, F) arrays."""
     n = X.shape[0]
-    NX = np.zeros_like(X)
-    NY = np.zeros_like(Y)
-    for r in range(1, stretch_radius(n) + 1):
-        NX += np.roll(Y, -r, axis=0) - np.roll(Y, r, axis=0)
-        NY += np.roll(X, r, axis=0) - np.roll(X, -r, axis=0)
+    NX = np.empty_like(X)
+    NY = np.empty_like(Y)
+    R = stretch_radius(n)
+    for k in range(n):
+        nx = Y[(k + 1) % n] - Y[(k - 1) % n]
+        ny = X[(k - 1) % n] - X[(k + 1) % n]
+        for r in range(2, R + 1):
+            nx += Y[(k + r) % n] - Y[(k - r) % n]
+            ny += X[(k - r) % n] - X[(k + r) % n]
+        NX[k] = nx
+        NY[k] = ny
     return NX, NY
 
 
-def _mean_edge(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    return np.hypot(np.roll(X, -1, axis=0) - X, np.roll(Y, -1, axis=0) - Y).mean(axis=0)
+def _edge_sum(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """Sum of the edge lengths of every face (n times the mean edge length)."""
+    n = X.shape[0]
+    total = np.zeros(X.shape[1])
+    for k in range(n):
+        ex = X[(k + 1) % n] - X[k]
+        ey = Y[(k + 1) % n] - Y[k]
+        ex *= ex
+        ey *= ey
+        ex += ey
+        total += np.sqrt(ex, out=ex)
+    return total
 
 
 def _abs_area(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -42,21 +59,35 @@ def group_transform_delta(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(DX, DY) = p^s - p for every corner of an (n, F) group, lam an (F,) array."""
     NX, NY = _stretch(X, Y)
-    SX = X + lam * NX
-    SY = Y + lam * NY
+    NX *= lam
+    NY *= lam  # now lambda n_k
+    SX = X + NX
+    SY = Y + NY
     if scaling == "edge":
-        before, after = _mean_edge(X, Y), _mean_edge(SX, SY)
+        before, after = _edge_sum(X, Y), _edge_sum(SX, SY)
     elif scaling == "area":
         before, after = np.sqrt(_abs_area(X, Y)), np.sqrt(_abs_area(SX, SY))
     else:
         raise ValueError(f"unknown scaling {scaling!r} (use 'edge' or 'area')")
     s = np.ones_like(before)
     np.divide(before, after, out=s, where=after > 0)
-    CX = X.mean(axis=0)
-    CY = Y.mean(axis=0)
+    n = X.shape[0]
+    one_minus_s = 1.0 - s
+    CX = X.sum(axis=0)
+    CX /= n
+    CY = Y.sum(axis=0)
+    CY /= n
     # p^s - p = (1 - s)(c - p) + s lambda n
-    DX = (1.0 - s) * (CX - X) + (s * lam) * NX
-    DY = (1.0 - s) * (CY - Y) + (s * lam) * NY
+    DX, DY = SX, SY  # reuse the buffers
+    for k in range(n):
+        np.subtract(CX, X[k], out=DX[k])
+        DX[k] *= one_minus_s
+        NX[k] *= s
+        DX[k] += NX[k]
+        np.subtract(CY, Y[k], out=DY[k])
+        DY[k] *= one_minus_s
+        NY[k] *= s
+        DY[k] += NY[k]
     return DX, DY
 
 
