@@ -400,3 +400,22 @@ def test_linked_library_mesh_is_refused(bpy, ext, tmp_path):
     assert bpy.ops.mesh.eegt_untangle_smooth() == {"CANCELLED"}
     assert np.array_equal(positions(obj), before)
     assert "linked from a library" in ext.operators.ops_untangle.LAST_RESULTS[0].line()
+
+
+def test_preferences_and_backend_choice(bpy, ext):
+    prefs = bpy.context.preferences.addons[MODULE].preferences
+    assert prefs.default_backend == "NUMPY"
+    items = ext.operators.prefs.device_items(prefs, bpy.context)
+    assert items[0][0] == "AUTO" and prefs.opencl_device == "AUTO"
+    resolve = ext.operators.prefs.resolve_backend
+    assert resolve("PREFS")[0] == "numpy"
+    assert resolve("AUTO")[0] == "auto" and resolve("OPENCL")[0] == "opencl"
+    prefs.default_backend = "AUTO"
+    try:
+        assert resolve("PREFS")[0] == "auto"
+    finally:
+        prefs.default_backend = "NUMPY"
+    # the scene backend "Default" follows the preference; an explicit NumPy run says numpy
+    obj = import_obj(bpy, "quad_hole")
+    bpy.ops.mesh.eegt_untangle_smooth(backend="NUMPY")
+    assert last(obj).backend == "numpy"
