@@ -1,0 +1,1 @@
+"""Benchmarks, demo and pictures (not part of the extension zip)."""
