@@ -119,6 +119,7 @@ def _load(path: str) -> None:
             bpy.ops.wm.stl_import(filepath=path, forward_axis="Y", up_axis="Z")
     except RuntimeError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else "read error"
+        first = first.removeprefix("Error: ")
         raise UsageError(f"eegt: cannot read input '{path}': {first}") from None
 
 
@@ -141,6 +142,7 @@ def _save(path: str) -> None:
             raise UsageError(f"eegt: unsupported output type '{ext}'")
     except RuntimeError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else "write error"
+        first = first.removeprefix("Error: ")
         raise UsageError(f"eegt: cannot write output '{path}': {first}") from None
 
 

@@ -143,3 +143,13 @@ def test_ply_and_stl_inputs(bpy, ext, tmp_path, fmt):
     assert o["n_nodes"] == 168 and o["n_faces"] == (140 if fmt == "ply" else 280)
     assert o["before"]["n_inverted"] > 0 and o["after"]["n_inverted"] == 0
     assert (tmp_path / f"out.{fmt}").stat().st_size > 0
+
+
+def test_garbage_blend_exit_2_one_line(bpy, ext, tmp_path, capfd):
+    bad = tmp_path / "garbage.blend"
+    bad.write_bytes(b"not a blend file at all")
+    assert cli(ext).execute([str(bad), "-o", str(tmp_path / "x.obj")]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    line = [e for e in err if e.startswith("eegt:")]
+    assert len(line) == 1 and "cannot read input" in line[0] and "Error: " not in line[0]
+    assert not (tmp_path / "x.obj").exists()
