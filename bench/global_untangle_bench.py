@@ -16,7 +16,7 @@ from core.global_untangle import untangle_global
 
 MESH_DIR = Path("/work/shared/meshes")
 DEFAULT = ["two_holes_twist", "naca_deform", "tri_two_holes", "quad_hole", "mixed_quad_tri",
-           "polygon_voronoi"]
+           "polygon_voronoi", "mesquite"]
 
 
 def load_obj(path: Path) -> tuple[np.ndarray, dict[int, np.ndarray]]:
@@ -34,6 +34,21 @@ def load_obj(path: Path) -> tuple[np.ndarray, dict[int, np.ndarray]]:
             faces.setdefault(len(idx), []).append(idx)
     groups = {n: np.array(f, dtype=np.int64) for n, f in faces.items()}
     return np.array(verts, dtype=np.float64), groups
+
+
+def load_mesquite_vtk(path: Path) -> tuple[np.ndarray, dict[int, np.ndarray], np.ndarray]:
+    """The paper's Table 1 mesh (legacy VTK, read in place): points, CCW quads, fixed mask."""
+    tok = path.read_text().split()
+    i = tok.index("POINTS")
+    n = int(tok[i + 1])
+    pts = np.array(tok[i + 3 : i + 3 + 3 * n], dtype=np.float64).reshape(n, 3)[:, :2]
+    i = tok.index("CELLS")
+    m = int(tok[i + 1])
+    cells = np.array(tok[i + 3 : i + 3 + 5 * m], dtype=np.int64).reshape(m, 5)[:, 1:]
+    i = tok.index("fixed", tok.index("POINT_DATA"))
+    j = tok.index("LOOKUP_TABLE", i) + 2
+    fixed = np.array(tok[j : j + n], dtype=np.int64) == 1
+    return pts, {4: cells[:, ::-1].copy()}, fixed
 
 
 def boundary_nodes(n_nodes: int, groups: dict[int, np.ndarray]) -> np.ndarray:
@@ -79,13 +94,20 @@ def main() -> None:
     ap.add_argument("meshes", nargs="*", default=DEFAULT)
     ap.add_argument("--perturb", type=int, default=0, help="runs with 1e-9 interior noise")
     ap.add_argument("--max-iter", type=int, default=3000)
+    ap.add_argument("--polish", type=int, default=300)
+    ap.add_argument("--power", type=float, default=1.0)
     args = ap.parse_args()
     for name in args.meshes:
-        pts, groups = load_obj(MESH_DIR / f"{name}.obj")
-        free = ~boundary_nodes(len(pts), groups)
+        if name == "mesquite":
+            pts, groups, fixed = load_mesquite_vtk(MESH_DIR / "mesquite/hole_in_square_tanglap.vtk")
+            free = ~fixed
+        else:
+            pts, groups = load_obj(MESH_DIR / f"{name}.obj")
+            free = ~boundary_nodes(len(pts), groups)
         q0 = quality(pts, groups)
         t = time.perf_counter()
-        out, info = untangle_global(pts, groups, free, max_iter=args.max_iter)
+        out, info = untangle_global(pts, groups, free, max_iter=args.max_iter,
+                                    polish_iter=args.polish, polish_power=args.power)
         dt = time.perf_counter() - t
         q1 = quality(out, groups)
         same = bool(np.array_equal(out[~free], pts[~free]))
@@ -102,7 +124,8 @@ def main() -> None:
                 p2 = pts.copy()
                 p2[free] += 1e-9 * span * rng.standard_normal((int(free.sum()), 2))
                 t = time.perf_counter()
-                o2, inf2 = untangle_global(p2, groups, free, max_iter=args.max_iter)
+                o2, inf2 = untangle_global(p2, groups, free, max_iter=args.max_iter,
+                                       polish_iter=args.polish, polish_power=args.power)
                 times.append(time.perf_counter() - t)
                 qq = quality(o2, groups)
                 ok += qq[2] == 0

@@ -119,12 +119,11 @@ def _reference_sizes(
     hn = np.maximum(hn / np.maximum(2.0 * cnt, 1.0), floor)
     lh = np.log(hn)
     deg = arity.astype(np.float64)
-    for it in range(SIZE_SMOOTHING + 1):
-        le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
-        if it == SIZE_SMOOTHING:
-            break
+    le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
+    for _ in range(SIZE_SMOOTHING):
         lh = np.bincount(edges[0], weights=le[edge_elem], minlength=n_nodes)
         lh = np.where(cnt > 0, lh / np.maximum(cnt, 1.0), np.log(floor))
+        le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     size = np.exp(le)
     ref_area = arity * size**2 / (4.0 * np.tan(np.pi / arity))
     x0, y0 = points[edges[0]].T
@@ -181,6 +180,7 @@ class _Energy:
         # like 1 / size^2, so moves are scaled by size^2.
         self.precond = (hnode / float(np.mean(hnode))) ** 2
         self.h_mean = float(np.mean(size))
+        self.power = 1.0
 
     def _jac(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
         x0 = x[self.i0]
@@ -207,7 +207,10 @@ class _Energy:
         num = (1.0 - THETA) * (j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11)
         num += THETA * (d * d + 1.0)
         chi = _chi(d, eps, np.sqrt(eps * eps + d * d))
-        return float(np.sum(self.weight * num / chi))
+        u = num / chi
+        if self.power != 1.0:
+            u = (0.5 * u) ** self.power
+        return float(np.sum(self.weight * u))
 
     def value_grad(
         self, x: np.ndarray, y: np.ndarray, eps: float
@@ -220,7 +223,13 @@ class _Energy:
         chi = _chi(d, eps, root)
         num = (1.0 - THETA) * t + THETA * (d * d + 1.0)
         inv_chi = self.weight / chi
-        energy = float(np.sum(num * inv_chi))
+        if self.power != 1.0:  # F = sum w (u / 2)^p with u = num / chi
+            u = 0.5 * num / chi
+            up = u**self.power
+            energy = float(np.sum(self.weight * up))
+            inv_chi = inv_chi * (0.5 * self.power) * (up / u)
+        else:
+            energy = float(np.sum(num * inv_chi))
         # dF/dJ = a J + b cof(J); cof(J) = [[j11, -j10], [-j01, j00]]; dchi/dD = chi / root
         a = (2.0 * (1.0 - THETA)) * inv_chi
         b = inv_chi * (2.0 * THETA * d - num / root)
@@ -369,6 +378,7 @@ def untangle_global(
     *,
     max_iter: int = 3000,
     polish_iter: int = 300,
+    polish_power: float = 1.0,
     time_limit: float | None = None,
     progress: Callable[[int, int, int], Any] | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
@@ -377,7 +387,9 @@ def untangle_global(
     points: (N, 2) float64; groups: arity -> (F_n, n) int node arrays, counterclockwise = valid;
     free: (N,) bool mask of the nodes that may move. max_iter bounds all L-BFGS iterations;
     polish_iter bounds those spent improving quality once no element is inverted (0: stop at
-    the first valid iterate); time_limit (s) stops early. progress(iterations, max_iter,
+    the first valid iterate); polish_power p > 1 polishes sum (f / 2)^p instead of the paper's
+    sum f (f / 2 = 1 / mean ratio for eps -> 0): higher q_min, lower q_avg (see the docs);
+    time_limit (s) stops early. progress(iterations, max_iter,
     n_inverted) is called after each eps round; returning False cancels.
 
     Returns (new points, info); non-free rows are bit-identical to the input. Once valid, steps
@@ -425,6 +437,7 @@ def untangle_global(
         rounds += 1
         eps_hist.append(eps)
         guard = best_inv == 0  # valid: polish the quality, never invert a corner again
+        en.power = float(polish_power) if guard else 1.0
         e_start = en.value(*st.unpack(v), eps)
         cap = min(max_iter - total, INNER_ITER)
         if guard:
