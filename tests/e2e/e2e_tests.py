@@ -222,8 +222,8 @@ def t_cli_impossible_exit3():
             f"(grid minimum {best}); --no-write-on-fail leaves it unchanged")
 
 
-def _grid():
-    return [i * 0.05 - 1.0 for i in range(101)]
+def _grid():  # centre positions over [-1, 4]^2 (the U spans [0, 3]^2), step 0.1
+    return [i * 0.1 - 1.0 for i in range(51)]
 
 
 def _with(v, x, y):
@@ -284,6 +284,35 @@ def t_batch_python_script():
     return f"{len(inputs)} files valid; a tangled result makes the script exit 1"
 
 
+BLEND = f"{OUT}/tangled_quad_hole.blend"
+
+
+def make_blend():
+    """A .blend holding the tangled quad_hole mesh, selected and active (made once)."""
+    if not os.path.isfile(BLEND):
+        rc, out = blender(["-b", "--factory-startup", "--python-exit-code", "1", "--python",
+                           f"{HERE}/bl_make_blend.py", "--", f"{DATA}/quad_hole.obj", BLEND],
+                          timeout=120, log="make_blend")
+        check(rc == 0 and os.path.isfile(BLEND), f"making the .blend: rc={rc}: {tail(out)}")
+    return BLEND
+
+
+@test
+def t_python_expr_on_blend():
+    """blender -b file.blend --python-expr "bpy.ops.mesh.eegt_untangle_smooth()": no UI context."""
+    out_obj = f"{OUT}/python_expr_out.obj"
+    expr = ("import bpy; r = bpy.ops.mesh.eegt_untangle_smooth(); print('E2E-EXPR', r); "
+            f"bpy.ops.wm.obj_export(filepath={out_obj!r}, export_selected_objects=True, "
+            "export_normals=False, export_uv=False, export_materials=False)")
+    rc, out = blender(["-b", make_blend(), "--python-exit-code", "1", "--python-expr", expr],
+                      timeout=120, log="python_expr")
+    check(rc == 0 and "E2E-EXPR {'FINISHED'}" in out, f"rc={rc}: {tail(out)}")
+    c = meshcheck.compare(f"{DATA}/quad_hole.obj", out_obj)
+    check(c["same_topology"] and c["out"]["n_inverted"] == 0 and c["in"]["n_inverted"] > 0,
+          f"result: {c['out']}")
+    return f"FINISHED, inverted {c['in']['n_inverted']} -> 0"
+
+
 # ---------------------------------------------------------------- OpenCL -----------------
 
 
@@ -318,11 +347,7 @@ def t_opencl_no_device_fallback():
 @test
 def t_gui_click_undo_redo_panel():
     check(DISPLAY, "no X display (Xvfb did not start)")
-    blend = f"{OUT}/gui_input.blend"
-    rc, out = blender(["-b", "--factory-startup", "--python-exit-code", "1", "--python",
-                       f"{HERE}/bl_make_blend.py", "--", f"{DATA}/quad_hole.obj", blend],
-                      timeout=120, log="gui_make_blend")
-    check(rc == 0 and os.path.isfile(blend), f"making the .blend: rc={rc}: {tail(out)}")
+    blend = make_blend()
     rc, out = blender(["--window-geometry", "0", "0", "1600", "900",
                        blend, "--python", f"{HERE}/bl_gui.py", "--", ART],
                       timeout=300, env={"DISPLAY": DISPLAY}, log="gui")

@@ -41,6 +41,10 @@ trap 'exit 130' INT TERM
 
 # --- 1. root -------------------------------------------------------------------------------
 t0=$SECONDS
+if [[ -n ${E2E_FRESH:-} ]]; then  # E2E_FRESH=1: throw the cached root away (time a CI run)
+    grep -q " $R/" /proc/self/mounts && { echo "e2e: $R has mounts, not removing"; exit 1; }
+    rm -rf "$R" "$R".*.log
+fi
 if ! tests/e2e/setup_root.sh "$R"; then
     echo "e2e: setting the Blender root up failed"; echo "0 passed, 1 failed"; exit 1
 fi
@@ -67,7 +71,7 @@ rm -rf "$ART" && mkdir -p "$ART"
 # The extension is built from the files git would ship (tracked + untracked, not ignored),
 # so nothing of .venv, .e2e-root or build outputs can leak into the zip.
 mkdir -p "$R$W/src"
-git ls-files -z -co --exclude-standard | while IFS= read -r -d '' f; do
+git -c safe.directory="$REPO" ls-files -z -co --exclude-standard | while IFS= read -r -d '' f; do
     [[ -e $f ]] && printf '%s\0' "$f"; done | xargs -0 cp --parents -t "$R$W/src"
 
 # --- 3. display ----------------------------------------------------------------------------

@@ -58,8 +58,9 @@ mountpoint -q "$R/proc" || mount -t proc proc "$R/proc"
 trap 'umount "$R/proc" 2>/dev/null || true' EXIT
 log "apt-get install in the root: $PKGS"
 retry 3 chroot "$R" apt-get update -q >/dev/null
-retry 3 chroot "$R" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
-    --no-install-recommends $PKGS >"$R.apt.log" 2>&1 || { tail -20 "$R.apt.log"; exit 1; }
+# (dpkg --configure -a first: a retry after an interrupted install must not trip over it)
+retry 3 chroot "$R" bash -c "dpkg --configure -a && DEBIAN_FRONTEND=noninteractive \
+    apt-get install -y -q --no-install-recommends $PKGS" >"$R.apt.log" 2>&1 || { tail -20 "$R.apt.log"; exit 1; }
 chroot "$R" apt-get clean
 chroot "$R" blender --version | head -1
 echo "$PKGS" > "$STAMP"
