@@ -61,6 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="only this mesh object (repeatable)")
     p.add_argument("--backend", choices=("numpy", "opencl", "auto"), default=None,
                    help="compute backend (default: the add-on preference, else numpy)")
+    p.add_argument("--device", metavar="SPEC", default=None,
+                   help="OpenCL device: 'platform:device' indices or part of its name "
+                        "(default: the add-on preference, else automatic)")
     p.add_argument("--paper", action="store_true",
                    help="start from the paper's parameters instead of the defaults")
     group = p.add_argument_group("EEGT parameters")
@@ -168,11 +171,10 @@ def _objects(names: list[str]) -> list[bpy.types.Object]:
     return unique
 
 
-def _backend(choice: str | None) -> tuple[str, str | None]:
-    if choice is not None:
-        return choice, None
+def _backend(choice: str | None, device: str | None) -> tuple[str, str | None]:
     from .prefs import resolve_backend
-    return resolve_backend("PREFS")
+    name, pref_device = resolve_backend(choice.upper() if choice else "PREFS")
+    return name, device or pref_device
 
 
 def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
@@ -185,7 +187,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         params = _params(ns)
         rep["params"] = params.as_dict() if hasattr(params, "as_dict") else \
             dataclasses.asdict(params)
-        backend, device = _backend(ns.backend)
+        backend, device = _backend(ns.backend, ns.device)
         rep["backend_requested"] = backend
         _load(ns.input)
         objs = _objects(ns.object)

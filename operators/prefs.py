@@ -9,7 +9,6 @@ import bpy
 from bpy.props import EnumProperty
 
 from .. import __package__ as base_package
-from .. import core
 
 DEFAULT_BACKEND_ITEMS = (
     ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
@@ -21,23 +20,23 @@ DEFAULT_BACKEND_ITEMS = (
 _device_items_cache: list[tuple[str, str, str]] = []
 
 
+_devices_found: list[tuple[str, str]] | None = None
+
+
 def _list_devices() -> list[tuple[str, str]]:
-    """(id, label) of OpenCL devices from the core helper when the core provides one."""
-    for name in ("list_opencl_devices", "opencl_devices"):
-        fn = getattr(core, name, None)
-        if callable(fn):
-            try:
-                found = fn()
-            except Exception:  # an OpenCL driver may fail in many ways; never break the UI
-                return []
-            out = []
-            for dev in found:
-                if isinstance(dev, tuple | list) and len(dev) >= 2:
-                    out.append((str(dev[0]), str(dev[1])))
-                else:
-                    out.append((str(dev), str(dev)))
-            return out
-    return []
+    """(id, label) of the OpenCL devices the core sees; [] without the OpenCL backend.
+
+    Asked once per session: enumerating OpenCL platforms can take a while and the enum
+    callback runs on every redraw.
+    """
+    global _devices_found
+    if _devices_found is None:
+        try:
+            from ..core import engine_opencl
+            _devices_found = [(str(i), str(label)) for i, label in engine_opencl.list_devices()]
+        except Exception:  # no backend module, no pyopencl, or a broken driver: "Automatic" only
+            _devices_found = []
+    return _devices_found
 
 
 def device_items(_self: Any, _context: Any) -> list[tuple[str, str, str]]:

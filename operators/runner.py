@@ -8,7 +8,6 @@ No algorithm lives here.
 
 from __future__ import annotations
 
-import inspect
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -207,13 +206,13 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     return job
 
 
-def _backend_kwargs(device: str | None) -> dict[str, Any]:
-    """Extra keyword arguments for the core when it accepts an OpenCL device choice."""
-    if device and device != "AUTO":
-        params = inspect.signature(untangle_and_smooth).parameters
-        if "device" in params:
-            return {"device": device}
-    return {}
+def select_opencl_device(device: str | None) -> None:
+    """Tell the core's OpenCL backend which device to use ("AUTO"/None: automatic)."""
+    try:
+        from ..core import engine_opencl
+    except ImportError:  # no OpenCL backend in this core: the core falls back to NumPy itself
+        return
+    engine_opencl.select_device(None if device in (None, "", "AUTO") else device)
 
 
 def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Progress | None = None,
@@ -221,9 +220,11 @@ def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Prog
     """Run the core on a prepared job (no bpy here: safe in a worker thread)."""
     if job.error:
         return
+    if backend in ("opencl", "auto"):
+        select_opencl_device(device)
     try:
         res = untangle_and_smooth(job.points2d, job.faces, fixed=job.fixed, params=params,
-                                  backend=backend, progress=progress, **_backend_kwargs(device))
+                                  backend=backend, progress=progress)
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return

@@ -153,3 +153,13 @@ def test_garbage_blend_exit_2_one_line(bpy, ext, tmp_path, capfd):
     line = [e for e in err if e.startswith("eegt:")]
     assert len(line) == 1 and "cannot read input" in line[0] and "Error: " not in line[0]
     assert not (tmp_path / "x.obj").exists()
+
+
+def test_unknown_opencl_device_falls_back_to_numpy(bpy, ext, tmp_path):
+    rep = tmp_path / "r.json"
+    code = cli(ext).execute([str(DATA / "quad_hole.obj"), "--backend", "opencl", "--device",
+                             "no-such-device", "--report", str(rep), "--quiet"])
+    assert code == 0
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert o["backend"].startswith("numpy (") and "using NumPy" in o["backend"]
+    assert o["after"]["n_inverted"] == 0
