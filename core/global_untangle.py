@@ -428,6 +428,7 @@ def untangle_global(
     dmin = info["min_det"]
     eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else EPS_MIN
     best_v, best_inv = v, n_inv
+    valid = dmin > 0.0  # every corner that can move is positive (others are constant)
     total = 0
     polish_used = 0
     status = ""
@@ -436,7 +437,7 @@ def untangle_global(
     while total < max_iter:
         rounds += 1
         eps_hist.append(eps)
-        guard = best_inv == 0  # valid: polish the quality, never invert a corner again
+        guard = valid  # valid: polish the quality, never invert a corner again
         en.power = float(polish_power) if guard else 1.0
         e_start = en.value(*st.unpack(v), eps)
         cap = min(max_iter - total, INNER_ITER)
@@ -453,6 +454,7 @@ def untangle_global(
         x, y = st.unpack(v)
         e_end = en.value(x, y, eps)
         dmin = float(np.min(en.dets(x, y)))
+        valid = dmin > 0.0
         n_inv = en.n_inverted(x, y)
         if n_inv <= best_inv:
             best_v, best_inv = v, n_inv
@@ -462,7 +464,7 @@ def untangle_global(
         decrease = 1.0 - e_end / e_start if e_start > 0.0 else 0.0
         if guard and (decrease < STOP_REL_DECREASE or its == 0):
             break
-        if best_inv == 0 and polish_iter <= 0:
+        if valid and polish_iter <= 0:
             break
         if time_limit is not None and time.perf_counter() - t_start > time_limit:
             break

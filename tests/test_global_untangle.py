@@ -176,3 +176,17 @@ def test_bad_input_rejected() -> None:
         untangle_global(bad, groups, free)
     with pytest.raises(ValueError):
         untangle_global(pts, groups, free[:-1])
+
+
+def test_unfixable_element_reported_not_looped() -> None:
+    pts, groups, free = grid(10)
+    tri = groups[3][0]
+    fixed_free = free.copy()
+    fixed_free[tri] = False
+    bad = pts.copy()
+    bad[tri[1]] = bad[tri[0]] + [-0.01, 0.0]  # an inverted element no free node can repair
+    assert quality(bad, groups)[2] == 1
+    out, info = untangle_global(bad, groups, fixed_free)
+    assert info["status"] == "failed" and info["iterations"] < 500  # no futile 3000 iterations
+    assert quality(out, groups)[2] == 1 == info["n_inverted_out"]
+    assert np.array_equal(out[~fixed_free], bad[~fixed_free]) and np.all(np.isfinite(out))
