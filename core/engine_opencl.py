@@ -1,0 +1,415 @@
+"""The OpenCL backend: the NumPy engine's iteration as float64 kernels (pyopencl).
+
+Positions live on the device for the whole run (one upload, one download); per iteration
+only (n_inverted, q_min, sum q) and a "something was reverted" flag come back. Kernels
+follow the NumPy reference's operation order with FP contraction off, stitching is a gather
+over each node's incident corners in NumPy's bincount order (no float atomics), and every
+reduction has a fixed order, so two runs on one device are bit-identical and results match
+NumPy to round-off. The initial state (mean edge length, distance quadtree, first weights)
+is the NumPy engine's own, built on the host once and uploaded.
+
+Device choice: `select_device(spec)` (the extension's preferences) or the environment
+variable EEGT_OPENCL_DEVICE, as "platform:device" indices or a substring of the device or
+platform name; otherwise "auto" prefers a GPU, then a CPU device. pyopencl is imported
+lazily: without it (or without a usable device) `available()` says why and the caller
+falls back to NumPy.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .engine_numpy import _DIST_FLOOR, NumpyEngine
+from .faces import FaceSet
+from .params import EEGTParams
+from .quality import Stats, corner_constants
+from .transform import stretch_radius
+
+__all__ = ["ENV_DEVICE", "OpenCLEngine", "available", "list_devices", "select_device"]
+
+ENV_DEVICE = "EEGT_OPENCL_DEVICE"
+KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
+_NO_PLATFORM_HINT = (
+    "install an OpenCL driver (e.g. pocl-opencl-icd), or register one with an .icd file "
+    "in /etc/OpenCL/vendors or a folder named by OCL_ICD_VENDORS"
+)
+_WG = 64  # work-group size for face and node kernels
+_NGON_MAXN = 16  # private-array size of the generic n-gon kernels (bigger faces: own build)
+
+_device_override: str | None = None
+_runtimes: dict[str, _Runtime] = {}
+
+
+def _import_cl():
+    """pyopencl, imported on first use (ImportError / OSError when it is missing or broken)."""
+    import pyopencl as cl
+
+    return cl
+
+
+def kernel_source() -> str:
+    """The OpenCL C source of every kernel."""
+    return KERNEL_FILE.read_text()
+
+
+def select_device(spec: str | None) -> None:
+    """Choose the device for later runs ("auto"/None: automatic; else as EEGT_OPENCL_DEVICE)."""
+    global _device_override
+    _device_override = spec or None
+
+
+def _has_fp64(dev) -> bool:
+    return "cl_khr_fp64" in dev.extensions.split() or bool(getattr(dev, "double_fp_config", 0))
+
+
+def _all_devices(cl) -> list[tuple[str, object, object]]:
+    """(id "p:d", platform, device) for every device of every platform."""
+    out = []
+    for pi, plat in enumerate(cl.get_platforms()):
+        try:
+            devs = plat.get_devices()
+        except cl.Error:  # a platform with no devices raises DEVICE_NOT_FOUND
+            continue
+        out.extend((f"{pi}:{di}", plat, d) for di, d in enumerate(devs))
+    return out
+
+
+def _label(cl, plat, dev) -> str:
+    kind = cl.device_type.to_string(dev.type).replace("ALL | ", "")
+    extra = "" if _has_fp64(dev) else ", no float64"
+    return f"{dev.name.strip()} ({plat.name.strip()}, {kind}{extra})"
+
+
+def list_devices() -> list[tuple[str, str]]:
+    """[(id, description)] of every OpenCL device, for a preferences menu ([] without OpenCL)."""
+    try:
+        cl = _import_cl()
+        return [(i, _label(cl, p, d)) for i, p, d in _all_devices(cl)]
+    except Exception:  # no pyopencl, no loader, no platform: nothing to list
+        return []
+
+
+def _pick_device(cl):
+    """((id, platform, device), None) or (None, reason). May raise when no platform exists."""
+    spec = (_device_override or os.environ.get(ENV_DEVICE, "")).strip()
+    devs = _all_devices(cl)
+    if not devs:
+        return None, f"no OpenCL device found ({_NO_PLATFORM_HINT}); using NumPy"
+    if spec and spec.lower() != "auto":
+        hits = [e for e in devs if e[0] == spec] or [
+            e for e in devs if spec.lower() in f"{e[2].name} {e[1].name}".lower()
+        ]
+        if not hits:
+            names = "; ".join(f"{i} {_label(cl, p, d)}" for i, p, d in devs)
+            return None, f"OpenCL device {spec!r} not found (devices: {names}); using NumPy"
+        entry = hits[0]
+        if not _has_fp64(entry[2]):
+            return None, (
+                f"OpenCL device {entry[2].name.strip()} has no float64 (cl_khr_fp64), "
+                "which the backend needs; using NumPy"
+            )
+        return entry, None
+    good = [e for e in devs if _has_fp64(e[2])]
+    if not good:
+        names = ", ".join(d.name.strip() for _, _, d in devs)
+        return None, f"no OpenCL device with float64 (cl_khr_fp64) among {names}; using NumPy"
+    gpu, cpu = cl.device_type.GPU, cl.device_type.CPU
+    good.sort(key=lambda e: (not e[2].type & gpu, not e[2].type & cpu))
+    return good[0], None
+
+
+def available():
+    """(OpenCLEngine, None) when a float64 OpenCL device is usable, else (None, reason)."""
+    try:
+        cl = _import_cl()
+    except Exception as exc:  # ImportError, or OSError from a broken libOpenCL
+        return None, f"OpenCL backend unavailable (pyopencl: {exc}); using NumPy"
+    try:
+        _, why = _pick_device(cl)
+    except Exception as exc:  # clGetPlatformIDs fails when no ICD is registered at all
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        return None, f"no OpenCL platform ({first}; {_NO_PLATFORM_HINT}); using NumPy"
+    return (None, why) if why else (OpenCLEngine, None)
+
+
+@dataclass
+class _Runtime:
+    """Context, queue and built programs of one device, shared by every run in the process."""
+
+    cl: object
+    device: object
+    name: str
+    ctx: object
+    queue: object
+    programs: dict = field(default_factory=dict)
+
+    def program(self, maxn: int):
+        """The kernels built for this device (once per process and n-gon size class)."""
+        prg = self.programs.get(maxn)
+        if prg is None:
+            try:
+                prg = self.cl.Program(self.ctx, kernel_source()).build(options=[f"-DMAXN={maxn}"])
+            except Exception as exc:  # build failure: report the compiler's first lines
+                msg = " ".join(str(exc).split())[:300]
+                raise RuntimeError(f"kernel build failed on {self.name}: {msg}") from exc
+            self.programs[maxn] = prg
+        return prg
+
+
+def _runtime() -> _Runtime:
+    """The cached runtime of the chosen device; RuntimeError when there is none."""
+    cl = _import_cl()
+    try:
+        entry, why = _pick_device(cl)
+    except Exception as exc:
+        raise RuntimeError(f"no OpenCL platform ({exc})") from exc
+    if entry is None:
+        raise RuntimeError(why)
+    dev_id, plat, dev = entry
+    key = f"{dev_id} {dev.name} {plat.name}"
+    rt = _runtimes.get(key)
+    if rt is None:
+        ctx = cl.Context([dev])
+        rt = _Runtime(cl, dev, f"{dev.name.strip()} [{dev_id}]", ctx, cl.CommandQueue(ctx))
+        _runtimes[key] = rt
+    return rt
+
+
+def _pow_mode(e: float) -> int:
+    """How NumPy's ndarray ** scalar evaluates: its fast paths, else pow (kernel np_pow)."""
+    return {2.0: 1, 1.0: 2, 0.0: 3, 0.5: 4, -1.0: 5}.get(float(e), 0)
+
+
+def _roundup(n: int, m: int) -> int:
+    return max(m, (n + m - 1) // m * m)
+
+
+class OpenCLEngine:
+    """Holds one run's mesh state on an OpenCL device; same interface as NumpyEngine."""
+
+    name = "opencl"
+
+    def __init__(self, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams):
+        rt = _runtime()
+        cl = rt.cl
+        self.cl, self.rt, self.queue = cl, rt, rt.queue
+        self.device_name = rt.name
+        self.params = params
+        self.faces = faces
+        self.iteration = 0
+        # The reference engine builds the initial state: lbar, quadtree, q, distance weights.
+        ref = NumpyEngine(points, faces, free, params)
+        self.lbar = ref.lbar
+        self.n_nodes = n = ref.n_nodes
+        groups = faces.groups
+        maxn = max(g.n for g in groups)
+        self.prg = rt.program(_NGON_MAXN if maxn <= _NGON_MAXN else 1 << (maxn - 1).bit_length())
+        mf = cl.mem_flags
+
+        def buf(a: np.ndarray):
+            return cl.Buffer(rt.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=a)
+
+        def empty(nbytes: int):
+            return cl.Buffer(rt.ctx, mf.READ_WRITE, max(int(nbytes), 8))
+
+        pts = np.empty((n, 2), dtype=np.float64)
+        pts[:, 0], pts[:, 1] = ref.x, ref.y
+        self.P = buf(pts)
+        self.old = empty(pts.nbytes)
+        self.best = empty(pts.nbytes)
+        cl.enqueue_copy(self.queue, self.best, self.P)
+        self.n_faces = nf = sum(g.size for g in groups)
+        self.q = buf(np.ascontiguousarray(np.concatenate(ref.q), dtype=np.float64))
+        self.fdist = buf(np.ascontiguousarray(np.concatenate(ref.inv_d_pow), dtype=np.float64))
+        self.wf = empty(8 * nf)
+        n_corners = int(ref.corner_nodes.size)
+        self.cmove = empty(16 * n_corners)
+        self.flag = buf(np.zeros(n, dtype=np.int32))
+        # CSR node -> incident corners of free nodes, in NumPy's bincount order
+        corner_face = np.concatenate(
+            [np.tile(np.arange(g.size, dtype=np.int64) + fo, g.n) for g, fo in self._fo(groups)]
+        )
+        keep = ref.free[ref.corner_nodes]
+        order = np.argsort(ref.corner_nodes, kind="stable")
+        order = order[keep[order]]
+        row = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(ref.corner_nodes[keep], minlength=n), out=row[1:])
+        self.row = buf(row.astype(np.int32))
+        self.ccorner = buf(np.ascontiguousarray(order, dtype=np.int32))
+        self.cface = buf(np.ascontiguousarray(corner_face[order], dtype=np.int32))
+        # distance quadtree (boundary nodes never move): the reference's, flattened
+        nb = ref.nearest
+        lv_len = [c.size for c in nb.child]
+        level_off = np.concatenate([[0], np.cumsum(lv_len)])
+        tree = np.concatenate([level_off, *nb.child, *nb.leaf_start, *nb.leaf_len, nb.cand]).astype(
+            np.int64
+        )
+        if tree.size and tree.max() >= 2**31:
+            raise RuntimeError("mesh too large for 32-bit indices on the device")
+        self.tree = buf(tree.astype(np.int32))
+        self.bxy = buf(np.column_stack([nb.bx, nb.by]))
+        self.tree_args = (
+            np.float64(nb.origin[0]),
+            np.float64(nb.origin[1]),
+            np.float64((1 << nb.depth) / nb.side),
+            np.float64(nb.side * (1 - 1e-12)),
+            np.float64((1 << nb.depth) - 1),
+            np.int32(nb.depth),
+            np.int32(len(lv_len)),
+            np.int32(nb.bx.size),
+            np.float64(self.lbar),
+            np.float64(_DIST_FLOOR * self.lbar),
+            np.float64(params.c),
+            np.int32(_pow_mode(params.c)),
+        )
+        # stats reduction: G partials of a fixed chunk (depends on the face count only)
+        self.G = int(min(4096, max(1, -(-nf // 256))))
+        self.chunk = -(-nf // self.G)
+        self.pcount = empty(4 * self.G)
+        self.pmin = empty(8 * self.G)
+        self.psum = empty(8 * self.G)
+        self.out = buf(np.zeros(4, dtype=np.float64))
+        self._host_out = np.zeros(4, dtype=np.float64)
+        self._setup_kernels(groups, params)
+        self._stats = ref.stats()
+        del ref
+
+    @staticmethod
+    def _fo(groups):
+        """(group, first face index in the concatenated order) pairs."""
+        fo = 0
+        for g in groups:
+            yield g, fo
+            fo += g.size
+
+    def _setup_kernels(self, groups, params: EEGTParams) -> None:
+        """Kernel objects with their arguments bound, per arity group."""
+        mf = self.cl.mem_flags
+
+        def kernel(name: str):  # a fresh kernel object: its arguments are this run's
+            return self.cl.Kernel(self.prg, name)
+
+        self._group_calls: list[tuple] = []
+        co = 0
+        two_sqrt3 = np.float64(2.0 * np.sqrt(3.0))
+        area = np.int32(params.scaling == "area")
+        for g, fo in self._fo(groups):
+            suf = {3: "tri", 4: "quad"}.get(g.n, "ngon")
+            cos_a, inv_sin = corner_constants(g.n)
+            nodes = self.cl.Buffer(
+                self.rt.ctx,
+                mf.READ_ONLY | mf.COPY_HOST_PTR,
+                hostbuf=np.ascontiguousarray(g.nodes, dtype=np.int32),
+            )
+            gargs = (
+                nodes,
+                np.int32(g.size),
+                np.int32(fo),
+                np.int32(co),
+                np.int32(g.n),
+                np.int32(stretch_radius(g.n)),
+                np.float64(cos_a),
+                np.float64(inv_sin),
+            )
+            kq = kernel(f"quality_{suf}")
+            kq.set_args(*gargs, self.P, self.q, two_sqrt3)
+            kd = kernel(f"distance_{suf}")
+            kd.set_args(*gargs, self.P, self.fdist, self.tree, self.bxy, *self.tree_args)
+            km = kernel(f"move_{suf}")
+            km.set_args(
+                *gargs,
+                self.P,
+                self.q,
+                self.fdist,
+                self.cmove,
+                self.wf,
+                np.float64(params.a),
+                np.float64(params.eta),
+                np.int32(_pow_mode(params.eta)),
+                np.float64(params.inverted_weight),
+                area,
+            )
+            kk = kernel(f"mark_{suf}")
+            kk.set_args(*gargs, self.q, self.flag)
+            self._group_calls.append((_roundup(g.size, _WG), kq, kd, km, kk, nodes))
+            co += g.n * g.size
+        n = np.int32(self.n_nodes)
+        self.k_stitch = kernel("stitch")
+        self.k_stitch.set_args(
+            n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old
+        )
+        self.k_revert = kernel("revert")
+        self.k_revert.set_args(n, self.flag, self.P, self.old, self.out)
+        self.k_partial = kernel("stats_partial")
+        self.k_partial.set_args(
+            np.int32(self.n_faces), np.int32(self.chunk), self.q, self.pcount, self.pmin, self.psum
+        )
+        self.k_final = kernel("stats_final")
+        self.k_final.set_args(np.int32(self.G), self.pcount, self.pmin, self.psum, self.out)
+
+    # -- enqueue helpers -----------------------------------------------------------------
+    def _run(self, kernel, gsize: int) -> None:
+        self.cl.enqueue_nd_range_kernel(self.queue, kernel, (gsize,), (_WG,))
+
+    def _faces(self, which: int) -> None:
+        """Enqueue one per-group kernel (1 quality, 2 distance, 3 move, 4 mark) for all groups."""
+        for call in self._group_calls:
+            self._run(call[which], call[0])
+
+    def _stats_and_read(self) -> np.ndarray:
+        self.cl.enqueue_nd_range_kernel(self.queue, self.k_partial, (self.G,), None)
+        self.cl.enqueue_nd_range_kernel(self.queue, self.k_final, (1,), None)
+        return self._read_out()
+
+    def _read_out(self) -> np.ndarray:
+        self.cl.enqueue_copy(self.queue, self._host_out, self.out)
+        return self._host_out
+
+    def _to_stats(self, out: np.ndarray) -> Stats:
+        return Stats(int(out[0]), float(out[1]), float(out[2]) / self.n_faces)
+
+    # -- the iteration -------------------------------------------------------------------
+    def stats(self) -> Stats:
+        """Stats of the current positions."""
+        return self._stats
+
+    def step(self, phase: str) -> Stats:
+        """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back."""
+        self.iteration += 1
+        if self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0:
+            self._faces(2)
+        self._faces(3)
+        self._run(self.k_stitch, _roundup(self.n_nodes, _WG))
+        self._faces(1)
+        if phase != "smooth":
+            self._stats = self._to_stats(self._stats_and_read())
+            return self._stats
+        while True:
+            self.cl.enqueue_nd_range_kernel(self.queue, self.k_partial, (self.G,), None)
+            self.cl.enqueue_nd_range_kernel(self.queue, self.k_final, (1,), None)
+            self._faces(4)
+            self._run(self.k_revert, _roundup(self.n_nodes, _WG))
+            out = self._read_out()
+            if out[3] == 0.0:  # nothing went back: the stats are those of the final state
+                self._stats = self._to_stats(out)
+                return self._stats
+            self._faces(1)
+
+    # -- best iterate --------------------------------------------------------------------
+    def save_best(self) -> None:
+        self.cl.enqueue_copy(self.queue, self.best, self.P)
+
+    def _download(self, buf) -> np.ndarray:
+        out = np.empty((self.n_nodes, 2), dtype=np.float64)
+        self.cl.enqueue_copy(self.queue, out, buf)
+        return out
+
+    def best_points(self) -> np.ndarray:
+        return self._download(self.best)
+
+    def points(self) -> np.ndarray:
+        return self._download(self.P)
