@@ -261,6 +261,12 @@ class _Energy:
 # --------------------------------------------------------------------------- L-BFGS
 
 
+def _dot(a: np.ndarray, b: np.ndarray) -> float:
+    """Dot product by NumPy's pairwise sum: unlike `a @ b` (BLAS, whose result depends on its
+    thread count), bit-identical on every run and thread setting."""
+    return float(np.sum(a * b))
+
+
 class _State:
     """Free coordinates packed as v = [x_free, y_free]; fixed nodes never written."""
 
@@ -312,23 +318,23 @@ def _lbfgs(
         q = -g
         alphas = []
         for s, yv, rho in zip(reversed(s_hist), reversed(y_hist), reversed(rho_hist), strict=True):
-            al = rho * float(s @ q)
+            al = rho * _dot(s, q)
             alphas.append(al)
             q -= al * yv
         if s_hist:
-            q *= dpre * (float(s_hist[-1] @ y_hist[-1]) / float(y_hist[-1] @ (dpre * y_hist[-1])))
+            q *= dpre * (_dot(s_hist[-1], y_hist[-1]) / _dot(y_hist[-1], dpre * y_hist[-1]))
             for s, yv, rho, al in zip(s_hist, y_hist, rho_hist, reversed(alphas), strict=True):
-                q += (al - rho * float(yv @ q)) * s
+                q += (al - rho * _dot(yv, q)) * s
             step = 1.0
         else:
             q *= dpre
             qmax = float(np.max(np.abs(q)))
             step = h0 / qmax if qmax > 0.0 else 0.0
-        slope = float(g @ q)
+        slope = _dot(g, q)
         if not slope < 0.0:  # not a descent direction: restart from preconditioned descent
             s_hist, y_hist, rho_hist = [], [], []
             q = -dpre * g
-            slope = float(g @ q)
+            slope = _dot(g, q)
             qmax = float(np.max(np.abs(q)))
             step = h0 / qmax if qmax > 0.0 else 0.0
             if not slope < 0.0:
@@ -354,8 +360,8 @@ def _lbfgs(
         gt = st.pack(gxt, gyt)
         s = vt - v
         yv = gt - g
-        sy = float(s @ yv)
-        if sy > 1e-12 * float(np.sqrt(float(s @ s) * float(yv @ yv))):
+        sy = _dot(s, yv)
+        if sy > 1e-12 * float(np.sqrt(_dot(s, s) * _dot(yv, yv))):
             s_hist.append(s)
             y_hist.append(yv)
             rho_hist.append(1.0 / sy)

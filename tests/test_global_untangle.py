@@ -190,3 +190,29 @@ def test_unfixable_element_reported_not_looped() -> None:
     assert info["status"] == "failed" and info["iterations"] < 500  # no futile 3000 iterations
     assert quality(out, groups)[2] == 1 == info["n_inverted_out"]
     assert np.array_equal(out[~fixed_free], bad[~fixed_free]) and np.all(np.isfinite(out))
+
+
+def test_bit_identical_across_blas_threads() -> None:
+    """Same bytes with 1 BLAS thread (subprocess) as with the default thread count."""
+    import hashlib
+    import os
+    import subprocess
+    import sys
+
+    pts, groups, free = load_case("naca_deform")
+    out, _ = untangle_global(pts, groups, free, polish_iter=0)
+    here = hashlib.sha256(out.tobytes()).hexdigest()
+    code = (
+        "import hashlib\n"
+        "from tests.test_global_untangle import load_case, untangle_global\n"
+        "p, g, f = load_case('naca_deform')\n"
+        "o, _ = untangle_global(p, g, f, polish_iter=0)\n"
+        "print(hashlib.sha256(o.tobytes()).hexdigest())\n"
+    )
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    root = Path(__file__).resolve().parent.parent
+    env["PYTHONPATH"] = str(root) + os.pathsep + env.get("PYTHONPATH", "")
+    res = subprocess.run(
+        [sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, check=True
+    )
+    assert res.stdout.strip() == here
