@@ -275,8 +275,33 @@ def steps():
     again = yield from wait_until(lambda: np.array_equal(positions(), res_b), 30)
     check(again, "Ctrl+Shift+Z did not restore the redo-panel result exactly")
     log("Ctrl+Shift+Z: redo-panel result exactly back")
+    yield from readme_shots(before)
     finish(True, f"click: inverted {n_before} -> 0; redo panel a={NEW_A} changed the result "
                  f"(max {diff:.2e}); Ctrl+Z exact on {len(before)} vertices; redo exact")
+
+
+def readme_shots(before):
+    """After every check passed: the before/after pair for the README, in Edit Mode (which
+    draws every edge; the object-mode wire overlay skips edges between coplanar faces)."""
+    win, area, rg = view3d()
+    xdo("key", "ctrl+z")
+    back = yield from wait_until(lambda: np.array_equal(positions(), before), 30)
+    check(back, "README shots: Ctrl+Z did not bring the input back")
+    with bpy.context.temp_override(window=win, area=area, region=rg["WINDOW"]):
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="DESELECT")
+    area.tag_redraw()
+    yield 0.8
+    shot_mesh("readme_before")
+    with bpy.context.temp_override(window=win, area=area, region=rg["WINDOW"]):
+        bpy.ops.object.mode_set(mode="OBJECT")
+        bpy.ops.mesh.eegt_untangle_smooth(a=0.2)  # the default (the redo panel changed it)
+        check(n_inverted(positions()) == 0, "README shots: result tangled")
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_all(action="DESELECT")
+    area.tag_redraw()
+    yield 0.8
+    shot_mesh("readme_after")
 
 
 class CheckFailed(Exception):
