@@ -18,6 +18,7 @@ falls back to NumPy.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -148,16 +149,29 @@ class _Runtime:
     programs: dict = field(default_factory=dict)
 
     def program(self, maxn: int):
-        """The kernels built for this device (once per process and n-gon size class)."""
+        """The kernels built for this device (once per process and n-gon size class); a
+        failed build is remembered too, so it is reported, not retried, on later runs."""
         prg = self.programs.get(maxn)
         if prg is None:
             try:
                 prg = self.cl.Program(self.ctx, kernel_source()).build(options=[f"-DMAXN={maxn}"])
-            except Exception as exc:  # build failure: report the compiler's first lines
-                msg = " ".join(str(exc).split())[:300]
-                raise RuntimeError(f"kernel build failed on {self.name}: {msg}") from exc
+            except Exception as exc:
+                prg = RuntimeError(f"kernel build failed on {self.name}: {_build_error(exc)}")
             self.programs[maxn] = prg
+        if isinstance(prg, RuntimeError):
+            raise prg
         return prg
+
+
+def _build_error(exc: Exception) -> str:
+    """The compiler's first error line, without temporary file names (stable across runs)."""
+    text = str(exc)
+    for line in text.splitlines():
+        if "error" not in line:
+            continue
+        m = re.search(r":(\d+):(\d+):\s*(?:error:\s*)?(.*)", line)  # [error: ]FILE:L:C: what
+        return f"line {m[1]}:{m[2]}: {m[3].strip()}" if m else line.strip()
+    return " ".join(text.split())[:200]
 
 
 def _runtime() -> _Runtime:
