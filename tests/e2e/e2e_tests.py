@@ -320,7 +320,7 @@ def t_python_expr_on_blend():
 def t_opencl_parity():
     """pyopencl + pocl inside the real Blender: OpenCL result vs NumPy (or the fallback)."""
     rc, out = blender(["-b", "--python-exit-code", "1", "--python", f"{HERE}/bl_opencl.py",
-                       "--", f"{DATA}/quad_hole.obj", f"{OUT}/opencl.json", "device"],
+                       "--", f"{DATA}/mixed_quad_tri.obj", f"{OUT}/opencl.json", "device"],
                       timeout=300, log="opencl")
     check(rc == 0, f"exit code {rc}: {tail(out)}")
     with open(f"{OUT}/opencl.json") as fh:
