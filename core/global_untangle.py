@@ -412,6 +412,8 @@ def untangle_global(
         raise ValueError("points must be (N, 2) and free (N,)")
     if not np.all(np.isfinite(P)):
         raise ValueError("points contain NaN or inf")
+    if not polish_power > 0.0:
+        raise ValueError("polish_power must be > 0")
     en = _Energy(P, groups, free)
     st = _State(P, free)
     n_inv = en.n_inverted(st.x, st.y)
@@ -467,7 +469,7 @@ def untangle_global(
         if progress is not None and progress(total, max_iter, n_inv) is False:
             status = "cancelled"
             break
-        decrease = 1.0 - e_end / e_start if e_start > 0.0 else 0.0
+        decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
         if guard and (decrease < STOP_REL_DECREASE or its == 0):
             break
         if valid and polish_iter <= 0:

@@ -216,3 +216,13 @@ def test_bit_identical_across_blas_threads() -> None:
         [sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, check=True
     )
     assert res.stdout.strip() == here
+
+
+def test_polish_power_raises_min_quality() -> None:
+    pts, groups, free = load_case("quad_hole")
+    q1 = quality(untangle_global(pts, groups, free)[0], groups)
+    q4 = quality(untangle_global(pts, groups, free, polish_power=4.0)[0], groups)
+    assert q1[2] == q4[2] == 0
+    assert q4[0] > q1[0] + 0.02  # measured 0.776 vs 0.737
+    with pytest.raises(ValueError):
+        untangle_global(pts, groups, free, polish_power=0.0)
