@@ -479,6 +479,8 @@ def untangle_global(
         sigma = max(decrease, SIGMA_MIN)
         mu = (1.0 - sigma) * _chi_scalar(dmin, eps)
         eps = max(2.0 * float(np.sqrt(mu * (mu - dmin))) if dmin < mu else EPS_MIN, EPS_MIN)
+        if valid:  # the guard now keeps dets > 0: use the exact barrier (see the docs)
+            eps = EPS_MIN
 
     x, y = st.unpack(best_v)
     out = P.copy()

@@ -226,3 +226,21 @@ def test_polish_power_raises_min_quality() -> None:
     assert q4[0] > q1[0] + 0.02  # measured 0.776 vs 0.737
     with pytest.raises(ValueError):
         untangle_global(pts, groups, free, polish_power=0.0)
+
+
+@pytest.mark.parametrize("turns", [1, 2])
+def test_full_turn_twist_not_left_degenerate(turns: int) -> None:
+    """A disc turned by whole turns: the first valid iterate has dets ~1e-12; the polish must
+    still reach a good mesh (with eps kept large after validity it stalled at q_min 1e-11)."""
+    pts, groups, free = grid(30)
+    c = np.array([0.5, 0.5])
+    d = pts - c
+    a = 2.0 * np.pi * turns * np.clip((0.2 - np.hypot(d[:, 0], d[:, 1])) / 0.05, 0.0, 1.0)
+    twisted = c + np.stack(
+        [np.cos(a) * d[:, 0] - np.sin(a) * d[:, 1], np.sin(a) * d[:, 0] + np.cos(a) * d[:, 1]], 1
+    )
+    twisted[~free] = pts[~free]
+    assert quality(twisted, groups)[2] > 20
+    out, info = untangle_global(twisted, groups, free)
+    q_min, _, n_inv = check_result(twisted, groups, free, out, info)
+    assert n_inv == 0 and q_min > 0.5  # measured 0.78-0.79
