@@ -279,6 +279,11 @@ class OpenCLEngine:
             np.float64(_DIST_FLOOR * self.lbar),
             np.float64(params.c),
             np.int32(_pow_mode(params.c)),
+            # per-face nearest-node cache: nodes, leaf level (-1: empty), leaf cell, q0 and gap
+            empty(16 * nf),
+            buf(np.full((nf, 2), -1, dtype=np.int32)),
+            empty(16 * nf),
+            empty(32 * nf),
         )
         # stats reduction: G partials of a fixed chunk (depends on the face count only)
         self.G = int(min(4096, max(1, -(-nf // 256))))

@@ -147,12 +147,37 @@ static inline void transform_moves(const int n, const int R, const double *X, co
 }
 
 // ---- nearest boundary node (distance.py: NearestBoundary.query) -------------------------
+// The exact minimum of dx * dx + dy * dy over the query's quadtree leaf list (which holds
+// the nearest node for every point of the leaf cell), or over all nodes outside the tree.
+// Per-face cache (temporal coherence, still exact): the last full search's position q0,
+// leaf cell, its NCACHE nearest nodes of the leaf list and G = the distance from q0 to the
+// next one. While the centroid q stays in that leaf and min_cached |q - b| < G - |q - q0|
+// (with round-off margins), no other node of the list can be nearer, so the cached minimum
+// is the value the full search would return, bit for bit.
+
+#define NCACHE 4
+#define GAP_MARGIN 1e-9
+
+static inline double brute_d2(const double qx, const double qy, __global const double2 *bxy,
+                              const int n_bnd)
+{
+    double best = INFINITY;
+    for (int e = 0; e < n_bnd; ++e) {
+        const double2 b = bxy[e];
+        const double dx = b.x - qx, dy = b.y - qy;
+        best = fmin(best, dx * dx + dy * dy);
+    }
+    return best;
+}
 
 static inline double nearest_d(const double qx, const double qy,
                                __global const int *tree_int, __global const double2 *bxy,
                                const double ox, const double oy, const double scale,
                                const double lim, const double top, const int depth,
-                               const int n_levels, const int n_bnd)
+                               const int n_levels, const int n_bnd,
+                               __global int4 *restrict cache_k, __global int2 *restrict cache_l,
+                               __global long2 *restrict cache_c,
+                               __global double4 *restrict cache_d, const int gj)
 {
     // tree_int: [level_off (n_levels + 1)] then child, leaf_start, leaf_len (each total long),
     // then the leaf candidate lists
@@ -161,39 +186,79 @@ static inline double nearest_d(const double qx, const double qy,
     __global const int *lstart = child + total;
     __global const int *llen = lstart + total;
     __global const int *cand = llen + total;
-    int start = 0, len = 0;
     const int inside = (qx >= ox) && (qx - ox < lim) && (qy >= oy) && (qy - oy < lim);
-    if (inside) {
-        const long ix = (long)fmin(fmax(floor((qx - ox) * scale), 0.0), top);
-        const long iy = (long)fmin(fmax(floor((qy - oy) * scale), 0.0), top);
-        int node = 0;
-        for (int level = 0; level < n_levels; ++level) {
-            const int at = tree_int[level] + node;
-            const int ch = child[at];
-            if (ch < 0) {
-                start = lstart[at];
-                len = llen[at];
-                break;
+    if (!inside) {  // outside the tree's square: brute force, like NumPy
+        cache_l[gj] = (int2)(-1, 0);
+        return sqrt(brute_d2(qx, qy, bxy, n_bnd));
+    }
+    const long ix = (long)fmin(fmax(floor((qx - ox) * scale), 0.0), top);
+    const long iy = (long)fmin(fmax(floor((qy - oy) * scale), 0.0), top);
+    const int2 cl = cache_l[gj];
+    if (cl.x >= 0) {
+        const int shift = depth - cl.x;
+        const long2 cell = cache_c[gj];
+        if ((ix >> shift) == cell.x && (iy >> shift) == cell.y) {
+            const int4 ck = cache_k[gj];
+            const int ks[4] = {ck.x, ck.y, ck.z, ck.w};
+            double m = INFINITY;
+            for (int i = 0; i < NCACHE; ++i) {
+                if (ks[i] < 0) break;
+                const double2 b = bxy[ks[i]];
+                const double dx = b.x - qx, dy = b.y - qy;
+                m = fmin(m, dx * dx + dy * dy);
             }
-            const int shift = depth - level - 1;
-            node = ch + (int)((ix >> shift) & 1) + 2 * (int)((iy >> shift) & 1);
+            const double4 cd = cache_d[gj];
+            const double mx = qx - cd.x, my = qy - cd.y;
+            const double d = sqrt(m);
+            if ((d + sqrt(mx * mx + my * my)) * (1.0 + GAP_MARGIN) < cd.z * (1.0 - GAP_MARGIN))
+                return d;
         }
     }
-    double best = INFINITY;
-    if (len > 0) {
-        for (int e = start; e < start + len; ++e) {
-            const double2 b = bxy[cand[e]];
-            const double dx = b.x - qx, dy = b.y - qy;
-            best = fmin(best, dx * dx + dy * dy);
+    int start = 0, len = 0, level = 0, node = 0;
+    for (; level < n_levels; ++level) {
+        const int at = tree_int[level] + node;
+        const int ch = child[at];
+        if (ch < 0) {
+            start = lstart[at];
+            len = llen[at];
+            break;
         }
-    } else {  // outside the tree's square: brute force, like NumPy
-        for (int e = 0; e < n_bnd; ++e) {
-            const double2 b = bxy[e];
-            const double dx = b.x - qx, dy = b.y - qy;
-            best = fmin(best, dx * dx + dy * dy);
+        const int shift = depth - level - 1;
+        node = ch + (int)((ix >> shift) & 1) + 2 * (int)((iy >> shift) & 1);
+    }
+    // the NCACHE + 1 smallest d2 of the leaf list, ascending (bd[0] is the exact minimum)
+    double bd[NCACHE + 1];
+    int bk[NCACHE + 1];
+    for (int i = 0; i <= NCACHE; ++i) {
+        bd[i] = INFINITY;
+        bk[i] = -1;
+    }
+    for (int e = start; e < start + len; ++e) {
+        const int k = cand[e];
+        const double2 b = bxy[k];
+        const double dx = b.x - qx, dy = b.y - qy;
+        const double d2 = dx * dx + dy * dy;
+        if (d2 < bd[NCACHE]) {
+            int p = NCACHE;
+            while (p > 0 && bd[p - 1] > d2) {
+                bd[p] = bd[p - 1];
+                bk[p] = bk[p - 1];
+                --p;
+            }
+            bd[p] = d2;
+            bk[p] = k;
         }
     }
-    return sqrt(best);
+    if (bk[0] < 0) {  // an empty leaf cannot happen; stay exact anyway
+        cache_l[gj] = (int2)(-1, 0);
+        return sqrt(brute_d2(qx, qy, bxy, n_bnd));
+    }
+    const int shift = depth - level;
+    cache_k[gj] = (int4)(bk[0], bk[1], bk[2], bk[3]);
+    cache_l[gj] = (int2)(level, 0);
+    cache_c[gj] = (long2)(ix >> shift, iy >> shift);
+    cache_d[gj] = (double4)(qx, qy, sqrt(bd[NCACHE]), 0.0);
+    return sqrt(bd[0]);
 }
 
 // ---- kernels ---------------------------------------------------------------------------
@@ -205,7 +270,9 @@ static inline double nearest_d(const double qx, const double qy,
     __global const int *restrict tree_int, __global const double2 *restrict bxy,            \
         const double ox, const double oy, const double scale, const double lim,              \
         const double top, const int depth, const int n_levels, const int n_bnd,              \
-        const double lbar, const double dfloor, const double c, const int pow_c
+        const double lbar, const double dfloor, const double c, const int pow_c,              \
+        __global int4 *restrict cache_k, __global int2 *restrict cache_l,                    \
+        __global long2 *restrict cache_c, __global double4 *restrict cache_d
 
 #define MAKE_KERNELS(SUF, NN)                                                                \
     __kernel void quality_##SUF(GROUP_ARGS, __global const double2 *restrict P,              \
@@ -225,7 +292,8 @@ static inline double nearest_d(const double qx, const double qy,
         double X[MAXN], Y[MAXN];                                                             \
         load_face(NN, nodes, F, j, P, X, Y);                                                 \
         const double d = nearest_d(mean_of(NN, X), mean_of(NN, Y), tree_int, bxy, ox, oy,    \
-                                   scale, lim, top, depth, n_levels, n_bnd);                 \
+                                   scale, lim, top, depth, n_levels, n_bnd, cache_k,         \
+                                   cache_l, cache_c, cache_d, fo + j);                       \
         fdist[fo + j] = np_pow(lbar / fmax(d, dfloor), c, pow_c);                            \
     }                                                                                        \
     __kernel void move_##SUF(GROUP_ARGS, __global const double2 *restrict P,                 \
