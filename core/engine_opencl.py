@@ -336,25 +336,30 @@ class OpenCLEngine:
             )
             kq = kernel(f"quality_{suf}")
             kq.set_args(*gargs, self.P, self.q, two_sqrt3)
-            kd = kernel(f"distance_{suf}")
-            kd.set_args(*gargs, self.P, self.fdist, self.tree, self.bxy, *self.tree_args)
-            km = kernel(f"move_{suf}")
-            km.set_args(
-                *gargs,
-                self.P,
-                self.q,
-                self.fdist,
-                self.cmove,
-                self.wf,
-                np.float64(params.a),
-                np.float64(params.eta),
-                np.int32(_pow_mode(params.eta)),
-                np.float64(params.inverted_weight),
-                area,
-            )
+            moves = []
+            for refresh in (0, 1):  # plain move, and move with the distance refresh fused
+                km = kernel(f"move_{suf}")
+                km.set_args(
+                    *gargs,
+                    self.P,
+                    self.q,
+                    self.fdist,
+                    self.cmove,
+                    self.wf,
+                    np.float64(params.a),
+                    np.float64(params.eta),
+                    np.int32(_pow_mode(params.eta)),
+                    np.float64(params.inverted_weight),
+                    area,
+                    np.int32(refresh),
+                    self.tree,
+                    self.bxy,
+                    *self.tree_args,
+                )
+                moves.append(km)
             kk = kernel(f"mark_{suf}")
             kk.set_args(*gargs, self.q, self.flag)
-            self._group_calls.append((_roundup(g.size, _WG), kq, kd, km, kk, nodes))
+            self._group_calls.append((_roundup(g.size, _WG), kq, *moves, kk, nodes))
             co += g.n * g.size
         n = np.int32(self.n_nodes)
         self.k_stitch = kernel("stitch")
@@ -375,7 +380,8 @@ class OpenCLEngine:
         self.cl.enqueue_nd_range_kernel(self.queue, kernel, (gsize,), (_WG,))
 
     def _faces(self, which: int) -> None:
-        """Enqueue one per-group kernel (1 quality, 2 distance, 3 move, 4 mark) for all groups."""
+        """Enqueue one per-group kernel for all groups: 1 quality, 2 move, 3 move with the
+        distance refresh first, 4 mark."""
         for call in self._group_calls:
             self._run(call[which], call[0])
 
@@ -399,9 +405,8 @@ class OpenCLEngine:
     def step(self, phase: str) -> Stats:
         """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back."""
         self.iteration += 1
-        if self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0:
-            self._faces(2)
-        self._faces(3)
+        refresh = self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0
+        self._faces(3 if refresh else 2)
         self._run(self.k_stitch, _roundup(self.n_nodes, _WG))
         self._faces(1)
         if phase != "smooth":

@@ -284,35 +284,35 @@ static inline double nearest_d(const double qx, const double qy,
         load_face(NN, nodes, F, j, P, X, Y);                                                 \
         q[fo + j] = mean_ratio(NN, X, Y, cos_a, inv_sin, two_sqrt3);                         \
     }                                                                                        \
-    __kernel void distance_##SUF(GROUP_ARGS, __global const double2 *restrict P,             \
-                                 __global double *restrict fdist, TREE_ARGS)                 \
-    {                                                                                        \
-        const int j = get_global_id(0);                                                      \
-        if (j >= F) return;                                                                  \
-        double X[MAXN], Y[MAXN];                                                             \
-        load_face(NN, nodes, F, j, P, X, Y);                                                 \
-        const double d = nearest_d(mean_of(NN, X), mean_of(NN, Y), tree_int, bxy, ox, oy,    \
-                                   scale, lim, top, depth, n_levels, n_bnd, cache_k,         \
-                                   cache_l, cache_c, cache_d, fo + j);                       \
-        fdist[fo + j] = np_pow(lbar / fmax(d, dfloor), c, pow_c);                            \
-    }                                                                                        \
+    /* refresh != 0: the distance weight f_j first (nearest node to the centroid) */      \
     __kernel void move_##SUF(GROUP_ARGS, __global const double2 *restrict P,                 \
                              __global const double *restrict q,                              \
-                             __global const double *restrict fdist,                          \
+                             __global double *restrict fdist,                                \
                              __global double2 *restrict cmove, __global double *restrict wf, \
                              const double a, const double eta, const int pow_eta,            \
-                             const double inv_weight, const int area)                        \
+                             const double inv_weight, const int area, const int refresh,     \
+                             TREE_ARGS)                                                      \
     {                                                                                        \
         const int j = get_global_id(0);                                                      \
         if (j >= F) return;                                                                  \
         double X[MAXN], Y[MAXN];                                                             \
         load_face(NN, nodes, F, j, P, X, Y);                                                 \
+        double fj;                                                                           \
+        if (refresh) {                                                                       \
+            const double d = nearest_d(mean_of(NN, X), mean_of(NN, Y), tree_int, bxy, ox,    \
+                                       oy, scale, lim, top, depth, n_levels, n_bnd, cache_k, \
+                                       cache_l, cache_c, cache_d, fo + j);                   \
+            fj = np_pow(lbar / fmax(d, dfloor), c, pow_c);                                   \
+            fdist[fo + j] = fj;                                                              \
+        } else {                                                                             \
+            fj = fdist[fo + j];                                                              \
+        }                                                                                    \
         const double qj = q[fo + j];                                                         \
         const double lam = a * (1.0 - qj);                                                   \
         const double g = qj > 0.0 ? np_pow(1.0 - qj, eta, pow_eta) : inv_weight;             \
-        const double w = fdist[fo + j] * g;                                                  \
+        const double w = fj * g;                                                             \
         wf[fo + j] = w;                                                                      \
-        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j);                               \
+        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j);                         \
     }                                                                                        \
     __kernel void mark_##SUF(GROUP_ARGS, __global const double *restrict q,                  \
                              __global int *restrict flag)                                    \
