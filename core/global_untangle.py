@@ -36,7 +36,7 @@ __all__ = ["untangle_global"]
 
 THETA = 1.0 / 16.0  # weight of the area term g against the shape term f
 LBFGS_MEMORY = 8  # L-BFGS (s, y) pairs kept
-INNER_ITER = 30  # L-BFGS iterations between two eps updates
+INNER_ITER = 60  # L-BFGS iterations between two eps updates
 SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
@@ -299,7 +299,8 @@ def _lbfgs(
 ) -> tuple[np.ndarray, int]:
     """L-BFGS with a diagonal preconditioner and Armijo backtracking from v0.
 
-    guard: reject trial points with a corner det <= 0 (used once the mesh is valid).
+    guard: reject trial points with a corner det <= 0 (used once the mesh is valid); without
+    it, stop as soon as every corner is positive.
     Stops after max_it iterations or when 5 iterations lower F by less than rel_tol (relative).
     Returns the last accepted point and the number of iterations done.
     """
@@ -368,6 +369,8 @@ def _lbfgs(
             if len(s_hist) > LBFGS_MEMORY:
                 del s_hist[0], y_hist[0], rho_hist[0]
         v, e, g = vt, et, gt
+        if not guard and dmin_t > 0.0:  # just became valid: hand over to the guarded polish
+            break
         e_hist.append(e)
         if len(e_hist) > 5 and e_hist[-6] - e <= rel_tol * abs(e_hist[-6]):
             break
