@@ -99,8 +99,8 @@ def _corners(
 
 def _reference_sizes(
     points: np.ndarray, arity: np.ndarray, edges: np.ndarray, edge_elem: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Reference edge length per element, reference area per element, smoothed node size.
+) -> tuple[np.ndarray, np.ndarray]:
+    """Reference edge length per element and the smoothed node size.
 
     Node size = mean length of its incident edges; element size = geometric mean of its
     nodes' sizes, smoothed SIZE_SMOOTHING times through the nodes; then one global factor so
@@ -131,9 +131,8 @@ def _reference_sizes(
     dom_area = 0.5 * float(np.sum(x0 * y1 - x1 * y0))
     total = float(np.sum(ref_area))
     if dom_area > 0.0 and total > 0.0:
-        ref_area = ref_area * (dom_area / total)
         size = size * np.sqrt(dom_area / total)
-    return size, ref_area, np.exp(lh)
+    return size, np.exp(lh)
 
 
 # --------------------------------------------------------------------------- energy
@@ -161,7 +160,7 @@ class _Energy:
         if self.n_elem == 0:
             self.i0 = self.i1 = self.i2 = np.zeros(0, dtype=np.int64)
             return
-        size, _ref_area, hnode = _reference_sizes(points, arity, edges, edge_elem)
+        size, hnode = _reference_sizes(points, arity, edges, edge_elem)
         i0, i1, i2, eid = self.v0, self.v1, self.v2, self.veid
         keep = free[i0] | free[i1] | free[i2]  # other corners have a constant energy
         self.i0, self.i1, self.i2 = i0[keep], i1[keep], i2[keep]
@@ -396,10 +395,10 @@ def untangle_global(
     points: (N, 2) float64; groups: arity -> (F_n, n) int node arrays, counterclockwise = valid;
     free: (N,) bool mask of the nodes that may move. max_iter bounds all L-BFGS iterations;
     polish_iter bounds those spent improving quality once no element is inverted (0: stop at
-    the first valid iterate); polish_power p > 1 polishes sum (f / 2)^p instead of the paper's
-    sum f (f / 2 = 1 / mean ratio for eps -> 0): higher q_min, lower q_avg (see the docs);
-    time_limit (s) stops early. progress(iterations, max_iter,
-    n_inverted) is called after each eps round; returning False cancels.
+    the first valid iterate); polish_power p > 0 polishes sum (f / 2)^p instead of the
+    paper's sum f (f / 2 = 1 / mean ratio for eps -> 0): p > 1 raises q_min and lowers q_avg,
+    p < 1 the opposite (see the docs); time_limit (s) stops early.
+    progress(iterations, max_iter, n_inverted) is called after each round; False cancels.
 
     Returns (new points, info); non-free rows are bit-identical to the input. Once valid, steps
     that would invert a corner are rejected, so a valid iterate stays valid; when no valid one
@@ -451,13 +450,12 @@ def untangle_global(
         guard = valid  # valid: polish the quality, never invert a corner again
         en.power = float(polish_power) if guard else 1.0
         e_start = en.value(*st.unpack(v), eps)
-        cap = min(max_iter - total, INNER_ITER)
-        if guard:
-            cap = min(cap, polish_iter - polish_used)
+        if guard:  # eps is at its floor: one long L-BFGS run, no memory restarts
+            cap = min(max_iter - total, polish_iter - polish_used)
             if cap <= 0:
                 break
-            if eps <= EPS_MIN:  # eps is final: one long L-BFGS run, no memory restarts
-                cap = polish_iter - polish_used
+        else:
+            cap = min(max_iter - total, INNER_ITER)
         v, its = _lbfgs(en, st, v, eps, max_it=cap, guard=guard)
         total += its
         if guard:

@@ -244,3 +244,13 @@ def test_full_turn_twist_not_left_degenerate(turns: int) -> None:
     out, info = untangle_global(twisted, groups, free)
     q_min, _, n_inv = check_result(twisted, groups, free, out, info)
     assert n_inv == 0 and q_min > 0.5  # measured 0.73-0.74 (before the fix: 1e-13 and 0.14)
+
+
+def test_max_iter_bounds_the_work() -> None:
+    pts, groups, free = load_case("naca_deform")
+    out, info = untangle_global(pts, groups, free, max_iter=20)
+    assert info["iterations"] <= 20 and info["status"] == "failed"
+    assert 0 < info["n_inverted_out"] < info["n_inverted_in"]  # best iterate, fewer folds
+    check_result(pts, groups, free, out, info)
+    out, info = untangle_global(pts, groups, free, max_iter=150, polish_iter=10_000)
+    assert info["iterations"] <= 150 and info["status"] == "untangled"
