@@ -40,6 +40,7 @@ INNER_ITER = 60  # L-BFGS iterations between two eps updates
 SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
+TICK_EVERY = 20  # progress is reported this often inside a long polish run
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
 
 
@@ -295,12 +296,14 @@ def _lbfgs(
     max_it: int,
     guard: bool,
     rel_tol: float = 1e-7,
+    tick: Callable[[int], bool] | None = None,
 ) -> tuple[np.ndarray, int]:
     """L-BFGS with a diagonal preconditioner and Armijo backtracking from v0.
 
     guard: reject trial points with a corner det <= 0 (used once the mesh is valid); without
     it, stop as soon as every corner is positive.
-    Stops after max_it iterations or when 5 iterations lower F by less than rel_tol (relative).
+    Stops after max_it iterations, when 5 iterations lower F by less than rel_tol (relative),
+    or when tick(iterations so far), called every TICK_EVERY iterations, returns False.
     Returns the last accepted point and the number of iterations done.
     """
     v = v0
@@ -373,6 +376,8 @@ def _lbfgs(
         e_hist.append(e)
         if len(e_hist) > 5 and e_hist[-6] - e <= rel_tol * abs(e_hist[-6]):
             break
+        if tick is not None and it % TICK_EVERY == 0 and tick(it) is False:
+            break
     return v, it
 
 
@@ -444,6 +449,7 @@ def untangle_global(
     status = ""
     eps_hist: list[float] = []
     rounds = 0
+    cancel = False
     while total < max_iter:
         rounds += 1
         eps_hist.append(eps)
@@ -456,7 +462,15 @@ def untangle_global(
                 break
         else:
             cap = min(max_iter - total, INNER_ITER)
-        v, its = _lbfgs(en, st, v, eps, max_it=cap, guard=guard)
+        tick = None
+        if progress is not None and guard:  # long polish runs report (and cancel) from inside
+
+            def tick(it: int, done: int = total, n_now: int = best_inv) -> bool:
+                nonlocal cancel
+                cancel = cancel or progress(done + it, max_iter, n_now) is False
+                return not cancel
+
+        v, its = _lbfgs(en, st, v, eps, max_it=cap, guard=guard, tick=tick)
         total += its
         if guard:
             polish_used += its
@@ -467,7 +481,7 @@ def untangle_global(
         n_inv = en.n_inverted(x, y)
         if n_inv <= best_inv:
             best_v, best_inv = v, n_inv
-        if progress is not None and progress(total, max_iter, n_inv) is False:
+        if cancel or (progress is not None and progress(total, max_iter, n_inv) is False):
             status = "cancelled"
             break
         decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0

@@ -254,3 +254,19 @@ def test_max_iter_bounds_the_work() -> None:
     check_result(pts, groups, free, out, info)
     out, info = untangle_global(pts, groups, free, max_iter=150, polish_iter=10_000)
     assert info["iterations"] <= 150 and info["status"] == "untangled"
+
+
+def test_progress_reported_inside_the_polish_and_cancels_there() -> None:
+    pts, groups, free = load_case("two_holes_twist")
+    calls: list[int] = []
+    untangle_global(pts, groups, free, progress=lambda it, m, n: calls.append(it))
+    assert len(calls) >= 10 and calls == sorted(calls)  # not only once per eps round
+    seen: list[int] = []
+
+    def stop_in_polish(it: int, total: int, n_inv: int) -> bool:
+        seen.append(it)
+        return n_inv > 0 or it < 100
+
+    out, info = untangle_global(pts, groups, free, progress=stop_in_polish)
+    assert info["status"] == "cancelled" and 100 <= info["iterations"] < 200
+    assert np.all(np.isfinite(out)) and np.array_equal(out[~free], pts[~free])
