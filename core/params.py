@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields, replace
 
-__all__ = ["EEGTParams"]
+__all__ = ["UNTANGLE_METHODS", "EEGTParams"]
+
+UNTANGLE_METHODS = ("global", "eegt+global", "eegt")
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,28 @@ class EEGTParams:
         default=1,
         metadata={"help": "Refresh element-to-boundary distances every this many iterations."},
     )
+    untangle: str = field(
+        default="global",
+        metadata={
+            "help": "How inverted faces are removed: 'global' foldover-free optimization "
+            "(fastest, most robust), 'eegt+global' EEGT first and the optimization when it "
+            "stalls, 'eegt' EEGT only (the paper)"
+        },
+    )
+    stall_iterations: int = field(
+        default=50,
+        metadata={
+            "help": "EEGT untangling counts as stalled when its inverted count has not "
+            "reached a new low for this many iterations"
+        },
+    )
+    polish_iterations: int = field(
+        default=300,
+        metadata={
+            "help": "Optimization iterations that improve shape quality once valid, "
+            "before EEGT smoothing (0: none; beyond the paper)"
+        },
+    )
     scaling: str = field(
         default="edge",
         metadata={
@@ -55,6 +79,12 @@ class EEGTParams:
             (self.max_smooth_iterations >= 0, "max_smooth_iterations must be >= 0"),
             (self.distance_refresh >= 1, "distance_refresh must be >= 1"),
             (self.scaling in ("edge", "area"), "scaling must be 'edge' or 'area'"),
+            (self.stall_iterations >= 1, "stall_iterations must be >= 1"),
+            (
+                self.untangle in UNTANGLE_METHODS,
+                f"untangle must be one of {', '.join(UNTANGLE_METHODS)}",
+            ),
+            (self.polish_iterations >= 0, "polish_iterations must be >= 0"),
         ]
         for ok, message in checks:
             if not ok:
@@ -73,6 +103,8 @@ class EEGTParams:
             max_smooth_iterations=1000,
             distance_refresh=1,
             scaling="edge",
+            untangle="eegt",
+            polish_iterations=0,
         )
 
     def with_(self, **changes) -> EEGTParams:

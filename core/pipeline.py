@@ -35,6 +35,7 @@ class EEGTResult:
     backend: str
     message: str
     moved: np.ndarray  # (N,) bool: nodes the run was allowed to move
+    global_iterations: int = 0  # optimization iterations of the global stage (beyond the paper)
 
     def as_dict(self) -> dict:
         return {
@@ -43,6 +44,7 @@ class EEGTResult:
             "after": self.after.as_dict(),
             "untangle_iterations": self.untangle_iterations,
             "smooth_iterations": self.smooth_iterations,
+            "global_iterations": self.global_iterations,
             "seconds": self.seconds,
             "backend": self.backend,
             "message": self.message,
@@ -80,8 +82,9 @@ def untangle_and_smooth(
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
     `fixed` pins extra nodes; boundary, non-manifold and loose nodes never move. `progress`
-    is called as progress(iteration, phase, stats) after every iteration; returning False
-    (or raising Cancelled) stops the run and returns the input unchanged.
+    is called as progress(iteration, phase, stats) after every iteration (phase "untangle",
+    "global" or "smooth"); returning False (or raising Cancelled) stops the run and returns
+    the input unchanged.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
@@ -90,76 +93,147 @@ def untangle_and_smooth(
     free = free_nodes(p.shape[0], fs, fixed)
     if not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
-    engine, backend_name = make_engine(backend, p, fs, free, params)
-    before = engine.stats()
-    best = before
-    engine.save_best()
-    n_untangle = n_smooth = 0
+    run = _Run(p, fs, free, params, backend, progress)
+    try:
+        status, message = run.execute()
+    except _CancelRun:
+        status, message = "cancelled", "cancelled: mesh left unchanged"
+    out, after = (p.copy(), run.before) if status == "cancelled" else (run.best_pts, run.best)
+    if out is None:
+        out = run.engine.best_points()
+    return EEGTResult(
+        out,
+        status,
+        run.before,
+        after,
+        run.n_untangle,
+        run.n_smooth,
+        time.perf_counter() - t0,
+        run.backend_name,
+        message,
+        free,
+        run.n_global,
+    )
 
-    def cancelled(it: int, phase: str, s: Stats) -> bool:
-        if progress is None:
-            return False
+
+class _CancelRun(Exception):
+    pass
+
+
+class _Run:
+    """One run of the pipeline: EEGT phases on an engine, the global stage on the host."""
+
+    def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress):
+        self.p, self.fs, self.free, self.params = p, fs, free, params
+        self.backend, self.progress = backend, progress
+        self.engine, self.backend_name = make_engine(backend, p, fs, free, params)
+        self.before = self.best = self.engine.stats()
+        self.best_pts: np.ndarray | None = None  # None: the engine's best buffer holds it
+        self.engine.save_best()
+        self.n_untangle = self.n_smooth = self.n_global = 0
+
+    def report(self, it: int, phase: str, s: Stats) -> None:
+        if self.progress is None:
+            return
         try:
-            return progress(it, phase, s) is False
+            stop = self.progress(it, phase, s) is False
         except Cancelled:
-            return True
+            stop = True
+        if stop:
+            raise _CancelRun
 
-    def done(status: str, message: str, out: np.ndarray, after: Stats) -> EEGTResult:
-        return EEGTResult(
-            out,
-            status,
-            before,
-            after,
-            n_untangle,
-            n_smooth,
-            time.perf_counter() - t0,
-            backend_name,
-            message,
-            free,
+    def track(self, s: Stats) -> None:
+        if s.better_than(self.best):
+            self.best = s
+            self.best_pts = None
+            self.engine.save_best()
+
+    def best_points(self) -> np.ndarray:
+        return self.engine.best_points() if self.best_pts is None else self.best_pts
+
+    def execute(self) -> tuple[str, str]:
+        prm, before = self.params, self.before
+        self.report(0, "untangle" if before.n_inverted else "smooth", before)
+        current = before
+        notes = []
+        if before.n_inverted:
+            if prm.untangle != "global":
+                current = self.untangle_eegt()
+            if self.best.n_inverted and prm.untangle != "eegt":
+                notes.append("global stage")
+                current = self.global_stage(polish=prm.polish_iterations)
+            if self.best.n_inverted:
+                return "failed", (
+                    f"failed: {self.best.n_inverted} inverted faces remain after "
+                    f"{self.n_untangle} untangling iterations"
+                    + (f" and {self.n_global} global iterations" if self.n_global else "")
+                    + f" (best iterate kept; input had {before.n_inverted})"
+                )
+        if prm.polish_iterations > 0 and not (notes and self.n_global):
+            current = self.global_stage(polish=prm.polish_iterations)
+        self.smooth_eegt(current)
+        status = "untangled" if before.n_inverted else "valid"
+        verb = f"untangled in {self.n_untangle} iterations, " if before.n_inverted else ""
+        glob = f"{self.n_global} optimization iterations, " if self.n_global else ""
+        b = self.best
+        return status, (
+            f"{verb}{glob}smoothed in {self.n_smooth} iterations: "
+            f"q_min {before.q_min:.4f} -> {b.q_min:.4f}, q_avg {before.q_avg:.4f} -> {b.q_avg:.4f}"
         )
 
-    def cancel() -> EEGTResult:
-        return done("cancelled", "cancelled: mesh left unchanged", p.copy(), before)
-
-    if cancelled(0, "untangle" if before.n_inverted else "smooth", before):
-        return cancel()
-    current = before
-    if before.n_inverted:
-        for _ in range(params.max_untangle_iterations):
-            current = engine.step("untangle")
-            n_untangle += 1
-            if current.better_than(best):
-                best = current
-                engine.save_best()
-            if cancelled(n_untangle, "untangle", current):
-                return cancel()
+    def untangle_eegt(self) -> Stats:
+        """EEGT until no face is inverted, the iteration cap, or (eegt+global) a stall."""
+        prm = self.params
+        current = self.before
+        low, since = current.n_inverted, 0
+        for _ in range(prm.max_untangle_iterations):
+            current = self.engine.step("untangle")
+            self.n_untangle += 1
+            self.track(current)
+            self.report(self.n_untangle, "untangle", current)
             if current.n_inverted == 0:
                 break
-        if best.n_inverted:
-            return done(
-                "failed",
-                f"failed: {best.n_inverted} inverted faces remain after {n_untangle} "
-                f"untangling iterations (best iterate kept; input had {before.n_inverted})",
-                engine.best_points(),
-                best,
-            )
-    for _ in range(params.max_smooth_iterations):
-        previous = current
-        current = engine.step("smooth")
-        n_smooth += 1
-        if current.better_than(best):
-            best = current
-            engine.save_best()
-        if cancelled(n_untangle + n_smooth, "smooth", current):
-            return cancel()
-        if current.q_avg - previous.q_avg < params.tol:
-            break
-    status = "untangled" if before.n_inverted else "valid"
-    verb = f"untangled in {n_untangle} iterations, " if before.n_inverted else ""
-    return done(
-        status,
-        f"{verb}smoothed in {n_smooth} iterations: q_min {before.q_min:.4f} -> {best.q_min:.4f}, "
-        f"q_avg {before.q_avg:.4f} -> {best.q_avg:.4f}",
-        engine.best_points(),
-        best,
-    )
+            if current.n_inverted < low:
+                low, since = current.n_inverted, 0
+            else:
+                since += 1
+                if prm.untangle == "eegt+global" and since >= prm.stall_iterations:
+                    break
+        return current
+
+    def global_stage(self, polish: int) -> Stats:
+        """Foldover-free optimization from the best iterate; EEGT continues from its result."""
+        from .global_untangle import untangle_global
+
+        start = self.best_points()
+        groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in self.fs.groups}
+        base = self.n_untangle
+
+        def relay(iterations: int, _max_iter: int, n_inv: int) -> None:
+            self.n_global = iterations
+            self.report(base + iterations, "global", Stats(n_inv, self.best.q_min, self.best.q_avg))
+
+        pts, info = untangle_global(start, groups, self.free, polish_iter=polish, progress=relay)
+        self.n_global = int(info["iterations"])
+        if info.get("status") == "cancelled":
+            raise _CancelRun
+        pts[~self.free] = self.p[~self.free]  # fixed rows bit-identical, whatever happened
+        self.engine, _ = make_engine(self.backend, pts, self.fs, self.free, self.params)
+        current = self.engine.stats()
+        if current.better_than(self.best):
+            self.best, self.best_pts = current, None
+            self.engine.save_best()
+        else:  # keep the earlier best as a host copy; the new engine starts from pts
+            self.best_pts = start if self.best_pts is None else self.best_pts
+        return current
+
+    def smooth_eegt(self, current: Stats) -> None:
+        prm = self.params
+        for _ in range(prm.max_smooth_iterations):
+            previous = current
+            current = self.engine.step("smooth")
+            self.n_smooth += 1
+            self.track(current)
+            self.report(self.n_untangle + self.n_global + self.n_smooth, "smooth", current)
+            if current.q_avg - previous.q_avg < prm.tol:
+                break

@@ -80,7 +80,10 @@ class VIEW3D_PT_eegt_last_run(bpy.types.Panel):
             col.label(text=f"Inverted: {lr.inverted_before} -> {lr.inverted_after}")
             col.label(text=f"q min: {lr.q_min_before:.3f} -> {lr.q_min_after:.3f}")
             col.label(text=f"q avg: {lr.q_avg_before:.3f} -> {lr.q_avg_after:.3f}")
-            col.label(text=f"Iterations: {lr.untangle_iterations} + {lr.smooth_iterations}")
+            its = f"{lr.untangle_iterations} + {lr.smooth_iterations}"
+            if lr.global_iterations:
+                its = f"{lr.untangle_iterations} + {lr.global_iterations} + {lr.smooth_iterations}"
+            col.label(text=f"Iterations: {its}")
             col.label(text=f"{lr.seconds:.2f} s, {lr.backend}")
         else:
             col.label(text=lr.message)

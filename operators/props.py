@@ -17,6 +17,12 @@ from ..core import EEGTParams
 
 # Choices of string parameters (dataclass fields carry no choice list).
 STRING_CHOICES: dict[str, tuple[tuple[str, str, str], ...]] = {
+    "untangle": (
+        ("global", "Global", "Foldover-free optimization removes inverted faces (fastest, "
+         "most robust)"),
+        ("eegt+global", "EEGT + Global", "EEGT first, the optimization when EEGT stalls"),
+        ("eegt", "EEGT Only", "The paper's EEGT untangling only"),
+    ),
     "scaling": (
         ("edge", "Edge", "Shrink keeps the mean edge length (paper)"),
         ("area", "Area", "Shrink keeps the mean area"),
@@ -33,6 +39,9 @@ LABELS: dict[str, str] = {
     "max_smooth_iterations": "Max Smooth Iterations",
     "distance_refresh": "Distance Refresh",
     "scaling": "Scaling",
+    "untangle": "Untangle With",
+    "stall_iterations": "Stall Iterations",
+    "polish_iterations": "Polish Iterations",
 }
 
 # Lower bounds matching EEGTParams.__post_init__ (soft_max keeps the sliders usable).
@@ -43,6 +52,8 @@ BOUNDS: dict[str, dict[str, float]] = {
     "inverted_weight": {"min": 1e-6, "soft_max": 50.0},
     "tol": {"min": 0.0, "soft_max": 0.1},
     "max_untangle_iterations": {"min": 0, "soft_max": 20000},
+    "stall_iterations": {"min": 1, "soft_max": 1000},
+    "polish_iterations": {"min": 0, "soft_max": 5000},
     "max_smooth_iterations": {"min": 0, "soft_max": 5000},
     "distance_refresh": {"min": 1, "soft_max": 100},
 }
@@ -161,6 +172,7 @@ class EEGT_PG_last_run(bpy.types.PropertyGroup):
     q_avg_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
     untangle_iterations: IntProperty(default=0)  # type: ignore[valid-type]
     smooth_iterations: IntProperty(default=0)  # type: ignore[valid-type]
+    global_iterations: IntProperty(default=0)  # type: ignore[valid-type]
     seconds: FloatProperty(default=0.0)  # type: ignore[valid-type]
 
 

@@ -53,6 +53,7 @@ class ObjectResult:
     after: dict[str, Any] | None = None
     untangle_iterations: int = 0
     smooth_iterations: int = 0
+    global_iterations: int = 0
     seconds: float = 0.0
     backend: str = ""
     n_nodes: int = 0
@@ -75,7 +76,7 @@ class ObjectResult:
         text = (f"{self.object}: inverted {b.get('n_inverted')} -> {a.get('n_inverted')}, "
                 f"q_min {b.get('q_min', 0):.3f} -> {a.get('q_min', 0):.3f}, "
                 f"q_avg {b.get('q_avg', 0):.3f} -> {a.get('q_avg', 0):.3f}, "
-                f"{self.untangle_iterations}+{self.smooth_iterations} iterations, "
+                f"{self.iterations_text()}, "
                 f"{self.seconds:.2f} s, {self.backend}")
         if self.status == "failed":
             text += f"; FAILED to untangle: {self.message}"
@@ -85,6 +86,14 @@ class ObjectResult:
             text += "; " + "; ".join(self.notes)
         return text
 
+    def iterations_text(self) -> str:
+        """'U+S iterations', or 'U+G+S iterations (untangle+optimize+smooth)' with the
+        global optimization stage."""
+        if self.global_iterations:
+            return (f"{self.untangle_iterations}+{self.global_iterations}+"
+                    f"{self.smooth_iterations} iterations (untangle+optimize+smooth)")
+        return f"{self.untangle_iterations}+{self.smooth_iterations} iterations"
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the per-object entry of the CLI report)."""
         return {
@@ -93,6 +102,7 @@ class ObjectResult:
             "before": self.before, "after": self.after,
             "untangle_iterations": self.untangle_iterations,
             "smooth_iterations": self.smooth_iterations,
+            "global_iterations": self.global_iterations,
             "seconds": round(self.seconds, 6), "backend": self.backend,
             "n_nodes": self.n_nodes, "n_faces": self.n_faces, "n_free": self.n_free,
             "notes": list(self.notes),
@@ -261,6 +271,7 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
     out.after = job.after if job.after is not None else stats_dict(res.after)
     out.untangle_iterations = int(res.untangle_iterations)
     out.smooth_iterations = int(res.smooth_iterations)
+    out.global_iterations = int(getattr(res, "global_iterations", 0))
     out.seconds = float(res.seconds)
     out.backend = str(res.backend)
     if res.status == "cancelled":
@@ -303,6 +314,7 @@ def store_last_run(obj: bpy.types.Object, result: ObjectResult) -> None:
     lr.q_avg_after = float(a.get("q_avg", 0.0))
     lr.untangle_iterations = result.untangle_iterations
     lr.smooth_iterations = result.smooth_iterations
+    lr.global_iterations = result.global_iterations
     lr.seconds = result.seconds
 
 

@@ -120,7 +120,7 @@ def test_pipeline_same_result_and_iteration_counts(device, name):
 
 def test_failed_run_returns_same_best_iterate(device):
     p, f = load2d("two_holes_twist")
-    params = EEGTParams(max_untangle_iterations=60)
+    params = EEGTParams(max_untangle_iterations=60, untangle="eegt")
     ra = untangle_and_smooth(p, f, params=params, backend="numpy")
     rb = untangle_and_smooth(p, f, params=params, backend="opencl")
     assert ra.status == rb.status == "failed"
@@ -256,7 +256,8 @@ def test_cancel_via_progress(device, how):
             return False
         return None
 
-    res = untangle_and_smooth(p, f, backend="opencl", progress=progress)
+    res = untangle_and_smooth(p, f, params=EEGTParams(untangle="eegt"), backend="opencl",
+                              progress=progress)
     assert res.status == "cancelled" and res.backend == "opencl"
     assert seen[-1] == 3
     assert np.array_equal(res.points, p)

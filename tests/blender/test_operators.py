@@ -74,7 +74,8 @@ def test_object_mode_untangles_and_keeps_boundary(bpy, ext):
 def test_nothing_changed_is_cancelled(bpy, ext):
     obj = import_obj(bpy, "quad_hole")
     before = snapshot(obj, skip=())
-    res = bpy.ops.mesh.eegt_untangle_smooth(max_untangle_iterations=0, max_smooth_iterations=0)
+    res = bpy.ops.mesh.eegt_untangle_smooth(untangle="eegt", max_untangle_iterations=0,
+                                            max_smooth_iterations=0)
     assert res == {"CANCELLED"}
     assert snapshot(obj, skip=()) == before
     assert last(obj).status == "failed"
@@ -83,6 +84,7 @@ def test_nothing_changed_is_cancelled(bpy, ext):
 def test_scene_settings_feed_operator_and_args_override(bpy, ext):
     obj = import_obj(bpy, "quad_hole")
     settings = bpy.context.scene.eegt_settings
+    settings.untangle = "eegt"  # EEGT only: one iteration cannot untangle quad_hole
     settings.max_untangle_iterations = 1
     settings.max_smooth_iterations = 0
     bpy.ops.mesh.eegt_untangle_smooth()

@@ -179,3 +179,46 @@ def test_coincident_free_nodes_are_pulled_apart():
     res = untangle_and_smooth(p, faces, params=PAPER)
     assert res.status == "untangled" and res.after.n_inverted == 0
     assert res.after.q_min > 0.5
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["quad_hole", "tri_two_holes", "naca_deform", "mixed_quad_tri", "polygon_voronoi",
+     "two_holes_twist"],
+)
+def test_default_parameters_untangle_every_shared_mesh_including_the_twist(name):
+    p, f = load2d(name)
+    res = untangle_and_smooth(p, f)
+    assert res.status == "untangled" and res.after.n_inverted == 0, res.message
+    assert res.global_iterations > 0  # the optimization stage did the untangling
+    b = boundary_nodes(len(p), f)
+    assert np.array_equal(res.points[b], p[b])
+    check = mesh_stats(res.points, f)
+    assert check.n_inverted == 0 and check.q_min == res.after.q_min > 0
+
+
+def test_default_quality_beats_paper_mode_on_tri_two_holes_and_naca():
+    for name, q_min, q_avg in (("tri_two_holes", 0.73, 0.985), ("naca_deform", 0.1, 0.81)):
+        p, f = load2d(name)
+        res = untangle_and_smooth(p, f)
+        assert res.after.q_min > q_min and res.after.q_avg > q_avg, (name, res.after)
+
+
+def test_eegt_then_global_when_eegt_stalls_on_the_twist():
+    p, f = load2d("two_holes_twist")
+    res = untangle_and_smooth(p, f, params=EEGTParams(untangle="eegt+global", stall_iterations=20))
+    assert res.status == "untangled" and res.after.n_inverted == 0
+    assert res.untangle_iterations >= 20 and res.global_iterations > 0
+
+
+def test_cancel_during_global_stage_returns_input():
+    p, f = load2d("naca_deform")
+    phases = []
+
+    def progress(it, phase, stats):
+        phases.append(phase)
+        return phase != "global"
+
+    res = untangle_and_smooth(p, f, progress=progress)
+    assert res.status == "cancelled" and np.array_equal(res.points, p)
+    assert phases[-1] == "global"
