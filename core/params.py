@@ -36,7 +36,7 @@ class EEGTParams:
         default=1000, metadata={"help": "Smoothing stops after this many iterations."}
     )
     distance_refresh: int = field(
-        default=1,
+        default=10,
         metadata={"help": "Refresh element-to-boundary distances every this many iterations."},
     )
     untangle: str = field(
