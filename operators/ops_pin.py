@@ -106,13 +106,5 @@ class MESH_OT_eegt_unpin(_PinBase, bpy.types.Operator):
 classes = (MESH_OT_eegt_pin, MESH_OT_eegt_unpin)
 
 
-def register() -> None:
-    """Register the pin operators."""
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the pin operators."""
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+# Register in order, unregister in reverse (Blender's own helper).
+register, unregister = bpy.utils.register_classes_factory(classes)

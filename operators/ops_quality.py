@@ -186,13 +186,5 @@ class MESH_OT_eegt_select_inverted(bpy.types.Operator):
 classes = (MESH_OT_eegt_analyze, MESH_OT_eegt_select_inverted)
 
 
-def register() -> None:
-    """Register the quality operators."""
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the quality operators."""
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+# Register in order, unregister in reverse (Blender's own helper).
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -218,13 +218,5 @@ def _printer(name: str) -> runner.Progress:
 classes = (MESH_OT_eegt_untangle_smooth,)
 
 
-def register() -> None:
-    """Register the operator."""
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the operator."""
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+# Register in order, unregister in reverse (Blender's own helper).
+register, unregister = bpy.utils.register_classes_factory(classes)

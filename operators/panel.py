@@ -92,13 +92,5 @@ class VIEW3D_PT_eegt_last_run(bpy.types.Panel):
 classes = (VIEW3D_PT_eegt, VIEW3D_PT_eegt_params, VIEW3D_PT_eegt_last_run)
 
 
-def register() -> None:
-    """Register the sidebar panels."""
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the sidebar panels."""
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+# Register in order, unregister in reverse (Blender's own helper).
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -91,13 +91,5 @@ def resolve_backend(
 classes = (EEGT_AddonPreferences,)
 
 
-def register() -> None:
-    """Register the preferences class."""
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the preferences class."""
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+# Register in order, unregister in reverse (Blender's own helper).
+register, unregister = bpy.utils.register_classes_factory(classes)
