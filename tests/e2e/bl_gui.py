@@ -16,6 +16,7 @@ Ctrl+C (copy the value of the field under the mouse) and read the clipboard.
 import os
 import subprocess
 import sys
+import threading
 import time
 import traceback
 
@@ -120,9 +121,11 @@ def wait_until(cond, timeout, step=0.2):
 
 def probe(points, key, match):
     """Hover each (x11) point, press `key`, and return the first point whose clipboard text
-    satisfies match(text). Generator: yields between events so Blender handles them."""
+    satisfies match(text), moved down to the middle of the hit (the first hit is usually the
+    button's top edge). Generator: yields between events so Blender handles them."""
     wm = bpy.context.window_manager
-    for x, y in points:
+
+    def hit(x, y):
         wm.clipboard = ""
         xdo("mousemove", x, y)
         yield 0.12
@@ -131,9 +134,26 @@ def probe(points, key, match):
         text = wm.clipboard
         if os.environ.get("E2E_GUI_DEBUG"):
             log(f"probe {key} at {x},{y}: {text!r}")
-        if text and match(text):
-            return (x, y), text
+        return text if text and match(text) else None
+
+    for x, y in points:
+        text = yield from hit(x, y)
+        if text:
+            last = y
+            for dy in range(3, 40, 3):  # X11 y grows downwards
+                if not (yield from hit(x, y + dy)):
+                    break
+                last = y + dy
+            return (x, (y + last) // 2), text
     return None, None
+
+
+def click(pt):
+    """Hover first, let Blender activate the button under the mouse, then click: a press
+    arriving together with the move that enters a button can be lost."""
+    xdo("mousemove", *pt)
+    yield 0.3
+    xdo("click", 1)
 
 
 def as_float(text):
@@ -196,7 +216,7 @@ def steps():
     pt, _ = yield from probe(pts, "ctrl+c", lambda t: "eegt_untangle_smooth" in t)
     check(pt, "no button with bpy.ops.mesh.eegt_untangle_smooth found in the EEGT tab")
     n_ops = len(bpy.context.window_manager.operators)
-    xdo("mousemove", *pt, "click", 1)
+    yield from click(pt)
     log(f"clicked Untangle & Smooth at {pt}")
     done = yield from wait_until(
         lambda: len(bpy.context.window_manager.operators) > n_ops
@@ -234,7 +254,7 @@ def steps():
     if pt is None:  # the panel may start collapsed: click its header, probe again
         _, _, r = view3d()
         h = r["HUD"]
-        xdo("mousemove", *to_x11(h.x + 40, h.y + h.height - 10), "click", 1)
+        yield from click(to_x11(h.x + 40, h.y + h.height - 10))
         yield 0.5
         pt, _ = yield from probe(hud_points(), "ctrl+c", is_a)
     check(pt, f"no field with the value a={a_old} in the redo panel")
@@ -275,9 +295,11 @@ def steps():
     again = yield from wait_until(lambda: np.array_equal(positions(), res_b), 30)
     check(again, "Ctrl+Shift+Z did not restore the redo-panel result exactly")
     log("Ctrl+Shift+Z: redo-panel result exactly back")
+    yield from esc_cancel()
     yield from readme_shots(before)
     finish(True, f"click: inverted {n_before} -> 0; redo panel a={NEW_A} changed the result "
-                 f"(max {diff:.2e}); Ctrl+Z exact on {len(before)} vertices; redo exact")
+                 f"(max {diff:.2e}); Ctrl+Z exact on {len(before)} vertices; redo exact; "
+                 "ESC cancel exact")
 
 
 def readme_shots(before):
@@ -302,6 +324,77 @@ def readme_shots(before):
     area.tag_redraw()
     yield 0.8
     shot_mesh("readme_after")
+
+
+def big_impossible_mesh(n=120, seed=1):
+    """A jittered n x n triangle grid (tangled but fixable) plus a separate U-star component
+    (data/u_star_impossible.obj: cannot be untangled), so the run goes on to the iteration
+    limit: long enough to press ESC in the middle of it."""
+    rng = np.random.default_rng(seed)
+    g = np.arange(n, dtype=np.float64)
+    x, y = np.meshgrid(g, g)
+    v = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    inner = (x.ravel() > 0) & (x.ravel() < n - 1) & (y.ravel() > 0) & (y.ravel() < n - 1)
+    v[inner, :2] += rng.uniform(-0.6, 0.6, (int(inner.sum()), 2))
+    i = (np.arange(n - 1)[None, :] + n * np.arange(n - 1)[:, None]).ravel()
+    tris = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)])
+    uv, uf = meshcheck.read_obj(os.path.join(os.path.dirname(__file__), "data",
+                                             "u_star_impossible.obj"))
+    uv = uv + np.array([n + 5.0, 0.0, 0.0])  # to the right of the grid
+    faces = tris.tolist() + [(f + len(v)).tolist() for f in uf]
+    me = bpy.data.meshes.new("BigImpossible")
+    me.from_pydata(np.concatenate([v, uv]).tolist(), [], faces)
+    return me
+
+
+def esc_cancel():
+    """Start Untangle & Smooth on a long run the way the button does (INVOKE_DEFAULT: the
+    modal path with a worker thread), press ESC (real key) in the middle: the mesh must stay
+    exactly as it was, the worker must stop, and no operator may be registered.
+    (A second real click on the button, after this script changed the selection, did not
+    reach the operator under Xvfb; not diagnosed, so the run is started from Python.)"""
+    win, area, rg = view3d()
+    ob = bpy.data.objects.new("BigImpossible", big_impossible_mesh())
+    bpy.context.scene.collection.objects.link(ob)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o is ob)
+    bpy.context.view_layer.objects.active = ob
+    yield 0.5
+    me = ob.data
+    start = np.empty(len(me.vertices) * 3, dtype=np.float32)
+    me.attributes["position"].data.foreach_get("vector", start)
+
+    def now():
+        co = np.empty_like(start)
+        bpy.data.objects["BigImpossible"].data.attributes["position"].data.foreach_get(
+            "vector", co)
+        return co
+
+    def workers():
+        return [t for t in threading.enumerate() if t.name == "eegt-worker" and t.is_alive()]
+
+    n_ops = len(bpy.context.window_manager.operators)
+    with bpy.context.temp_override(window=win, area=area, region=rg["WINDOW"]):
+        res = bpy.ops.mesh.eegt_untangle_smooth("INVOKE_DEFAULT")
+    check(res == {"RUNNING_MODAL"}, f"ESC test: invoke returned {res}")
+    running = yield from wait_until(lambda: bool(workers()), 10)
+    lr = bpy.data.objects["BigImpossible"].eegt_last_run
+    check(running, f"ESC test: no eegt-worker thread after the invoke (last run: "
+                   f"{lr.has_run} {lr.message!r}; mode {bpy.context.mode})")
+    yield 1.5
+    check(workers(), "ESC test: the run ended within 1.5 s, too short to cancel")
+    shot("gui_progress")
+    w = rg["WINDOW"]
+    xdo("mousemove", *to_x11(w.x + w.width // 3, w.y + w.height // 2))
+    yield 0.1
+    xdo("key", "Escape")
+    stopped = yield from wait_until(lambda: not workers(), 15)
+    check(stopped, "ESC test: the worker still runs 15 s after ESC")
+    yield 1.0
+    check(np.array_equal(now(), start), "ESC test: the mesh changed although cancelled")
+    check(len(bpy.context.window_manager.operators) == n_ops,
+          "ESC test: a cancelled run registered an operator (undo step)")
+    log(f"ESC: run on {len(me.polygons)} faces cancelled, mesh exactly unchanged")
 
 
 class CheckFailed(Exception):
