@@ -56,3 +56,19 @@ def object_mode(context: bpy.types.Context) -> Iterator[None]:
     finally:
         if was_edit:
             bpy.ops.object.mode_set(mode="EDIT")
+
+
+class TargetObjectsMixin:
+    """Operators on the target meshes: available in Object and Edit Mode, run in Object Mode.
+
+    Subclasses implement ``_run(objs) -> set[str]``.
+    """
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        return context.mode in ("OBJECT", "EDIT_MESH") and bool(target_objects(context))
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        objs = target_objects(context)
+        with object_mode(context):
+            return self._run(objs)

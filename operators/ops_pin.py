@@ -41,17 +41,8 @@ def set_pins(obj: bpy.types.Object, mask: np.ndarray, value: bool) -> str | None
     return None
 
 
-class _PinBase:
+class _PinBase(modes.TargetObjectsMixin):
     value = True
-
-    @classmethod
-    def poll(cls, context: bpy.types.Context) -> bool:
-        return context.mode in ("OBJECT", "EDIT_MESH") and bool(modes.target_objects(context))
-
-    def execute(self, context: bpy.types.Context) -> set[str]:
-        objs = modes.target_objects(context)
-        with modes.object_mode(context):
-            return self._run(objs)
 
     def _run(self, objs: list[bpy.types.Object]) -> set[str]:
         everything = bool(getattr(self, "all", False))

@@ -80,7 +80,7 @@ def _stats_line(name: str, q: np.ndarray) -> str:
             f"q_avg {s['q_avg']:.3f}")
 
 
-class MESH_OT_eegt_analyze(bpy.types.Operator):
+class MESH_OT_eegt_analyze(modes.TargetObjectsMixin, bpy.types.Operator):
     """Measure the mean ratio quality of every face; store it as the eegt_quality face attribute and a heat-map color attribute"""  # noqa: E501
 
     bl_idname = "mesh.eegt_analyze"
@@ -90,15 +90,6 @@ class MESH_OT_eegt_analyze(bpy.types.Operator):
     store: BoolProperty(  # type: ignore[valid-type]
         name="Store Attributes", default=True,
         description="Write the eegt_quality and eegt_quality_color attributes")
-
-    @classmethod
-    def poll(cls, context: bpy.types.Context) -> bool:
-        return context.mode in ("OBJECT", "EDIT_MESH") and bool(modes.target_objects(context))
-
-    def execute(self, context: bpy.types.Context) -> set[str]:
-        objs = modes.target_objects(context)
-        with modes.object_mode(context):
-            return self._run(objs)
 
     def _run(self, objs: list[bpy.types.Object]) -> set[str]:
         found: list[tuple[bpy.types.Object, np.ndarray]] = []
@@ -124,7 +115,7 @@ class MESH_OT_eegt_analyze(bpy.types.Operator):
         return {"FINISHED"} if written else {"CANCELLED"}
 
 
-class MESH_OT_eegt_select_inverted(bpy.types.Operator):
+class MESH_OT_eegt_select_inverted(modes.TargetObjectsMixin, bpy.types.Operator):
     """Select the faces whose mean ratio quality is at most the threshold (0 = inverted faces only)"""  # noqa: E501
 
     bl_idname = "mesh.eegt_select_inverted"
@@ -136,10 +127,6 @@ class MESH_OT_eegt_select_inverted(bpy.types.Operator):
         description="Select faces with quality <= this (0 selects inverted faces only)")
     extend: BoolProperty(  # type: ignore[valid-type]
         name="Extend", default=False, description="Keep the current selection")
-
-    @classmethod
-    def poll(cls, context: bpy.types.Context) -> bool:
-        return context.mode in ("OBJECT", "EDIT_MESH") and bool(modes.target_objects(context))
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         objs = modes.target_objects(context)

@@ -116,16 +116,24 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
         return {"FINISHED"}
 
     # -- synchronous path (background, EXEC_DEFAULT, redo panel) ---------------------------
-    def execute(self, context: bpy.types.Context) -> set[str]:
+    def _setup(self, context: bpy.types.Context):
+        """Parameters, backend and targets shared by both paths; None (reported) if invalid."""
         self._fill_from_scene(context)
         try:
             params = props.params_from(self)
         except ValueError as exc:
             self.report({"WARNING"}, str(exc))
-            return {"CANCELLED"}
+            return None
         backend, device = resolve_backend(self.backend, context)
         self._targets = modes.target_objects(context)
         self._edit = modes.is_edit_mode(context)
+        return params, backend, device
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        setup = self._setup(context)
+        if setup is None:
+            return {"CANCELLED"}
+        params, backend, device = setup
         verbose = bpy.app.background
         with modes.object_mode(context):
             objs, jobs = self._prepare(context)
@@ -136,17 +144,12 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
 
     # -- modal path (UI) ---------------------------------------------------------------------
     def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
-        self._fill_from_scene(context)
         if bpy.app.background or context.window is None:
             return self.execute(context)
-        try:
-            params = props.params_from(self)
-        except ValueError as exc:
-            self.report({"WARNING"}, str(exc))
+        setup = self._setup(context)
+        if setup is None:
             return {"CANCELLED"}
-        backend, device = resolve_backend(self.backend, context)
-        self._targets = modes.target_objects(context)
-        self._edit = modes.is_edit_mode(context)
+        params, backend, device = setup
         with modes.object_mode(context):
             self._objs, self._jobs = self._prepare(context)
         self._worker = _Worker(self._jobs, params, backend, device)
