@@ -23,14 +23,18 @@ LAST_RESULTS: list[runner.ObjectResult] = []
 
 
 def _annotations() -> dict[str, Any]:
-    ann = props.param_annotations()
+    # SKIP_SAVE: Blender must not restore last-used values into a new call, or they would
+    # count as set and hide later changes of the sidebar (scene) settings. The redo panel
+    # still edits the running operator's own values.
+    skip = {"SKIP_SAVE"}
+    ann = props.param_annotations(skip)
     ann["backend"] = EnumProperty(name="Backend", items=props.BACKEND_ITEMS, default="PREFS",
-                                  description="Compute backend")
+                                  description="Compute backend", options=skip)
     ann["use_pinned"] = BoolProperty(
-        name="Use Pinned", default=True,
+        name="Use Pinned", default=True, options=skip,
         description="Keep vertices of the eegt_pinned attribute or vertex group fixed")
     ann["project"] = BoolProperty(
-        name="Project to Plane", default=False,
+        name="Project to Plane", default=False, options=skip,
         description="Project a slightly non-planar mesh onto its plane instead of refusing it")
     return ann
 

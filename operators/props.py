@@ -89,31 +89,32 @@ def _default(f: dataclasses.Field) -> Any:
     return getattr(EEGTParams(), f.name)
 
 
-def blender_property(f: dataclasses.Field) -> Any:
+def blender_property(f: dataclasses.Field, options: set[str] | None = None) -> Any:
     """A bpy property definition for one EEGTParams field (type taken from its default)."""
     default = _default(f)
     name, desc = field_label(f.name), field_help(f)
     bounds = BOUNDS.get(f.name, {})
+    opt = {"options": options} if options is not None else {}
     if isinstance(default, bool):
-        return BoolProperty(name=name, description=desc, default=default)
+        return BoolProperty(name=name, description=desc, default=default, **opt)
     if isinstance(default, int):
-        return IntProperty(name=name, description=desc, default=default,
+        return IntProperty(name=name, description=desc, default=default, **opt,
                            min=int(bounds.get("min", 0)),
                            soft_max=int(bounds.get("soft_max", 2**31 - 1)))
     if isinstance(default, float):
-        return FloatProperty(name=name, description=desc, default=default,
+        return FloatProperty(name=name, description=desc, default=default, **opt,
                              min=bounds.get("min", -3.4e38),
                              soft_max=bounds.get("soft_max", 3.4e38),
                              precision=4 if default and abs(default) < 0.01 else 3)
     if isinstance(default, str) and f.name in STRING_CHOICES:
         return EnumProperty(name=name, description=desc, items=STRING_CHOICES[f.name],
-                            default=default)
-    return StringProperty(name=name, description=desc, default=str(default))
+                            default=default, **opt)
+    return StringProperty(name=name, description=desc, default=str(default), **opt)
 
 
-def param_annotations() -> dict[str, Any]:
+def param_annotations(options: set[str] | None = None) -> dict[str, Any]:
     """Annotations (name -> bpy property) for every EEGTParams field."""
-    return {f.name: blender_property(f) for f in param_fields()}
+    return {f.name: blender_property(f, options) for f in param_fields()}
 
 
 def params_from(owner: Any, fallback: Any = None) -> EEGTParams:
