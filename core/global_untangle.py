@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["untangle_global"]
+__all__ = ["lift_min_quality", "untangle_global"]
 
 THETA = 1.0 / 16.0  # weight of the area term g against the shape term f
 LBFGS_MEMORY = 8  # L-BFGS (s, y) pairs kept
@@ -42,6 +42,14 @@ EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 TICK_EVERY = 20  # progress is reported this often inside a long polish run
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
+# lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
+LIFT_FIRST_ITER = 150  # L-BFGS iterations of the first run (floor = the input's q_min)
+LIFT_ITER = 50  # L-BFGS iterations per later round
+LIFT_GROW = 1.15  # floor of the next round: min(q_min * GROW, q_min + GAP * (q_avg - q_min))
+LIFT_GAP = 0.15
+LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE times as much
+LIFT_PENALTY = 1000.0  # weight of the one-sided quadratic floor penalty
+LIFT_BARRIER = 0.01  # weight of sum 1/q_corner (keeps every corner away from det = 0)
 
 
 # --------------------------------------------------------------------------- mesh tables
@@ -256,6 +264,83 @@ class _Energy:
         if not bad.any():
             return 0
         return int(np.count_nonzero(np.bincount(self.veid[bad], minlength=self.n_elem)))
+
+
+class _LiftEnergy(_Energy):
+    """F = sum_e [ -q_e + PENALTY ((qc - q_e)_+ / qc)^2 ] + BARRIER sum_corners w / q_k.
+
+    q_k = 2 det / |J|_F^2 is the corner's mean ratio (theta = 0, eps -> 0) and q_e the mean
+    over the element's corners (SPEC section 3). The first term maximises q_avg itself, the
+    second is a soft floor qc on every element's quality, the third a barrier per corner (the
+    mean alone lets one corner of a polygon collapse). Every corner of every element is kept,
+    so element means are complete; only valid (guarded) iterates are evaluated.
+    """
+
+    def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
+        super().__init__(points, groups, free)
+        self.qc = 0.0
+        if self.n_elem == 0:
+            return
+        _faces, arity, edges, edge_elem = _tables(groups)
+        size, _ = _reference_sizes(points, arity, edges, edge_elem)
+        self.i0, self.i1, self.i2, self.eid = self.v0, self.v1, self.v2, self.veid
+        n = arity[self.eid].astype(np.float64)
+        s = size[self.eid]
+        a = (n - 2.0) * np.pi / n
+        self.w00 = 1.0 / s
+        self.w01 = -np.cos(a) / (np.sin(a) * s)
+        self.w11 = 1.0 / (np.sin(a) * s)
+        self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
+        self.n_corners = np.bincount(self.eid, minlength=self.n_elem).astype(np.float64)
+        self.idx = np.concatenate([self.i1, self.i2, self.i0])
+
+    def _corner_u(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        j00, j01, j10, j11 = self._jac(x, y)
+        d = j00 * j11 - j01 * j10
+        t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
+        u = 0.5 * t / np.where(d > 0.0, d, np.inf)  # 1 / q_k; inf (q_k = 0) when not positive
+        return j00, j01, j10, j11, d, t, u
+
+    def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """(E,) mean ratio of each element (0 where a corner is not positive)."""
+        *_, d, _t, u = self._corner_u(x, y)
+        q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
+        bad = np.bincount(self.eid, d <= 0.0, minlength=self.n_elem) > 0
+        return np.where(bad, 0.0, q)
+
+    def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
+        return self.value_grad(x, y, eps)[0]
+
+    def value_grad(
+        self, x: np.ndarray, y: np.ndarray, eps: float
+    ) -> tuple[float, np.ndarray, np.ndarray, float]:
+        j00, j01, j10, j11, d, _t, u = self._corner_u(x, y)
+        dmin = float(np.min(d))
+        n = self.n_nodes
+        if not dmin > 0.0:  # only reached by rejected trial steps: infinite energy
+            z = np.zeros(n)
+            return float("inf"), z, z, dmin
+        q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
+        gap = np.maximum(self.qc - q, 0.0) / self.qc
+        energy = float(np.sum(LIFT_PENALTY * gap * gap - q))
+        energy += LIFT_BARRIER * float(np.sum(self.weight * u))
+        de_dq = -1.0 - (2.0 * LIFT_PENALTY / self.qc) * gap  # dF / dq_e
+        # dq_e / du_k = -1 / (n_e u_k^2); u_k = t / (2 d): du/dJ = J / d - u cof(J) / d
+        de_du = de_dq[self.eid] * (-1.0 / self.n_corners[self.eid]) / (u * u)
+        de_du = de_du + LIFT_BARRIER * self.weight
+        a = de_du / d
+        b = -de_du * u / d
+        g00 = a * j00 + b * j11
+        g01 = a * j01 - b * j10
+        g10 = a * j10 - b * j01
+        g11 = a * j11 + b * j00
+        ge1x = g00 * self.w00 + g01 * self.w01
+        ge1y = g10 * self.w00 + g11 * self.w01
+        ge2x = g01 * self.w11
+        ge2y = g11 * self.w11
+        gx = np.bincount(self.idx, np.concatenate([ge1x, ge2x, -(ge1x + ge2x)]), minlength=n)
+        gy = np.bincount(self.idx, np.concatenate([ge1y, ge2y, -(ge1y + ge2y)]), minlength=n)
+        return energy, gx, gy, dmin
 
 
 # --------------------------------------------------------------------------- L-BFGS
@@ -516,3 +601,78 @@ def untangle_global(
         status=status,
     )
     return out, info
+
+
+def lift_min_quality(
+    points: np.ndarray,
+    groups: Mapping[int, np.ndarray],
+    free: np.ndarray,
+    *,
+    rounds: int = 6,
+    progress: Callable[[int, int], Any] | None = None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Raise the worst element quality of a valid mesh without lowering its mean quality.
+
+    Maximises the mean quality q_avg subject to a soft floor q_e >= qc on every element
+    (`_LiftEnergy`, guarded L-BFGS: the mesh stays valid), first with qc = the input's q_min,
+    then for up to `rounds` rounds with a rising floor. A round is kept only when q_min rises,
+    q_avg stays at least the input's, and any q_avg it costs buys at least LIFT_RATE times as
+    much q_min. Returns (points, info) with the kept iterate: the input itself (bit-identical)
+    when nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
+    q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
+    status ("lifted", "unchanged", "cancelled").
+    progress(iterations, rounds_done) after each run; False cancels (the input is returned).
+    """
+    t_start = time.perf_counter()
+    P = np.array(points, dtype=np.float64, copy=True)
+    free = np.asarray(free, dtype=bool).reshape(-1)
+    if P.ndim != 2 or P.shape[1] != 2 or free.shape[0] != P.shape[0]:
+        raise ValueError("points must be (N, 2) and free (N,)")
+    en = _LiftEnergy(P, groups, free)
+    st = _State(P, free)
+    info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
+    q = en.element_quality(st.x, st.y) if en.n_elem else np.zeros(0)
+    m0 = float(q.min()) if q.size else 0.0
+    a0 = float(q.mean()) if q.size else 0.0
+    info.update(q_min_in=m0, q_avg_in=a0, q_min_out=m0, q_avg_out=a0)
+    if q.size == 0 or st.nf == 0 or not m0 > 0.0 or not np.all(np.isfinite(P)):
+        info["seconds"] = time.perf_counter() - t_start
+        return P, info
+
+    best_v, best_m, best_a = None, m0, a0
+    v = st.pack(st.x, st.y)
+    cur_m, cur_a = m0, a0
+    total = 0
+    trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run, kept or not
+    info["trail"] = trail
+    for r in range(rounds + 1):
+        en.qc = m0 if r == 0 else min(cur_m * LIFT_GROW, cur_m + LIFT_GAP * (cur_a - cur_m))
+        vt, its = _lbfgs(
+            en, st, v, EPS_MIN, max_it=LIFT_FIRST_ITER if r == 0 else LIFT_ITER, guard=True,
+            rel_tol=1e-9,
+        )
+        total += its
+        qt = en.element_quality(*st.unpack(vt))
+        qm, qa = float(qt.min()), float(qt.mean())
+        trail.append((qm, qa))
+        if progress is not None and progress(total, r) is False:
+            info.update(iterations=total, status="cancelled", seconds=time.perf_counter() - t_start)
+            return P, info
+        if r == 0:  # the first run maximises q_avg at the input's floor: the start of the climb
+            v, cur_m, cur_a = vt, qm, qa
+        else:
+            if qa < a0 or qm <= cur_m or (qa < cur_a and qm - cur_m < LIFT_RATE * (cur_a - qa)):
+                break
+            v, cur_m, cur_a = vt, qm, qa
+            info["rounds"] = r
+        if cur_a >= a0 and cur_m > best_m:
+            best_v, best_m, best_a = v, cur_m, cur_a
+
+    info.update(iterations=total, seconds=time.perf_counter() - t_start)
+    if best_v is None:
+        return P, info
+    x, y = st.unpack(best_v)
+    P[st.fidx, 0] = x[st.fidx]
+    P[st.fidx, 1] = y[st.fidx]
+    info.update(q_min_out=best_m, q_avg_out=best_a, status="lifted")
+    return P, info

@@ -61,6 +61,13 @@ class EEGTParams:
             "before EEGT smoothing (0: none; beyond the paper)"
         },
     )
+    lift_rounds: int = field(
+        default=6,
+        metadata={
+            "help": "Rounds that raise the worst face quality after the optimization without "
+            "lowering the mean quality (0: none; beyond the paper)"
+        },
+    )
     scaling: str = field(
         default="edge",
         metadata={
@@ -85,6 +92,7 @@ class EEGTParams:
                 f"untangle must be one of {', '.join(UNTANGLE_METHODS)}",
             ),
             (self.polish_iterations >= 0, "polish_iterations must be >= 0"),
+            (self.lift_rounds >= 0, "lift_rounds must be >= 0"),
         ]
         for ok, message in checks:
             if not ok:
@@ -105,6 +113,7 @@ class EEGTParams:
             scaling="edge",
             untangle="eegt",
             polish_iterations=0,
+            lift_rounds=0,
         )
 
     def with_(self, **changes) -> EEGTParams:

@@ -217,6 +217,8 @@ class _Run:
         self.n_global = int(info["iterations"])
         if info.get("status") == "cancelled":
             raise _CancelRun
+        if info.get("status") == "untangled" and self.params.lift_rounds > 0:
+            pts = self.lift(pts, groups)
         pts[~self.free] = self.p[~self.free]  # fixed rows bit-identical, whatever happened
         self.engine, _ = make_engine(self.backend, pts, self.fs, self.free, self.params)
         current = self.engine.stats()
@@ -226,6 +228,21 @@ class _Run:
         else:  # keep the earlier best as a host copy; the new engine starts from pts
             self.best_pts = start if self.best_pts is None else self.best_pts
         return current
+
+    def lift(self, pts: np.ndarray, groups: dict) -> np.ndarray:
+        """Raise q_min of the valid optimization result without lowering its q_avg."""
+        from .global_untangle import lift_min_quality
+
+        base = self.n_untangle + self.n_global
+
+        def relay(iterations: int, _rounds: int) -> None:
+            self.report(base + iterations, "global", self.best)
+
+        out, info = lift_min_quality(
+            pts, groups, self.free, rounds=self.params.lift_rounds, progress=relay
+        )
+        self.n_global += int(info["iterations"])
+        return out
 
     def smooth_eegt(self, current: Stats) -> None:
         prm = self.params
