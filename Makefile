@@ -6,7 +6,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: venv test lint test-core test-blender test-compat e2e demo build bench clean
+.PHONY: venv test lint test-core test-blender test-compat e2e demo build bench bench-paper clean
 
 venv: $(STAMP)
 
@@ -52,8 +52,14 @@ test: lint
 demo: $(STAMP)
 	$(PY) -m bench.demo --out out
 
+# Speed tables of the NumPy core (shared meshes, 1M triangles).
 bench: $(STAMP)
 	$(PY) -m bench.run
+
+# The paper's Tables 1-3 side by side with our modes, Blender's Smooth Vertices and the peers;
+# rewrites the README's results block and docs/results.md. Robustness: bench.robustness.
+bench-paper: $(STAMP)
+	$(PY) -m bench.paper_tables --readme
 
 # Real Blender 4.3 in a Debian 13 chroot (root needed; cached in .e2e-root/): tests/e2e/.
 e2e:
