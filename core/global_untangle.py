@@ -53,6 +53,7 @@ LIFT_BARRIER = 0.01  # weight of sum 1/q_corner (keeps every corner away from de
 LIFT_RINGS = 6  # rounds after the first move only the nodes within this many rings of ...
 LIFT_ACTIVE = 1.0  # ... the elements with q < LIFT_ACTIVE * floor (a small local problem)
 LIFT_REL_TOL = 1e-6  # a lift run stops when 5 iterations lower F by less than this (relative)
+LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
 
 
@@ -652,8 +653,9 @@ def lift_min_quality(
     (`_LiftEnergy`, guarded L-BFGS: the mesh stays valid), first with qc = the input's q_min,
     then for up to `rounds` rounds with a rising floor, each over only the free nodes within
     LIFT_RINGS rings of the elements under the new floor. A round is kept only when q_min
-    rises, q_avg stays at least the input's and within LIFT_AVG_DROP (relative) of the best
-    q_avg seen, and any q_avg it costs buys at least LIFT_RATE times as much q_min.
+    rises, q_avg stays within LIFT_AVG_DROP (relative) of the best q_avg seen and, once q_min
+    >= LIFT_POOR q_avg, at least the input's, and any q_avg it costs buys at least LIFT_RATE
+    times as much q_min.
     Returns (points, info) with the kept iterate: the input itself (bit-identical) when
     nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
     q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
@@ -718,13 +720,15 @@ def lift_min_quality(
             v, q, cur_m, cur_a = vt, qt, qm, qa
             peak = max(peak, qa)
         else:
-            floor = max(a0, (1.0 - LIFT_AVG_DROP) * peak)
+            floor = (1.0 - LIFT_AVG_DROP) * peak
+            if cur_m >= LIFT_POOR * cur_a:
+                floor = max(floor, a0)
             if qa < floor or qm <= cur_m or (qa < cur_a and qm - cur_m < LIFT_RATE * (cur_a - qa)):
                 break
             v, q, cur_m, cur_a = vt, qt, qm, qa
             peak = max(peak, qa)
             info["rounds"] = r
-        if cur_a >= a0 and cur_m > best_m:
+        if (cur_a >= a0 or info["rounds"]) and cur_m > best_m:
             best_v, best_m, best_a = v, cur_m, cur_a
 
     info.update(iterations=total, seconds=time.perf_counter() - t_start)
