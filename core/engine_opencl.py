@@ -39,6 +39,8 @@ _NO_PLATFORM_HINT = (
     "in /etc/OpenCL/vendors or a folder named by OCL_ICD_VENDORS"
 )
 _WG = 64  # work-group size for face and node kernels
+_CH = 32  # faces per work-item of the quality kernels (one stats row each)
+_NCACHE = 8  # nearest boundary nodes cached per face for the distance refresh
 _NGON_MAXN = 16  # private-array size of the generic n-gon kernels (bigger faces: own build)
 
 _device_override: str | None = None
@@ -154,7 +156,9 @@ class _Runtime:
         prg = self.programs.get(maxn)
         if prg is None:
             try:
-                prg = self.cl.Program(self.ctx, kernel_source()).build(options=[f"-DMAXN={maxn}"])
+                prg = self.cl.Program(self.ctx, kernel_source()).build(
+                    options=[f"-DMAXN={maxn}", f"-DCH={_CH}", f"-DNCACHE={_NCACHE}"]
+                )
             except Exception as exc:
                 prg = RuntimeError(f"kernel build failed on {self.name}: {_build_error(exc)}")
             self.programs[maxn] = prg
@@ -280,19 +284,16 @@ class OpenCLEngine:
             np.float64(params.c),
             np.int32(_pow_mode(params.c)),
             # per-face nearest-node cache: nodes, leaf level (-1: empty), leaf cell, q0 and gap
-            empty(16 * nf),
-            buf(np.full((nf, 2), -1, dtype=np.int32)),
+            empty(4 * _NCACHE * nf),
+            buf(np.full((nf, 4), -1, dtype=np.int32)),
             empty(16 * nf),
             empty(32 * nf),
         )
-        # stats reduction: G partials of a fixed chunk (depends on the face count only)
-        self.G = int(min(4096, max(1, -(-nf // 256))))
-        self.chunk = -(-nf // self.G)
-        self.pcount = empty(4 * self.G)
-        self.pmin = empty(8 * self.G)
-        self.psum = empty(8 * self.G)
-        self.out = buf(np.zeros(4, dtype=np.float64))
-        self._host_out = np.zeros(4, dtype=np.float64)
+        # stats: one (count, min, sum, 0) row per quality work-item (_CH faces), folded on
+        # the host in a fixed order; row 0's last slot is the smoothing's "reverted" flag
+        self.n_rows = sum(-(-g.size // _CH) for g in groups)
+        self.part = empty(32 * self.n_rows)
+        self._host_part = np.zeros((self.n_rows, 4), dtype=np.float64)
         self._setup_kernels(groups, params)
         self._stats = ref.stats()
         del ref
@@ -313,7 +314,7 @@ class OpenCLEngine:
             return self.cl.Kernel(self.prg, name)
 
         self._group_calls: list[tuple] = []
-        co = 0
+        co = ro = 0
         two_sqrt3 = np.float64(2.0 * np.sqrt(3.0))
         area = np.int32(params.scaling == "area")
         for g, fo in self._fo(groups):
@@ -335,10 +336,11 @@ class OpenCLEngine:
                 np.float64(inv_sin),
             )
             kq = kernel(f"quality_{suf}")
-            kq.set_args(*gargs, self.P, self.q, two_sqrt3)
+            kq.set_args(*gargs, self.P, self.q, two_sqrt3, self.part, np.int32(ro))
+            rows = -(-g.size // _CH)
             moves = []
             for refresh in (0, 1):  # plain move, and move with the distance refresh fused
-                km = kernel(f"move_{suf}")
+                km = kernel(f"move_{suf}_d" if refresh else f"move_{suf}")
                 km.set_args(
                     *gargs,
                     self.P,
@@ -359,7 +361,11 @@ class OpenCLEngine:
                 moves.append(km)
             kk = kernel(f"mark_{suf}")
             kk.set_args(*gargs, self.q, self.flag)
-            self._group_calls.append((_roundup(g.size, _WG), kq, *moves, kk, nodes))
+            gs = _roundup(g.size, _WG)
+            self._group_calls.append(
+                ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes)
+            )
+            ro += rows
             co += g.n * g.size
         n = np.int32(self.n_nodes)
         self.k_stitch = kernel("stitch")
@@ -367,35 +373,28 @@ class OpenCLEngine:
             n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old
         )
         self.k_revert = kernel("revert")
-        self.k_revert.set_args(n, self.flag, self.P, self.old, self.out)
-        self.k_partial = kernel("stats_partial")
-        self.k_partial.set_args(
-            np.int32(self.n_faces), np.int32(self.chunk), self.q, self.pcount, self.pmin, self.psum
-        )
-        self.k_final = kernel("stats_final")
-        self.k_final.set_args(np.int32(self.G), self.pcount, self.pmin, self.psum, self.out)
+        self.k_revert.set_args(n, self.flag, self.P, self.old, self.part)
 
     # -- enqueue helpers -----------------------------------------------------------------
     def _run(self, kernel, gsize: int) -> None:
         self.cl.enqueue_nd_range_kernel(self.queue, kernel, (gsize,), (_WG,))
 
     def _faces(self, which: int) -> None:
-        """Enqueue one per-group kernel for all groups: 1 quality, 2 move, 3 move with the
-        distance refresh first, 4 mark."""
+        """Enqueue one per-group kernel for all groups: 1 quality (+ stats rows), 2 move,
+        3 move with the distance refresh first, 4 mark."""
         for call in self._group_calls:
-            self._run(call[which], call[0])
+            gsize, kern = call[which - 1]
+            self._run(kern, gsize)
 
-    def _stats_and_read(self) -> np.ndarray:
-        self.cl.enqueue_nd_range_kernel(self.queue, self.k_partial, (self.G,), None)
-        self.cl.enqueue_nd_range_kernel(self.queue, self.k_final, (1,), None)
-        return self._read_out()
+    def _read_part(self) -> np.ndarray:
+        """The stats rows (one blocking read; it waits for the queue)."""
+        self.cl.enqueue_copy(self.queue, self._host_part, self.part)
+        return self._host_part
 
-    def _read_out(self) -> np.ndarray:
-        self.cl.enqueue_copy(self.queue, self._host_out, self.out)
-        return self._host_out
-
-    def _to_stats(self, out: np.ndarray) -> Stats:
-        return Stats(int(out[0]), float(out[1]), float(out[2]) / self.n_faces)
+    def _to_stats(self, part: np.ndarray) -> Stats:
+        """Fold the rows: exact count and min, the sum in NumPy's fixed (pairwise) order."""
+        cnt = int(part[:, 0].sum())
+        return Stats(cnt, float(part[:, 1].min()), float(part[:, 2].sum()) / self.n_faces)
 
     # -- the iteration -------------------------------------------------------------------
     def stats(self) -> Stats:
@@ -410,16 +409,14 @@ class OpenCLEngine:
         self._run(self.k_stitch, _roundup(self.n_nodes, _WG))
         self._faces(1)
         if phase != "smooth":
-            self._stats = self._to_stats(self._stats_and_read())
+            self._stats = self._to_stats(self._read_part())
             return self._stats
         while True:
-            self.cl.enqueue_nd_range_kernel(self.queue, self.k_partial, (self.G,), None)
-            self.cl.enqueue_nd_range_kernel(self.queue, self.k_final, (1,), None)
             self._faces(4)
             self._run(self.k_revert, _roundup(self.n_nodes, _WG))
-            out = self._read_out()
-            if out[3] == 0.0:  # nothing went back: the stats are those of the final state
-                self._stats = self._to_stats(out)
+            part = self._read_part()
+            if part[0, 3] == 0.0:  # nothing went back: the stats are those of the final state
+                self._stats = self._to_stats(part)
                 return self._stats
             self._faces(1)
 

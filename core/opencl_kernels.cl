@@ -14,6 +14,17 @@
 #ifndef MAXN
 #define MAXN 8
 #endif
+#ifndef CH
+#define CH 32  // faces per work-item of the quality + stats kernels (the host passes it)
+#endif
+
+// Inline IEEE operations (correctly rounded, like NumPy's): pocl otherwise calls its
+// library functions for sqrt / fabs / fmin / floor, which blocks inlining and vectorization.
+#define SQRT(x) __builtin_sqrt(x)
+#define FABS(x) __builtin_fabs(x)
+#define FMIN(x, y) __builtin_fmin((x), (y))
+#define FMAX(x, y) __builtin_fmax((x), (y))
+#define FLOOR(x) __builtin_floor(x)
 
 // ---- NumPy-compatible helpers ----------------------------------------------------------
 
@@ -23,7 +34,7 @@ static inline double np_pow(const double x, const double e, const int mode)
     case 1: return x * x;
     case 2: return x;
     case 3: return 1.0;
-    case 4: return sqrt(x);
+    case 4: return SQRT(x);
     case 5: return 1.0 / x;
     default: return pow(x, e);
     }
@@ -115,23 +126,23 @@ static inline void transform_moves(const int n, const int R, const double *X, co
             const int k1 = (k + 1 == n) ? 0 : k + 1;
             L[k] = X[k] * Y[k1] - X[k1] * Y[k];
         }
-        before = sqrt(0.5 * fabs(sum_of(n, L)));
+        before = SQRT(0.5 * FABS(sum_of(n, L)));
         for (int k = 0; k < n; ++k) {
             const int k1 = (k + 1 == n) ? 0 : k + 1;
             L[k] = SX[k] * SY[k1] - SX[k1] * SY[k];
         }
-        after = sqrt(0.5 * fabs(sum_of(n, L)));
+        after = SQRT(0.5 * FABS(sum_of(n, L)));
     } else {  // mean edge length (paper): the ratio of edge-length sums
         for (int k = 0; k < n; ++k) {
             const int k1 = (k + 1 == n) ? 0 : k + 1;
             const double ex = X[k1] - X[k], ey = Y[k1] - Y[k];
-            L[k] = sqrt(ex * ex + ey * ey);
+            L[k] = SQRT(ex * ex + ey * ey);
         }
         before = sum_of(n, L);
         for (int k = 0; k < n; ++k) {
             const int k1 = (k + 1 == n) ? 0 : k + 1;
             const double ex = SX[k1] - SX[k], ey = SY[k1] - SY[k];
-            L[k] = sqrt(ex * ex + ey * ey);
+            L[k] = SQRT(ex * ex + ey * ey);
         }
         after = sum_of(n, L);
     }
@@ -155,7 +166,9 @@ static inline void transform_moves(const int n, const int R, const double *X, co
 // (with round-off margins), no other node of the list can be nearer, so the cached minimum
 // is the value the full search would return, bit for bit.
 
-#define NCACHE 4
+#ifndef NCACHE
+#define NCACHE 8
+#endif
 #define GAP_MARGIN 1e-9
 
 static inline double brute_d2(const double qx, const double qy, __global const double2 *bxy,
@@ -165,17 +178,19 @@ static inline double brute_d2(const double qx, const double qy, __global const d
     for (int e = 0; e < n_bnd; ++e) {
         const double2 b = bxy[e];
         const double dx = b.x - qx, dy = b.y - qy;
-        best = fmin(best, dx * dx + dy * dy);
+        best = FMIN(best, dx * dx + dy * dy);
     }
     return best;
 }
 
+// cache_k: NCACHE node indices per face; cache_l: (leaf level or -1, leaf list start, leaf
+// list length, 0); cache_c: leaf cell; cache_d: (q0x, q0y, G, 0).
 static inline double nearest_d(const double qx, const double qy,
                                __global const int *tree_int, __global const double2 *bxy,
                                const double ox, const double oy, const double scale,
                                const double lim, const double top, const int depth,
                                const int n_levels, const int n_bnd,
-                               __global int4 *restrict cache_k, __global int2 *restrict cache_l,
+                               __global int *restrict cache_k, __global int4 *restrict cache_l,
                                __global long2 *restrict cache_c,
                                __global double4 *restrict cache_d, const int gj)
 {
@@ -188,43 +203,48 @@ static inline double nearest_d(const double qx, const double qy,
     __global const int *cand = llen + total;
     const int inside = (qx >= ox) && (qx - ox < lim) && (qy >= oy) && (qy - oy < lim);
     if (!inside) {  // outside the tree's square: brute force, like NumPy
-        cache_l[gj] = (int2)(-1, 0);
-        return sqrt(brute_d2(qx, qy, bxy, n_bnd));
+        cache_l[gj] = (int4)(-1, 0, 0, 0);
+        return SQRT(brute_d2(qx, qy, bxy, n_bnd));
     }
-    const long ix = (long)fmin(fmax(floor((qx - ox) * scale), 0.0), top);
-    const long iy = (long)fmin(fmax(floor((qy - oy) * scale), 0.0), top);
-    const int2 cl = cache_l[gj];
+    const long ix = (long)FMIN(FMAX(FLOOR((qx - ox) * scale), 0.0), top);
+    const long iy = (long)FMIN(FMAX(FLOOR((qy - oy) * scale), 0.0), top);
+    const int4 cl = cache_l[gj];
+    int start = 0, len = 0, level = -1, node = 0;
     if (cl.x >= 0) {
         const int shift = depth - cl.x;
         const long2 cell = cache_c[gj];
         if ((ix >> shift) == cell.x && (iy >> shift) == cell.y) {
-            const int4 ck = cache_k[gj];
-            const int ks[4] = {ck.x, ck.y, ck.z, ck.w};
+            __global const int *ck = cache_k + (long)gj * NCACHE;
             double m = INFINITY;
             for (int i = 0; i < NCACHE; ++i) {
-                if (ks[i] < 0) break;
-                const double2 b = bxy[ks[i]];
+                const int k = ck[i];
+                if (k < 0) break;
+                const double2 b = bxy[k];
                 const double dx = b.x - qx, dy = b.y - qy;
-                m = fmin(m, dx * dx + dy * dy);
+                m = FMIN(m, dx * dx + dy * dy);
             }
             const double4 cd = cache_d[gj];
             const double mx = qx - cd.x, my = qy - cd.y;
-            const double d = sqrt(m);
-            if ((d + sqrt(mx * mx + my * my)) * (1.0 + GAP_MARGIN) < cd.z * (1.0 - GAP_MARGIN))
+            const double d = SQRT(m);
+            if ((d + SQRT(mx * mx + my * my)) * (1.0 + GAP_MARGIN) < cd.z * (1.0 - GAP_MARGIN))
                 return d;
+            level = cl.x;  // same leaf, the gap test failed: rescan its list, no descent
+            start = cl.y;
+            len = cl.z;
         }
     }
-    int start = 0, len = 0, level = 0, node = 0;
-    for (; level < n_levels; ++level) {
-        const int at = tree_int[level] + node;
-        const int ch = child[at];
-        if (ch < 0) {
-            start = lstart[at];
-            len = llen[at];
-            break;
+    if (level < 0) {
+        for (level = 0; level < n_levels; ++level) {
+            const int at = tree_int[level] + node;
+            const int ch = child[at];
+            if (ch < 0) {
+                start = lstart[at];
+                len = llen[at];
+                break;
+            }
+            const int shift = depth - level - 1;
+            node = ch + (int)((ix >> shift) & 1) + 2 * (int)((iy >> shift) & 1);
         }
-        const int shift = depth - level - 1;
-        node = ch + (int)((ix >> shift) & 1) + 2 * (int)((iy >> shift) & 1);
     }
     // the NCACHE + 1 smallest d2 of the leaf list, ascending (bd[0] is the exact minimum)
     double bd[NCACHE + 1];
@@ -250,15 +270,16 @@ static inline double nearest_d(const double qx, const double qy,
         }
     }
     if (bk[0] < 0) {  // an empty leaf cannot happen; stay exact anyway
-        cache_l[gj] = (int2)(-1, 0);
-        return sqrt(brute_d2(qx, qy, bxy, n_bnd));
+        cache_l[gj] = (int4)(-1, 0, 0, 0);
+        return SQRT(brute_d2(qx, qy, bxy, n_bnd));
     }
     const int shift = depth - level;
-    cache_k[gj] = (int4)(bk[0], bk[1], bk[2], bk[3]);
-    cache_l[gj] = (int2)(level, 0);
+    __global int *ck = cache_k + (long)gj * NCACHE;
+    for (int i = 0; i < NCACHE; ++i) ck[i] = bk[i];
+    cache_l[gj] = (int4)(level, start, len, 0);
     cache_c[gj] = (long2)(ix >> shift, iy >> shift);
-    cache_d[gj] = (double4)(qx, qy, sqrt(bd[NCACHE]), 0.0);
-    return sqrt(bd[0]);
+    cache_d[gj] = (double4)(qx, qy, SQRT(bd[NCACHE]), 0.0);
+    return SQRT(bd[0]);
 }
 
 // ---- kernels ---------------------------------------------------------------------------
@@ -271,49 +292,102 @@ static inline double nearest_d(const double qx, const double qy,
         const double ox, const double oy, const double scale, const double lim,              \
         const double top, const int depth, const int n_levels, const int n_bnd,              \
         const double lbar, const double dfloor, const double c, const int pow_c,              \
-        __global int4 *restrict cache_k, __global int2 *restrict cache_l,                    \
+        __global int *restrict cache_k, __global int4 *restrict cache_l,                     \
         __global long2 *restrict cache_c, __global double4 *restrict cache_d
 
-#define MAKE_KERNELS(SUF, NN)                                                                \
+// Quality: work-item g computes q of the faces [g * CH, (g + 1) * CH) of its group and
+// writes (count q == 0, min q, sum q in order, 0) to part[ro + g] (no barriers, no second
+// pass over q). QUALITY_BODY(j) defines v = q of face j.
+#define QUALITY_KERNEL(SUF, QUALITY_BODY)                                                    \
     __kernel void quality_##SUF(GROUP_ARGS, __global const double2 *restrict P,              \
-                                __global double *restrict q, const double two_sqrt3)         \
+                                __global double *restrict q, const double two_sqrt3,         \
+                                __global double4 *restrict part, const int ro)               \
     {                                                                                        \
-        const int j = get_global_id(0);                                                      \
-        if (j >= F) return;                                                                  \
-        double X[MAXN], Y[MAXN];                                                             \
-        load_face(NN, nodes, F, j, P, X, Y);                                                 \
-        q[fo + j] = mean_ratio(NN, X, Y, cos_a, inv_sin, two_sqrt3);                         \
-    }                                                                                        \
-    /* refresh != 0: the distance weight f_j first (nearest node to the centroid) */      \
-    __kernel void move_##SUF(GROUP_ARGS, __global const double2 *restrict P,                 \
-                             __global const double *restrict q,                              \
-                             __global double *restrict fdist,                                \
-                             __global double2 *restrict cmove, __global double *restrict wf, \
-                             const double a, const double eta, const int pow_eta,            \
-                             const double inv_weight, const int area, const int refresh,     \
-                             TREE_ARGS)                                                      \
-    {                                                                                        \
-        const int j = get_global_id(0);                                                      \
-        if (j >= F) return;                                                                  \
-        double X[MAXN], Y[MAXN];                                                             \
-        load_face(NN, nodes, F, j, P, X, Y);                                                 \
-        double fj;                                                                           \
-        if (refresh) {                                                                       \
-            const double d = nearest_d(mean_of(NN, X), mean_of(NN, Y), tree_int, bxy, ox,    \
-                                       oy, scale, lim, top, depth, n_levels, n_bnd, cache_k, \
-                                       cache_l, cache_c, cache_d, fo + j);                   \
-            fj = np_pow(lbar / fmax(d, dfloor), c, pow_c);                                   \
-            fdist[fo + j] = fj;                                                              \
-        } else {                                                                             \
-            fj = fdist[fo + j];                                                              \
+        const int g = get_global_id(0);                                                      \
+        const int j0 = g * CH;                                                               \
+        if (j0 >= F) return;                                                                 \
+        const int j1 = min(j0 + CH, F);                                                      \
+        double cnt = 0.0, mn = INFINITY, s = 0.0;                                            \
+        for (int j = j0; j < j1; ++j) {                                                      \
+            QUALITY_BODY(j)                                                                  \
+            q[fo + j] = v;                                                                   \
+            cnt += (v == 0.0) ? 1.0 : 0.0;                                                   \
+            mn = FMIN(mn, v);                                                                \
+            s += v;                                                                          \
         }                                                                                    \
-        const double qj = q[fo + j];                                                         \
-        const double lam = a * (1.0 - qj);                                                   \
-        const double g = qj > 0.0 ? np_pow(1.0 - qj, eta, pow_eta) : inv_weight;             \
-        const double w = fj * g;                                                             \
-        wf[fo + j] = w;                                                                      \
-        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j);                         \
+        part[ro + g] = (double4)(cnt, mn, s, 0.0);                                           \
+    }
+
+#define GENERIC_QUALITY(NN)                                                                  \
+    double X[MAXN], Y[MAXN];                                                                 \
+    load_face(NN, nodes, F, j, P, X, Y);                                                     \
+    const double v = mean_ratio(NN, X, Y, cos_a, inv_sin, two_sqrt3);
+#define QUALITY_QUAD(j) GENERIC_QUALITY(4)
+#define QUALITY_NGON(j) GENERIC_QUALITY(n)
+
+// Triangles written out with scalars (pocl compiles the generic array code several times
+// slower); same operations in the same order as mean_ratio / transform_moves with n = 3.
+#define TRI_LOAD(j)                                                                          \
+    const double2 p0 = P[nodes[j]], p1 = P[nodes[F + j]], p2 = P[nodes[2 * F + j]];
+#define QUALITY_TRI(j)                                                                       \
+    TRI_LOAD(j)                                                                              \
+    const double e0x = p1.x - p0.x, e0y = p1.y - p0.y;                                       \
+    const double e1x = p2.x - p1.x, e1y = p2.y - p1.y;                                       \
+    const double e2x = p0.x - p2.x, e2y = p0.y - p2.y;                                       \
+    const double two_area = e0x * e1y - e0y * e1x;                                           \
+    double ssq = e0x * e0x + e0y * e0y;                                                      \
+    ssq = ssq + (e1x * e1x + e1y * e1y);                                                     \
+    ssq = ssq + (e2x * e2x + e2y * e2y);                                                     \
+    const double v = (two_area > 0.0 && ssq > 0.0) ? (two_sqrt3 * two_area) / ssq : 0.0;
+
+QUALITY_KERNEL(tri, QUALITY_TRI)
+QUALITY_KERNEL(quad, QUALITY_QUAD)
+QUALITY_KERNEL(ngon, QUALITY_NGON)
+
+#define MOVE_ARGS                                                                            \
+    GROUP_ARGS, __global const double2 *restrict P, __global const double *restrict q,      \
+        __global double *restrict fdist, __global double2 *restrict cmove,                   \
+        __global double *restrict wf, const double a, const double eta, const int pow_eta,   \
+        const double inv_weight, const int area, const int refresh_arg, TREE_ARGS
+
+// the face weight w = f_j g(q_j) and lambda; refresh != 0: f_j first (nearest boundary node
+// to the centroid CXm, CYm)
+#define MOVE_WEIGHT(CXm, CYm)                                                                \
+    double fj;                                                                               \
+    if (refresh) {                                                                           \
+        const double d = nearest_d(CXm, CYm, tree_int, bxy, ox, oy, scale, lim, top, depth,  \
+                                   n_levels, n_bnd, cache_k, cache_l, cache_c, cache_d,      \
+                                   fo + j);                                                  \
+        fj = np_pow(lbar / FMAX(d, dfloor), c, pow_c);                                       \
+        fdist[fo + j] = fj;                                                                  \
+    } else {                                                                                 \
+        fj = fdist[fo + j];                                                                  \
     }                                                                                        \
+    const double qj = q[fo + j];                                                             \
+    const double lam = a * (1.0 - qj);                                                       \
+    const double g = qj > 0.0 ? np_pow(1.0 - qj, eta, pow_eta) : inv_weight;                 \
+    const double w = fj * g;                                                                 \
+    wf[fo + j] = w;
+
+// move_SUF: plain; move_SUF_d: the distance refresh first (separate builds of the body,
+// so the plain one carries none of the search code)
+#define MOVE_KERNEL(NAME, NN, RF)                                                            \
+    __kernel void NAME(MOVE_ARGS)                                                            \
+    {                                                                                        \
+        const int refresh = RF;                                                              \
+        const int j = get_global_id(0);                                                      \
+        if (j >= F) return;                                                                  \
+        double X[MAXN], Y[MAXN];                                                             \
+        load_face(NN, nodes, F, j, P, X, Y);                                                 \
+        MOVE_WEIGHT(mean_of(NN, X), mean_of(NN, Y))                                          \
+        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j);                         \
+    }
+#define MAKE_KERNELS(SUF, NN)                                                                \
+    MOVE_KERNEL(move_##SUF, NN, 0)                                                           \
+    MOVE_KERNEL(move_##SUF##_d, NN, 1)                                                       \
+    MARK_KERNEL(SUF, NN)
+
+#define MARK_KERNEL(SUF, NN)                                                                 \
     __kernel void mark_##SUF(GROUP_ARGS, __global const double *restrict q,                  \
                              __global int *restrict flag)                                    \
     {                                                                                        \
@@ -323,9 +397,58 @@ static inline double nearest_d(const double qx, const double qy,
             for (int k = 0; k < NN; ++k) flag[nodes[k * F + j]] = 1;                         \
     }
 
-MAKE_KERNELS(tri, 3)
 MAKE_KERNELS(quad, 4)
 MAKE_KERNELS(ngon, n)
+MARK_KERNEL(tri, 3)
+
+// transform_moves for n = 3 (R = 1), scalar: lambda n_k, p^s - p for corner k.
+#define TRI_EDGE_LEN(AX, AY, BX, BY) SQRT(((BX) - (AX)) * ((BX) - (AX)) + ((BY) - (AY)) * ((BY) - (AY)))
+#define TRI_CROSS(AX, AY, BX, BY) ((AX) * (BY) - (BX) * (AY))
+#define MOVE_TRI_KERNEL(NAME, RF)                                                            \
+__kernel void NAME(MOVE_ARGS)                                                                \
+{                                                                                            \
+    const int refresh = RF;                                                                  \
+    const int j = get_global_id(0);                                                          \
+    if (j >= F) return;                                                                      \
+    TRI_LOAD(j)                                                                              \
+    const double X0 = p0.x, X1 = p1.x, X2 = p2.x, Y0 = p0.y, Y1 = p1.y, Y2 = p2.y;           \
+    const double CX = ((X0 + X1) + X2) / 3.0;                                                \
+    const double CY = ((Y0 + Y1) + Y2) / 3.0;                                                \
+    MOVE_WEIGHT(CX, CY)                                                                      \
+    /* corner k: kp = k + 1, km = k - 1 (mod 3); nx = 0 + (Y[kp] - Y[km]), ny = 0 + (X[km] - X[kp]) */ \
+    const double NX0 = (0.0 + (Y1 - Y2)) * lam, NY0 = (0.0 + (X2 - X1)) * lam;               \
+    const double NX1 = (0.0 + (Y2 - Y0)) * lam, NY1 = (0.0 + (X0 - X2)) * lam;               \
+    const double NX2 = (0.0 + (Y0 - Y1)) * lam, NY2 = (0.0 + (X1 - X0)) * lam;               \
+    const double SX0 = X0 + NX0, SX1 = X1 + NX1, SX2 = X2 + NX2;                             \
+    const double SY0 = Y0 + NY0, SY1 = Y1 + NY1, SY2 = Y2 + NY2;                             \
+    double before, after;                                                                    \
+    if (area) {                                                                              \
+        double t = TRI_CROSS(X0, Y0, X1, Y1);                                                \
+        t = t + TRI_CROSS(X1, Y1, X2, Y2);                                                   \
+        t = t + TRI_CROSS(X2, Y2, X0, Y0);                                                   \
+        before = SQRT(0.5 * FABS(t));                                                        \
+        t = TRI_CROSS(SX0, SY0, SX1, SY1);                                                   \
+        t = t + TRI_CROSS(SX1, SY1, SX2, SY2);                                               \
+        t = t + TRI_CROSS(SX2, SY2, SX0, SY0);                                               \
+        after = SQRT(0.5 * FABS(t));                                                         \
+    } else {                                                                                 \
+        before = TRI_EDGE_LEN(X0, Y0, X1, Y1);                                               \
+        before = before + TRI_EDGE_LEN(X1, Y1, X2, Y2);                                      \
+        before = before + TRI_EDGE_LEN(X2, Y2, X0, Y0);                                      \
+        after = TRI_EDGE_LEN(SX0, SY0, SX1, SY1);                                            \
+        after = after + TRI_EDGE_LEN(SX1, SY1, SX2, SY2);                                    \
+        after = after + TRI_EDGE_LEN(SX2, SY2, SX0, SY0);                                    \
+    }                                                                                        \
+    const double s = after > 0.0 ? before / after : 1.0;                                     \
+    const double oms = 1.0 - s;                                                              \
+    cmove[co + j] = (double2)((oms * (CX - X0) + s * NX0) * w, (oms * (CY - Y0) + s * NY0) * w); \
+    cmove[co + F + j] =                                                                      \
+        (double2)((oms * (CX - X1) + s * NX1) * w, (oms * (CY - Y1) + s * NY1) * w);         \
+    cmove[co + 2 * F + j] =                                                                  \
+        (double2)((oms * (CX - X2) + s * NX2) * w, (oms * (CY - Y2) + s * NY2) * w);         \
+}
+MOVE_TRI_KERNEL(move_tri, 0)
+MOVE_TRI_KERNEL(move_tri_d, 1)
 
 // Stitching (eq. 18) as a gather: node i sums its incident corners in the order NumPy's
 // bincount meets them (CSR rows built on the host), then moves by sum(w d) / sum(w).
@@ -354,7 +477,8 @@ __kernel void stitch(const int N, __global const int *restrict row,
 }
 
 // Smoothing: every marked node that moved this iteration goes back; flags are cleared;
-// out[3] (zeroed by stats_final) becomes 1 when some node went back.
+// out[3] (the first stats row's last slot, zeroed by the quality kernels) becomes 1 when some
+// node went back.
 __kernel void revert(const int N, __global int *restrict flag, __global double2 *restrict P,
                      __global const double2 *restrict old, __global double *restrict out)
 {
@@ -366,44 +490,4 @@ __kernel void revert(const int N, __global int *restrict flag, __global double2 
         P[i] = o;
         out[3] = 1.0;
     }
-}
-
-// Stats, stage 1: work-item g reduces the contiguous chunk [g * chunk, (g + 1) * chunk).
-__kernel void stats_partial(const int F, const int chunk, __global const double *restrict q,
-                            __global int *restrict pcount, __global double *restrict pmin,
-                            __global double *restrict psum)
-{
-    const int g = get_global_id(0);
-    const int a = g * chunk;
-    const int b = min(a + chunk, F);
-    int cnt = 0;
-    double mn = INFINITY, s = 0.0;
-    for (int j = a; j < b; ++j) {
-        const double v = q[j];
-        cnt += (v == 0.0);
-        mn = fmin(mn, v);
-        s += v;
-    }
-    pcount[g] = cnt;
-    pmin[g] = mn;
-    psum[g] = s;
-}
-
-// Stats, stage 2: one work-item folds the partials in order; out = (count, min, sum, 0).
-__kernel void stats_final(const int G, __global const int *restrict pcount,
-                          __global const double *restrict pmin,
-                          __global const double *restrict psum, __global double *restrict out)
-{
-    if (get_global_id(0) != 0) return;
-    int cnt = 0;
-    double mn = INFINITY, s = 0.0;
-    for (int g = 0; g < G; ++g) {
-        cnt += pcount[g];
-        mn = fmin(mn, pmin[g]);
-        s += psum[g];
-    }
-    out[0] = (double)cnt;
-    out[1] = mn;
-    out[2] = s;
-    out[3] = 0.0;
 }
