@@ -270,6 +270,7 @@ class OpenCLEngine:
             raise RuntimeError("mesh too large for 32-bit indices on the device")
         self.tree = buf(tree.astype(np.int32))
         self.bxy = buf(np.column_stack([nb.bx, nb.by]))
+        self.cxy = buf(np.column_stack([nb.bx[nb.cand], nb.by[nb.cand]]))
         self.tree_args = (
             np.float64(nb.origin[0]),
             np.float64(nb.origin[1]),
@@ -356,6 +357,7 @@ class OpenCLEngine:
                     np.int32(refresh),
                     self.tree,
                     self.bxy,
+                    self.cxy,
                     *self.tree_args,
                 )
                 moves.append(km)

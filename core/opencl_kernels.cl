@@ -183,16 +183,18 @@ static inline double brute_d2(const double qx, const double qy, __global const d
     return best;
 }
 
-// cache_k: NCACHE node indices per face; cache_l: (leaf level or -1, leaf list start, leaf
+// cxy: the leaf lists' node coordinates (cxy[e] = bxy[cand[e]], scanned contiguously);
+// cache_k: NCACHE boundary node indices per face (the hit test reads the small bxy); cache_l: (leaf level or -1, leaf list start, leaf
 // list length, 0); cache_c: leaf cell; cache_d: (q0x, q0y, G, 0).
-static inline double nearest_d(const double qx, const double qy,
-                               __global const int *tree_int, __global const double2 *bxy,
-                               const double ox, const double oy, const double scale,
-                               const double lim, const double top, const int depth,
-                               const int n_levels, const int n_bnd,
-                               __global int *restrict cache_k, __global int4 *restrict cache_l,
-                               __global long2 *restrict cache_c,
-                               __global double4 *restrict cache_d, const int gj)
+// The full search of nearest_d (a cache miss): descend to the leaf unless level >= 0 gives
+// it, scan its list, refill the cache. Kept out of line so that the cache-hit path stays a
+// short loop body (inlined, it made every hit several times slower on pocl).
+static double __attribute__((noinline))
+nearest_full(const double qx, const double qy, const long ix, const long iy, int level,
+             int start, int len, __global const int *tree_int, __global const double2 *bxy,
+             __global const double2 *restrict cxy, const int depth, const int n_levels,
+             const int n_bnd, __global int *restrict cache_k, __global int4 *restrict cache_l,
+             __global long2 *restrict cache_c, __global double4 *restrict cache_d, const int gj)
 {
     // tree_int: [level_off (n_levels + 1)] then child, leaf_start, leaf_len (each total long),
     // then the leaf candidate lists
@@ -200,7 +202,67 @@ static inline double nearest_d(const double qx, const double qy,
     __global const int *child = tree_int + n_levels + 1;
     __global const int *lstart = child + total;
     __global const int *llen = lstart + total;
+    int node = 0;
+    if (level < 0) {
+        for (level = 0; level < n_levels; ++level) {
+            const int at = tree_int[level] + node;
+            const int ch = child[at];
+            if (ch < 0) {
+                start = lstart[at];
+                len = llen[at];
+                break;
+            }
+            const int shift = depth - level - 1;
+            node = ch + (int)((ix >> shift) & 1) + 2 * (int)((iy >> shift) & 1);
+        }
+    }
+    // the NCACHE + 1 smallest d2 of the leaf list, ascending (bd[0] is the exact minimum)
+    double bd[NCACHE + 1];
+    int bk[NCACHE + 1];
+    for (int i = 0; i <= NCACHE; ++i) {
+        bd[i] = INFINITY;
+        bk[i] = -1;
+    }
+    for (int e = start; e < start + len; ++e) {
+        const int k = e;  // a leaf-list position while scanning (cxy[e] = bxy[cand[e]])
+        const double2 b = cxy[k];
+        const double dx = b.x - qx, dy = b.y - qy;
+        const double d2 = dx * dx + dy * dy;
+        if (d2 < bd[NCACHE]) {
+            int p = NCACHE;
+            while (p > 0 && bd[p - 1] > d2) {
+                bd[p] = bd[p - 1];
+                bk[p] = bk[p - 1];
+                --p;
+            }
+            bd[p] = d2;
+            bk[p] = k;
+        }
+    }
+    if (bk[0] < 0) {  // an empty leaf cannot happen; stay exact anyway
+        cache_l[gj] = (int4)(-1, 0, 0, 0);
+        return SQRT(brute_d2(qx, qy, bxy, n_bnd));
+    }
+    const int shift = depth - level;
+    __global int *ck = cache_k + (long)gj * NCACHE;
     __global const int *cand = llen + total;
+    for (int i = 0; i < NCACHE; ++i) ck[i] = bk[i] >= 0 ? cand[bk[i]] : -1;
+    cache_l[gj] = (int4)(level, start, len, 0);
+    cache_c[gj] = (long2)(ix >> shift, iy >> shift);
+    cache_d[gj] = (double4)(qx, qy, SQRT(bd[NCACHE]), 0.0);
+    return SQRT(bd[0]);
+}
+
+static inline double nearest_d(const double qx, const double qy,
+                               __global const int *tree_int, __global const double2 *bxy,
+                               __global const double2 *restrict cxy,
+                               const double ox, const double oy, const double scale,
+                               const double lim, const double top, const int depth,
+                               const int n_levels, const int n_bnd,
+                               __global int *restrict cache_k, __global int4 *restrict cache_l,
+                               __global long2 *restrict cache_c,
+                               __global double4 *restrict cache_d, const int gj)
+{
     const int inside = (qx >= ox) && (qx - ox < lim) && (qy >= oy) && (qy - oy < lim);
     if (!inside) {  // outside the tree's square: brute force, like NumPy
         cache_l[gj] = (int4)(-1, 0, 0, 0);
@@ -209,7 +271,7 @@ static inline double nearest_d(const double qx, const double qy,
     const long ix = (long)FMIN(FMAX(FLOOR((qx - ox) * scale), 0.0), top);
     const long iy = (long)FMIN(FMAX(FLOOR((qy - oy) * scale), 0.0), top);
     const int4 cl = cache_l[gj];
-    int start = 0, len = 0, level = -1, node = 0;
+    int start = 0, len = 0, level = -1;
     if (cl.x >= 0) {
         const int shift = depth - cl.x;
         const long2 cell = cache_c[gj];
@@ -233,53 +295,8 @@ static inline double nearest_d(const double qx, const double qy,
             len = cl.z;
         }
     }
-    if (level < 0) {
-        for (level = 0; level < n_levels; ++level) {
-            const int at = tree_int[level] + node;
-            const int ch = child[at];
-            if (ch < 0) {
-                start = lstart[at];
-                len = llen[at];
-                break;
-            }
-            const int shift = depth - level - 1;
-            node = ch + (int)((ix >> shift) & 1) + 2 * (int)((iy >> shift) & 1);
-        }
-    }
-    // the NCACHE + 1 smallest d2 of the leaf list, ascending (bd[0] is the exact minimum)
-    double bd[NCACHE + 1];
-    int bk[NCACHE + 1];
-    for (int i = 0; i <= NCACHE; ++i) {
-        bd[i] = INFINITY;
-        bk[i] = -1;
-    }
-    for (int e = start; e < start + len; ++e) {
-        const int k = cand[e];
-        const double2 b = bxy[k];
-        const double dx = b.x - qx, dy = b.y - qy;
-        const double d2 = dx * dx + dy * dy;
-        if (d2 < bd[NCACHE]) {
-            int p = NCACHE;
-            while (p > 0 && bd[p - 1] > d2) {
-                bd[p] = bd[p - 1];
-                bk[p] = bk[p - 1];
-                --p;
-            }
-            bd[p] = d2;
-            bk[p] = k;
-        }
-    }
-    if (bk[0] < 0) {  // an empty leaf cannot happen; stay exact anyway
-        cache_l[gj] = (int4)(-1, 0, 0, 0);
-        return SQRT(brute_d2(qx, qy, bxy, n_bnd));
-    }
-    const int shift = depth - level;
-    __global int *ck = cache_k + (long)gj * NCACHE;
-    for (int i = 0; i < NCACHE; ++i) ck[i] = bk[i];
-    cache_l[gj] = (int4)(level, start, len, 0);
-    cache_c[gj] = (long2)(ix >> shift, iy >> shift);
-    cache_d[gj] = (double4)(qx, qy, SQRT(bd[NCACHE]), 0.0);
-    return SQRT(bd[0]);
+    return nearest_full(qx, qy, ix, iy, level, start, len, tree_int, bxy, cxy, depth, n_levels,
+                        n_bnd, cache_k, cache_l, cache_c, cache_d, gj);
 }
 
 // ---- kernels ---------------------------------------------------------------------------
@@ -289,6 +306,7 @@ static inline double nearest_d(const double qx, const double qy,
         const int R, const double cos_a, const double inv_sin
 #define TREE_ARGS                                                                            \
     __global const int *restrict tree_int, __global const double2 *restrict bxy,            \
+        __global const double2 *restrict cxy,                                                \
         const double ox, const double oy, const double scale, const double lim,              \
         const double top, const int depth, const int n_levels, const int n_bnd,              \
         const double lbar, const double dfloor, const double c, const int pow_c,              \
@@ -355,7 +373,7 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
 #define MOVE_WEIGHT(CXm, CYm)                                                                \
     double fj;                                                                               \
     if (refresh) {                                                                           \
-        const double d = nearest_d(CXm, CYm, tree_int, bxy, ox, oy, scale, lim, top, depth,  \
+        const double d = nearest_d(CXm, CYm, tree_int, bxy, cxy, ox, oy, scale, lim, top, depth,  \
                                    n_levels, n_bnd, cache_k, cache_l, cache_c, cache_d,      \
                                    fo + j);                                                  \
         fj = np_pow(lbar / FMAX(d, dfloor), c, pow_c);                                       \
