@@ -155,12 +155,10 @@ class _Run:
         prm, before = self.params, self.before
         self.report(0, "untangle" if before.n_inverted else "smooth", before)
         current = before
-        notes = []
         if before.n_inverted:
             if prm.untangle != "global":
                 current = self.untangle_eegt()
             if self.best.n_inverted and prm.untangle != "eegt":
-                notes.append("global stage")
                 current = self.global_stage(polish=prm.polish_iterations)
             if self.best.n_inverted:
                 return "failed", (
@@ -169,7 +167,7 @@ class _Run:
                     + (f" and {self.n_global} global iterations" if self.n_global else "")
                     + f" (best iterate kept; input had {before.n_inverted})"
                 )
-        if prm.polish_iterations > 0 and not (notes and self.n_global):
+        if prm.polish_iterations > 0 and self.n_global == 0:  # the global stage polishes too
             current = self.global_stage(polish=prm.polish_iterations)
         self.smooth_eegt(current)
         status = "untangled" if before.n_inverted else "valid"
