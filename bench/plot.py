@@ -41,7 +41,7 @@ def before_after_png(
     """One PNG with the tangled input left and the result right."""
     fig, axes = plt.subplots(1, 2, figsize=(10, 5), dpi=110)
     draw(axes[0], before, faces, f"{name}: input")
-    draw(axes[1], after, faces, f"{name}: EEGT result")
+    draw(axes[1], after, faces, f"{name}: result")
     if view is not None:
         for ax in axes:
             ax.set_xlim(view[0], view[1])
