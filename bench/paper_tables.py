@@ -114,16 +114,12 @@ BLENDER_FACTOR, BLENDER_REPEAT = 0.5, 100
 
 def load_table1() -> tuple[np.ndarray, np.ndarray]:
     """The Table 1 mesh from the legacy VTK file, read in place; its clockwise quads reversed."""
-    tokens = TABLE1_VTK.read_text().split()
-    i = tokens.index("POINTS")
-    n = int(tokens[i + 1])
-    pts = np.array(tokens[i + 3 : i + 3 + 3 * n], dtype=float).reshape(n, 3)
-    j = tokens.index("CELLS")
-    m = int(tokens[j + 1])
-    raw = np.array(tokens[j + 3 : j + 3 + int(tokens[j + 2])], dtype=np.int64).reshape(m, 5)
-    if not (raw[:, 0] == 4).all():
+    from core.obj_io import read_legacy_vtk
+
+    pts, cells = read_legacy_vtk(TABLE1_VTK)
+    if set(np.diff(cells.offsets).tolist()) != {4}:
         raise ValueError(f"{TABLE1_VTK}: only quads expected")
-    return pts, raw[:, :0:-1].copy()  # columns 4, 3, 2, 1: counterclockwise
+    return pts, cells.reversed().indices.reshape(-1, 4)
 
 
 def fmt_sec(x: float | None) -> str:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from core.faces import FaceSet
-from core.obj_io import read_obj
+from core.obj_io import read_legacy_vtk, read_obj
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 SHARED_MESQUITE = (
@@ -30,22 +30,11 @@ def load2d(name: str) -> tuple[np.ndarray, FaceSet]:
     return v[:, :2].copy(), f
 
 
-def read_vtk_quads(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Points (N, 3) and cells (F, 4) of a legacy ASCII VTK unstructured grid of quads."""
-    tokens = path.read_text().split()
-    i = tokens.index("POINTS")
-    n = int(tokens[i + 1])
-    pts = np.array(tokens[i + 3 : i + 3 + 3 * n], dtype=float).reshape(n, 3)
-    j = tokens.index("CELLS")
-    m = int(tokens[j + 1])
-    raw = np.array(tokens[j + 3 : j + 3 + int(tokens[j + 2])], dtype=np.int64).reshape(m, 5)
-    assert (raw[:, 0] == 4).all()
-    return pts, raw[:, 1:]
-
-
 def mesquite_table1() -> tuple[np.ndarray, np.ndarray]:
     """The paper's Table 1 mesh (third-party, read in place), quads made counterclockwise."""
     if not SHARED_MESQUITE.exists():
         pytest.skip(f"third-party Table 1 mesh not present at {SHARED_MESQUITE} (../shared absent)")
-    pts, quads = read_vtk_quads(SHARED_MESQUITE)
-    return pts[:, :2].copy(), quads[:, ::-1].copy()
+    pts, cells = read_legacy_vtk(SHARED_MESQUITE)
+    assert set(np.diff(cells.offsets).tolist()) == {4}  # quads only
+    quads = cells.reversed().indices.reshape(-1, 4)
+    return pts[:, :2].copy(), quads
