@@ -83,28 +83,27 @@ def read_bool_attribute(me: bpy.types.Mesh, name: str, domain: str = "POINT") ->
     return out
 
 
+def _read_flags(collection, prop: str) -> np.ndarray:
+    """A boolean property of every item of a mesh collection, in one bulk read."""
+    out = np.zeros(len(collection), dtype=bool)
+    if out.size:
+        collection.foreach_get(prop, out)
+    return out
+
+
 def read_vertex_selection(me: bpy.types.Mesh) -> np.ndarray:
     """Selected vertices (bool (N,))."""
-    sel = np.zeros(len(me.vertices), dtype=bool)
-    if sel.size:
-        me.vertices.foreach_get("select", sel)
-    return sel
+    return _read_flags(me.vertices, "select")
 
 
 def read_face_selection(me: bpy.types.Mesh) -> np.ndarray:
     """Selected faces (bool (F,))."""
-    sel = np.zeros(len(me.polygons), dtype=bool)
-    if sel.size:
-        me.polygons.foreach_get("select", sel)
-    return sel
+    return _read_flags(me.polygons, "select")
 
 
 def read_face_hidden(me: bpy.types.Mesh) -> np.ndarray:
     """Hidden faces (bool (F,))."""
-    hide = np.zeros(len(me.polygons), dtype=bool)
-    if hide.size:
-        me.polygons.foreach_get("hide", hide)
-    return hide
+    return _read_flags(me.polygons, "hide")
 
 
 def vertex_group_pins(obj: bpy.types.Object, n_verts: int) -> np.ndarray | None:
