@@ -14,7 +14,7 @@ from .distance import NearestBoundary
 from .faces import FaceSet
 from .params import EEGTParams
 from .quality import Stats, group_quality, stats_of
-from .transform import group_transform_delta
+from .transform import _edge_sum, group_transform_delta
 
 __all__ = ["NumpyEngine"]
 
@@ -63,8 +63,7 @@ class NumpyEngine:
         """(lbar, smallest element mean edge length > 0) of the current positions."""
         means = []
         for g in self.groups:
-            X, Y = self._gather(g)
-            means.append(np.hypot(np.roll(X, -1, 0) - X, np.roll(Y, -1, 0) - Y).mean(0))
+            means.append(_edge_sum(*self._gather(g)) / g.n)
         m = np.concatenate(means)
         lbar = float(m.mean())
         positive = m[m > 0]
