@@ -28,19 +28,26 @@ class MeshArrays:
     corner_verts: np.ndarray  # (L,) int32
 
 
+def _read_corner_ints(me: bpy.types.Mesh, attr_name: str, loop_prop: str) -> np.ndarray:
+    """A per-corner int array: the internal attribute (fast), else the loops' property."""
+    nl = len(me.loops)
+    out = np.empty(nl, dtype=np.int32)
+    attr = me.attributes.get(attr_name)
+    if attr is not None and attr.domain == "CORNER" and attr.data_type == "INT" and nl:
+        attr.data.foreach_get("value", out)
+    elif nl:
+        me.loops.foreach_get(loop_prop, out)
+    return out
+
+
 def read_topology(me: bpy.types.Mesh) -> MeshArrays:
     """Face offsets and corner vertices of ``me``."""
-    nf, nl = len(me.polygons), len(me.loops)
+    nf = len(me.polygons)
     loop_start = np.empty(nf, dtype=np.int32)
     loop_total = np.empty(nf, dtype=np.int32)
     me.polygons.foreach_get("loop_start", loop_start)
     me.polygons.foreach_get("loop_total", loop_total)
-    corner_verts = np.empty(nl, dtype=np.int32)
-    attr = me.attributes.get(".corner_vert")
-    if attr is not None and attr.domain == "CORNER" and attr.data_type == "INT" and nl:
-        attr.data.foreach_get("value", corner_verts)
-    elif nl:
-        me.loops.foreach_get("vertex_index", corner_verts)
+    corner_verts = _read_corner_ints(me, ".corner_vert", "vertex_index")
     return MeshArrays(len(me.vertices), loop_start, loop_total, corner_verts)
 
 
@@ -153,15 +160,10 @@ def corner_faces(topo: MeshArrays) -> np.ndarray:
 
 def loose_edge_vertices(me: bpy.types.Mesh) -> np.ndarray | None:
     """Vertices of edges used by no face (bool (N,)), or None when there is no loose edge."""
-    ne, nl = len(me.edges), len(me.loops)
+    ne = len(me.edges)
     if ne == 0:
         return None
-    corner_edges = np.empty(nl, dtype=np.int32)
-    attr = me.attributes.get(".corner_edge")
-    if attr is not None and attr.domain == "CORNER" and attr.data_type == "INT" and nl:
-        attr.data.foreach_get("value", corner_edges)
-    elif nl:
-        me.loops.foreach_get("edge_index", corner_edges)
+    corner_edges = _read_corner_ints(me, ".corner_edge", "edge_index")
     used = np.zeros(ne, dtype=bool)
     used[corner_edges] = True
     if used.all():

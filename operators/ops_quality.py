@@ -74,6 +74,18 @@ def write_quality_attributes(obj: bpy.types.Object, q: np.ndarray) -> str | None
     return None
 
 
+def _qualities(op: bpy.types.Operator, objs: list[bpy.types.Object]):
+    """(object, per-face quality) of every object that can be measured; one warning line
+    for each that cannot."""
+    found: list[tuple[bpy.types.Object, np.ndarray]] = []
+    for obj in objs:
+        try:
+            found.append((obj, face_quality(obj)))
+        except ValueError as exc:
+            op.report({"WARNING"}, f"{obj.name}: {str(exc).splitlines()[0]}")
+    return found
+
+
 def _stats_line(name: str, q: np.ndarray) -> str:
     s = runner.stats_from_quality(q)
     return (f"{name}: {q.size} faces, {s['n_inverted']} inverted, q_min {s['q_min']:.3f}, "
@@ -92,14 +104,8 @@ class MESH_OT_eegt_analyze(modes.TargetObjectsMixin, bpy.types.Operator):
         description="Write the eegt_quality and eegt_quality_color attributes")
 
     def _run(self, objs: list[bpy.types.Object]) -> set[str]:
-        found: list[tuple[bpy.types.Object, np.ndarray]] = []
-        for obj in objs:
-            try:
-                q = face_quality(obj)
-            except ValueError as exc:
-                self.report({"WARNING"}, f"{obj.name}: {str(exc).splitlines()[0]}")
-                continue
-            found.append((obj, q))
+        found = _qualities(self, objs)
+        for obj, q in found:
             self.report({"INFO"}, _stats_line(obj.name, q))
         written = False
         if self.store and found:
@@ -138,14 +144,7 @@ class MESH_OT_eegt_select_inverted(modes.TargetObjectsMixin, bpy.types.Operator)
             return self._run(objs)
 
     def _run(self, objs: list[bpy.types.Object]) -> set[str]:
-        found = []
-        for obj in objs:
-            try:
-                q = face_quality(obj)
-            except ValueError as exc:
-                self.report({"WARNING"}, f"{obj.name}: {str(exc).splitlines()[0]}")
-                continue
-            found.append((obj, q <= self.threshold))
+        found = [(obj, q <= self.threshold) for obj, q in _qualities(self, objs)]
         if not found:
             return {"CANCELLED"}
         for obj, sel in found:
