@@ -515,6 +515,7 @@ def untangle_global(
     polish_power: float = 1.0,
     time_limit: float | None = None,
     progress: Callable[[int, int, int], Any] | None = None,
+    lbfgs: Callable[..., tuple[np.ndarray, int]] | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Untangle a planar polygon mesh by minimising the foldover-free energy (eps continuation).
 
@@ -525,6 +526,7 @@ def untangle_global(
     paper's sum f (f / 2 = 1 / mean ratio for eps -> 0): p > 1 raises q_min and lowers q_avg,
     p < 1 the opposite (see the docs); time_limit (s) stops early.
     progress(iterations, max_iter, n_inverted) is called after each round; False cancels.
+    lbfgs: a drop-in for `_lbfgs` (same arguments and result), e.g. the OpenCL solver.
 
     Returns (new points, info); non-free rows are bit-identical to the input. Once valid, steps
     that would invert a corner are rejected, so a valid iterate stays valid; when no valid one
@@ -542,6 +544,7 @@ def untangle_global(
         raise ValueError("points contain NaN or inf")
     if not polish_power > 0.0:
         raise ValueError("polish_power must be > 0")
+    run_lbfgs = lbfgs or _lbfgs
     en = _Energy(P, groups, free)
     st = _State(P, free)
     n_inv = en.n_inverted(st.x, st.y)
@@ -591,7 +594,7 @@ def untangle_global(
                 cancel = cancel or progress(done + it, max_iter, n_now) is False
                 return not cancel
 
-        v, its = _lbfgs(en, st, v, eps, max_it=cap, guard=guard, tick=tick)
+        v, its = run_lbfgs(en, st, v, eps, max_it=cap, guard=guard, tick=tick)
         total += its
         if guard:
             polish_used += its
@@ -646,6 +649,7 @@ def lift_min_quality(
     *,
     rounds: int = 6,
     progress: Callable[[int, int], Any] | None = None,
+    lbfgs: Callable[..., tuple[np.ndarray, int]] | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Raise the worst element quality of a valid mesh without lowering its mean quality.
 
@@ -661,12 +665,14 @@ def lift_min_quality(
     q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
     status ("lifted", "unchanged", "cancelled").
     progress(iterations, rounds_done) after each run; False cancels (the input is returned).
+    lbfgs: a drop-in for `_lbfgs` (same arguments and result), e.g. the OpenCL solver.
     """
     t_start = time.perf_counter()
     P = np.array(points, dtype=np.float64, copy=True)
     free = np.asarray(free, dtype=bool).reshape(-1)
     if P.ndim != 2 or P.shape[1] != 2 or free.shape[0] != P.shape[0]:
         raise ValueError("points must be (N, 2) and free (N,)")
+    run_lbfgs = lbfgs or _lbfgs
     en = _LiftEnergy(P, groups, free)
     st = _State(P, free)
     info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
@@ -688,7 +694,7 @@ def lift_min_quality(
     for r in range(rounds + 1):
         en.qc = m0 if r == 0 else min(cur_m * LIFT_GROW, cur_m + LIFT_GAP * (cur_a - cur_m))
         if r == 0:  # the whole mesh: maximise q_avg at the input's floor
-            vt, its = _lbfgs(
+            vt, its = run_lbfgs(
                 en, st, v, EPS_MIN, max_it=LIFT_FIRST_ITER, guard=True, rel_tol=LIFT_REL_TOL
             )
             xt, yt = st.unpack(vt)
@@ -701,7 +707,7 @@ def lift_min_quality(
             sen = _LiftEnergy(sp, sub, sfree)
             sen.qc = en.qc
             sst = _State(sp, sfree)
-            sv, its = _lbfgs(
+            sv, its = run_lbfgs(
                 sen, sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER, guard=True,
                 rel_tol=LIFT_REL_TOL,
             )

@@ -131,6 +131,7 @@ class _Run:
         self.best_pts: np.ndarray | None = None  # None: the engine's best buffer holds it
         self.engine.save_best()
         self.n_untangle = self.n_smooth = self.n_global = 0
+        self.lbfgs = None  # the global stage's L-BFGS: None = the host NumPy one
 
     def report(self, it: int, phase: str, s: Stats) -> None:
         if self.progress is None:
@@ -211,7 +212,9 @@ class _Run:
             self.n_global = iterations
             self.report(base + iterations, "global", Stats(n_inv, self.best.q_min, self.best.q_avg))
 
-        pts, info = untangle_global(start, groups, self.free, polish_iter=polish, progress=relay)
+        pts, info = untangle_global(
+            start, groups, self.free, polish_iter=polish, progress=relay, lbfgs=self.lbfgs
+        )
         self.n_global = int(info["iterations"])
         if info.get("status") == "cancelled":
             raise _CancelRun
@@ -237,7 +240,7 @@ class _Run:
             self.report(base + iterations, "global", self.best)
 
         out, info = lift_min_quality(
-            pts, groups, self.free, rounds=self.params.lift_rounds, progress=relay
+            pts, groups, self.free, rounds=self.params.lift_rounds, progress=relay, lbfgs=self.lbfgs
         )
         self.n_global += int(info["iterations"])
         return out
