@@ -120,6 +120,23 @@ class _CancelRun(Exception):
     pass
 
 
+def _device_lbfgs(backend_name: str):
+    """The global stage's L-BFGS on the OpenCL device when the run's engine is OpenCL on a
+    CPU device (one work-item: a GPU would run it on one thread); None = the host's NumPy."""
+    if backend_name != "opencl":
+        return None
+    from .lbfgs_opencl import OpenCLLbfgs
+
+    try:
+        solver = OpenCLLbfgs()
+    except RuntimeError as exc:  # kernel build failed: the host solver gives the same result
+        import warnings
+
+        warnings.warn(f"{exc}; global stage on NumPy", RuntimeWarning, stacklevel=4)
+        return None
+    return solver if solver.is_cpu else None
+
+
 class _Run:
     """One run of the pipeline: EEGT phases on an engine, the global stage on the host."""
 
@@ -131,7 +148,7 @@ class _Run:
         self.best_pts: np.ndarray | None = None  # None: the engine's best buffer holds it
         self.engine.save_best()
         self.n_untangle = self.n_smooth = self.n_global = 0
-        self.lbfgs = None  # the global stage's L-BFGS: None = the host NumPy one
+        self.lbfgs = _device_lbfgs(self.backend_name)
 
     def report(self, it: int, phase: str, s: Stats) -> None:
         if self.progress is None:

@@ -1,0 +1,137 @@
+"""The global stage's L-BFGS on an OpenCL device, bit-identical to the host solver.
+
+`OpenCLLbfgs` is a drop-in for `global_untangle._lbfgs` (same arguments, same result to the
+last bit): the energy tables are uploaded once per energy object, the whole solve runs in
+one single-work-item kernel (core/lbfgs_kernel.cl), and only the solution comes back. The
+kernel pauses every `TICK_EVERY` iterations when the caller passes a progress tick, so
+progress and cancelling work as on the host. Meant for CPU devices, where one compiled loop
+beats NumPy's per-call overhead at every mesh size; a GPU would run it on one thread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from . import global_untangle as gu
+
+__all__ = ["KERNEL_FILE", "OpenCLLbfgs"]
+
+KERNEL_FILE = Path(__file__).with_name("lbfgs_kernel.cl")
+_ST_TICK = 1  # kernel status: paused for a progress tick
+
+
+def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(row pointer, positions) of each key's entries in ascending position (bincount order)."""
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
+    return ptr, np.argsort(keys, kind="stable")
+
+
+class _Tables:
+    """One energy's constant arrays on the device."""
+
+    def __init__(self, solver: OpenCLLbfgs, en: gu._Energy, st: gu._State):
+        lift = isinstance(en, gu._LiftEnergy)
+        nn, nc = en.n_nodes, en.i0.size
+        ne = en.n_elem if lift else 0
+        pad = np.minimum(np.arange(-(-nc // 4) * 4), nc - 1)  # corner arrays: 4-wide, padded
+        nc4 = pad.size
+        gptr, gpos = _csr(en.idx, nn)
+        part, corner = np.divmod(gpos, nc)  # entry of [e1, e2, -(e1 + e2)], coded for gather
+        gpos = np.where(part == 0, corner, np.where(part == 1, nc4 + corner, -1 - corner))
+        ints = [st.fidx, en.i0[pad], en.i1[pad], en.i2[pad], gptr, gpos]
+        dbls = [st.x, st.y, en.w00[pad], en.w01[pad], en.w11[pad], en.weight[pad]]
+        dbls.append(np.tile(en.precond[st.fidx], 2))
+        if lift:
+            eptr, ecorn = _csr(en.eid, ne)
+            ints += [en.eid[pad], eptr, ecorn]
+            dbls.append(en.n_corners)
+        flat = np.concatenate([np.asarray(a, dtype=np.int64) for a in ints])
+        if flat.size and flat.max() >= 2**31:
+            raise ValueError("mesh too large for the device solver's 32-bit indices")
+        self.ints = solver._buffer(flat.astype(np.int32))
+        self.dbls = solver._buffer(np.concatenate([np.asarray(a, np.float64) for a in dbls]))
+        n2 = 2 * st.nf
+        self.sizes = (nn, st.nf, nc, ne, int(lift))
+        self.state_len = 11 + gu.LBFGS_MEMORY + 2 * n2 + 2 * gu.LBFGS_MEMORY * n2
+        self.v_at = 11 + gu.LBFGS_MEMORY  # where v starts in the state (see lbfgs_run)
+        self.work = solver._empty(8 * (2 * nn + 5 * n2 + 6 * nc4 + 3 * ne))
+        self.n2 = n2
+
+
+class OpenCLLbfgs:
+    """`_lbfgs` for `untangle_global` / `lift_min_quality`, run by an OpenCL kernel."""
+
+    def __init__(self) -> None:
+        from .engine_opencl import _build_error, _runtime
+
+        rt = _runtime()
+        self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
+        self.device_name = rt.name
+        self.is_cpu = bool(rt.device.type & rt.cl.device_type.CPU)
+        prg = rt.programs.get("lbfgs")
+        if prg is None:
+            try:
+                prg = self.cl.Program(self.ctx, KERNEL_FILE.read_text()).build()
+            except Exception as exc:
+                prg = RuntimeError(f"L-BFGS kernel build failed on {rt.name}: {_build_error(exc)}")
+            rt.programs["lbfgs"] = prg
+        if isinstance(prg, RuntimeError):
+            raise prg
+        self.kernel = self.cl.Kernel(prg, "lbfgs_run")
+        self._tables: dict[int, tuple[gu._Energy, _Tables]] = {}
+
+    def _buffer(self, a: np.ndarray):
+        mf = self.cl.mem_flags
+        return self.cl.Buffer(self.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=a)
+
+    def _empty(self, nbytes: int):
+        return self.cl.Buffer(self.ctx, self.cl.mem_flags.READ_WRITE, max(int(nbytes), 8))
+
+    def _tables_for(self, en: gu._Energy, st: gu._State) -> _Tables:
+        hit = self._tables.get(id(en))
+        if hit is None or hit[0] is not en:
+            self._tables = {k: t for k, t in self._tables.items() if t[0] is not en}
+            hit = (en, _Tables(self, en, st))
+            self._tables[id(en)] = hit
+            if len(self._tables) > 4:  # lift rounds make a new energy each: keep a few
+                del self._tables[next(iter(self._tables))]
+        return hit[1]
+
+    def __call__(
+        self,
+        en: gu._Energy,
+        st: gu._State,
+        v0: np.ndarray,
+        eps: float,
+        *,
+        max_it: int,
+        guard: bool,
+        rel_tol: float = 1e-7,
+        tick: Callable[[int], bool] | None = None,
+    ) -> tuple[np.ndarray, int]:
+        if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernel: the host's
+            kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
+            return gu._lbfgs(en, st, v0, eps, **kw)
+        tb = self._tables_for(en, st)
+        cl, queue = self.cl, self.queue
+        state = np.zeros(tb.state_len, dtype=np.float64)
+        state[:4] = eps, getattr(en, "qc", 0.0), 0.1 * en.h_mean, rel_tol
+        state[tb.v_at : tb.v_at + tb.n2] = v0
+        S = self._buffer(state)
+        ticks = gu.TICK_EVERY if tick is not None else 0
+        flags = np.array([0, 0, 0, 0, 1, 0, *tb.sizes, max_it, bool(guard), ticks], np.int32)
+        T = self._buffer(flags)
+        for i, buf in enumerate((tb.ints, tb.dbls, S, T, tb.work)):
+            self.kernel.set_arg(i, buf)
+        while True:
+            cl.enqueue_nd_range_kernel(queue, self.kernel, (1,), (1,))
+            cl.enqueue_copy(queue, flags, T)
+            if flags[5] != _ST_TICK or tick(int(flags[0])) is False:
+                break
+        v = np.empty(tb.n2, dtype=np.float64)
+        cl.enqueue_copy(queue, v, S, src_offset=8 * tb.v_at)
+        return v, int(flags[0])
