@@ -1,0 +1,145 @@
+"""The global stage's L-BFGS on an OpenCL device: bit-identical to the host solver.
+
+Needs a float64 OpenCL device (pocl's CPU device is enough); skips, saying why, without one.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core import global_untangle as gu
+from core.faces import as_faceset
+from core.obj_io import read_obj
+from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
+
+eo = pytest.importorskip("core.engine_opencl")
+lo = pytest.importorskip("core.lbfgs_opencl")
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.fixture(scope="module")
+def solver():
+    cls, why = eo.available()
+    if cls is None:
+        pytest.skip(f"no usable OpenCL device: {why}")
+    return lo.OpenCLLbfgs()
+
+
+def mesh(name: str):
+    v, f = read_obj(DATA / f"{name}.obj")
+    p = np.ascontiguousarray(v[:, :2])
+    fs = as_faceset(f, len(p))
+    groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in fs.groups}
+    return p, fs, groups, free_nodes(len(p), fs)
+
+
+class Recorder:
+    """Wraps a solver and keeps every call's result."""
+
+    def __init__(self, run):
+        self.run, self.results = run, []
+
+    def __call__(self, *args, **kw):
+        out = self.run(*args, **kw)
+        self.results.append((out[0].copy(), out[1]))
+        return out
+
+
+SHARED = ["quad_hole", "mixed_quad_tri", "polygon_voronoi", "tri_two_holes"]
+
+
+@pytest.mark.parametrize("name", SHARED)
+def test_untangle_and_lift_bit_identical_to_host_call_by_call(solver, name):
+    """Both energies (foldover-free with eps continuation, and the lift's with its sub-meshes),
+    triangles (one corner each: corner counts not a multiple of 4), quads and n-gons."""
+    p, _fs, groups, free = mesh(name)
+    host, dev = Recorder(gu._lbfgs), Recorder(solver)
+    outs = []
+    for rec in (host, dev):
+        u, info = gu.untangle_global(p, groups, free, polish_iter=300, lbfgs=rec)
+        lifted, linfo = gu.lift_min_quality(u, groups, free, rounds=10, lbfgs=rec)
+        outs.append((u, lifted, info["iterations"], linfo["iterations"]))
+    assert info["status"] == "untangled" and linfo["iterations"] > 0
+    assert len(host.results) == len(dev.results) >= 3
+    for k, ((vh, ih), (vd, idv)) in enumerate(zip(host.results, dev.results, strict=True)):
+        assert ih == idv, f"call {k}: {ih} host iterations, {idv} on the device"
+        assert np.array_equal(vh, vd), f"call {k}: max difference {np.abs(vh - vd).max():.3e}"
+    (u0, l0, i0, j0), (u1, l1, i1, j1) = outs
+    assert np.array_equal(u0, u1) and np.array_equal(l0, l1) and (i0, j0) == (i1, j1)
+
+
+def test_ticks_pause_and_cancel_like_the_host(solver):
+    """A tick every TICK_EVERY iterations; False stops at that iteration with its point."""
+    p, _fs, groups, free = mesh("quad_hole")
+    u, _ = gu.untangle_global(p, groups, free, polish_iter=0)
+    en, st = gu._LiftEnergy(u, groups, free), gu._State(u, free)
+    en.qc = 0.5
+    v0 = st.pack(st.x, st.y)
+    seen = {"host": [], "dev": []}
+    res = {}
+    for key, run in (("host", gu._lbfgs), ("dev", solver)):
+
+        def tick(it, key=key):
+            seen[key].append(it)
+            return it < 2 * gu.TICK_EVERY
+
+        res[key] = run(en, st, v0, gu.EPS_MIN, max_it=150, guard=True, rel_tol=0.0, tick=tick)
+    assert seen["host"] == seen["dev"] == [gu.TICK_EVERY, 2 * gu.TICK_EVERY]
+    assert res["host"][1] == res["dev"][1] == 2 * gu.TICK_EVERY
+    assert np.array_equal(res["host"][0], res["dev"][0])
+
+
+def test_powered_energy_falls_back_to_the_host_solver(solver):
+    """polish_power != 1 is not in the kernel: the host solver runs, same result."""
+    p, _fs, groups, free = mesh("quad_hole")
+    a, ia = gu.untangle_global(p, groups, free, polish_iter=40, polish_power=2.0)
+    b, ib = gu.untangle_global(p, groups, free, polish_iter=40, polish_power=2.0, lbfgs=solver)
+    assert np.array_equal(a, b) and ia["iterations"] == ib["iterations"] > 0
+
+
+@pytest.mark.parametrize("name", ["quad_hole", "mixed_quad_tri", "polygon_voronoi"])
+def test_pipeline_opencl_equals_numpy_bit_for_bit(solver, name):
+    """Global stage on the device, EEGT on the device: the NumPy run's points exactly."""
+    p, fs, _groups, _free = mesh(name)
+    ra = untangle_and_smooth(p, fs, backend="numpy")
+    rb = untangle_and_smooth(p, fs, backend="opencl")
+    assert rb.backend == "opencl" and rb.after.n_inverted == 0
+    assert ra.global_iterations == rb.global_iterations > 0
+    assert np.array_equal(ra.points, rb.points)
+
+
+def test_pipeline_cancel_during_device_global_stage(solver):
+    """Cancelling from a progress tick of the device solver leaves the input unchanged."""
+    p, fs, _groups, _free = mesh("quad_hole")
+    phases = []
+
+    def progress(it, phase, stats):
+        phases.append(phase)
+        if phase == "global" and it >= 40:
+            raise Cancelled
+
+    res = untangle_and_smooth(p, fs, backend="opencl", progress=progress)
+    assert res.status == "cancelled" and "global" in phases
+    assert np.array_equal(res.points, p)
+
+
+def test_device_solver_failure_falls_back_to_host(monkeypatch):
+    """A kernel that does not build: one warning, the host solver, the same result."""
+    import core.pipeline as pl
+
+    class Broken:
+        def __init__(self):
+            raise RuntimeError("L-BFGS kernel build failed on test device: line 1:1: boom")
+
+    monkeypatch.setattr(lo, "OpenCLLbfgs", Broken)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        solver = pl._device_lbfgs("opencl")
+    assert solver is None
+    assert any("global stage on NumPy" in str(w.message) for w in caught)
+    assert pl._device_lbfgs("numpy") is None
