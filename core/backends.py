@@ -1,4 +1,9 @@
-"""Backend choice: 'numpy' (reference), 'opencl', or 'auto' (OpenCL when usable, else NumPy)."""
+"""Backend choice: 'numpy' (reference), 'opencl', or 'auto' (OpenCL where it is faster).
+
+'auto' on a mesh under AUTO_ENGINE_MIN_FACES faces keeps the EEGT steps on the NumPy engine
+(the OpenCL engine's set-up costs more than the few steps it would speed up) and runs only
+the global stage on the device: the result is bit-identical either way.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +13,11 @@ from .engine_numpy import NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
 
-__all__ = ["BACKENDS", "make_engine"]
+__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "make_engine"]
 
 BACKENDS = ("numpy", "opencl", "auto")
+AUTO_ENGINE_MIN_FACES = 4000  # 'auto': the OpenCL engine from this many faces on
+HYBRID = "opencl (global stage) + numpy (EEGT steps, small mesh)"
 _warned: set[str] = set()
 
 
@@ -31,6 +38,8 @@ def make_engine(
         raise ValueError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend in ("opencl", "auto"):
         cls, why = _opencl_engine_class()
+        if cls is not None and backend == "auto" and faces.n_faces < AUTO_ENGINE_MIN_FACES:
+            return NumpyEngine(points, faces, free, params), HYBRID
         if cls is not None:
             try:
                 return cls(points, faces, free, params), cls.name

@@ -17,10 +17,23 @@ import numpy as np
 
 from . import global_untangle as gu
 
-__all__ = ["KERNEL_FILE", "OpenCLLbfgs"]
+__all__ = ["KERNEL_FILE", "OpenCLLbfgs", "device_solver"]
 
 KERNEL_FILE = Path(__file__).with_name("lbfgs_kernel.cl")
 _ST_TICK = 1  # kernel status: paused for a progress tick
+_solvers: dict[str, OpenCLLbfgs] = {}
+
+
+def device_solver() -> OpenCLLbfgs:
+    """The solver of the chosen OpenCL device, made once per process and device (a kernel
+    object costs ~0.5 ms); RuntimeError when there is no device or the kernel does not build."""
+    from .engine_opencl import _runtime
+
+    rt = _runtime()
+    solver = _solvers.get(rt.name)
+    if solver is None:
+        solver = _solvers[rt.name] = OpenCLLbfgs()
+    return solver
 
 
 def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -121,14 +121,14 @@ class _CancelRun(Exception):
 
 
 def _device_lbfgs(backend_name: str):
-    """The global stage's L-BFGS on the OpenCL device when the run's engine is OpenCL on a
-    CPU device (one work-item: a GPU would run it on one thread); None = the host's NumPy."""
-    if backend_name != "opencl":
+    """The global stage's L-BFGS on the OpenCL device when the run uses OpenCL on a CPU device
+    (one work-item: a GPU would run it on one thread); None = the host's NumPy solver."""
+    if not backend_name.startswith("opencl"):
         return None
-    from .lbfgs_opencl import OpenCLLbfgs
+    from .lbfgs_opencl import device_solver
 
     try:
-        solver = OpenCLLbfgs()
+        solver = device_solver()
     except RuntimeError as exc:  # kernel build failed: the host solver gives the same result
         import warnings
 

@@ -14,6 +14,7 @@ import pytest
 from core import global_untangle as gu
 from core.faces import as_faceset
 from core.obj_io import read_obj
+from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 
 eo = pytest.importorskip("core.engine_opencl")
@@ -132,14 +133,30 @@ def test_device_solver_failure_falls_back_to_host(monkeypatch):
     """A kernel that does not build: one warning, the host solver, the same result."""
     import core.pipeline as pl
 
-    class Broken:
-        def __init__(self):
-            raise RuntimeError("L-BFGS kernel build failed on test device: line 1:1: boom")
+    def broken():
+        raise RuntimeError("L-BFGS kernel build failed on test device: line 1:1: boom")
 
-    monkeypatch.setattr(lo, "OpenCLLbfgs", Broken)
+    monkeypatch.setattr(lo, "device_solver", broken)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         solver = pl._device_lbfgs("opencl")
     assert solver is None
     assert any("global stage on NumPy" in str(w.message) for w in caught)
     assert pl._device_lbfgs("numpy") is None
+
+
+def test_auto_small_mesh_numpy_steps_device_global_stage_same_result(solver):
+    """'auto' under AUTO_ENGINE_MIN_FACES: NumPy EEGT steps, device global stage, and still
+    the NumPy run's points bit for bit; at or above it, the OpenCL engine."""
+    from core import backends
+
+    p, fs, _groups, _free = mesh("quad_hole")
+    ra = untangle_and_smooth(p, fs, backend="numpy")
+    rb = untangle_and_smooth(p, fs, backend="auto")
+    assert fs.n_faces < backends.AUTO_ENGINE_MIN_FACES
+    assert rb.backend == backends.HYBRID
+    assert np.array_equal(ra.points, rb.points) and ra.global_iterations == rb.global_iterations
+    p, fs, _groups, _free = mesh("tri_two_holes")
+    assert fs.n_faces >= backends.AUTO_ENGINE_MIN_FACES
+    eng, name = backends.make_engine("auto", p, fs, free_nodes(len(p), fs), EEGTParams())
+    assert name == "opencl" and type(eng).__name__ == "OpenCLEngine"
