@@ -239,8 +239,8 @@ static double fold_value_grad(const Problem *P, __global double *G, double *dmin
     return energy;
 }
 
-// _LiftEnergy.value_grad: inf (no gradient) unless every corner det is positive
-static double lift_value_grad(const Problem *P, __global double *G, double *dmin)
+// _LiftEnergy.value_grad, value part: inf unless every corner det is positive
+static double lift_value(const Problem *P, double *dmin)
 {
     V m = (V)(INFINITY);
     for (int c = 0; c < P->nc4; c += 4) {  // u = 1 / q_corner (in c1x), 1 / u (cr), det (c1y)
@@ -273,6 +273,13 @@ static double lift_value_grad(const Problem *P, __global double *G, double *dmin
     }
     double energy = np_sum(P->et, P->et, P->et, 0, P->ne);
     energy += BARRIER * np_sum(P->ct, P->ct, P->ct, 0, P->nc);
+    return energy;
+}
+
+// _LiftEnergy.value_grad, gradient part, from lift_value's arrays (only for accepted points:
+// a rejected trial's gradient is never used)
+static void lift_grad(const Problem *P, __global double *G)
+{
     for (int c = 0; c < P->nc4; c += 4) {
         V j00, j01, j10, j11;
         jac(P, c, &j00, &j01, &j10, &j11);
@@ -285,17 +292,22 @@ static double lift_value_grad(const Problem *P, __global double *G, double *dmin
         corner_grad(P, c, a, b, j00, j01, j10, j11);
     }
     gather(P, G);
-    return energy;
 }
 
-static double value_grad(const Problem *P, __global const double *v, __global double *G,
-                         double *dmin)
+// F at v; its gradient into G too unless this is a lift trial point (see lift_grad)
+static double evaluate(const Problem *P, __global const double *v, __global double *G,
+                       double *dmin, const int trial)
 {
     for (int f = 0; f < P->nf; ++f) {  // _State.unpack
         P->X[P->fidx[f]] = v[f];
         P->Y[P->fidx[f]] = v[P->nf + f];
     }
-    return P->mode ? lift_value_grad(P, G, dmin) : fold_value_grad(P, G, dmin);
+    if (!P->mode)
+        return fold_value_grad(P, G, dmin);
+    const double e = lift_value(P, dmin);
+    if (!trial && isfinite(e))
+        lift_grad(P, G);
+    return e;
 }
 
 // ---- the solver ----------------------------------------------------------------------------
@@ -360,7 +372,7 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
     }
     double e, dmin_t = 0.0;
     if (T[T_FRESH]) {
-        e = value_grad(&P, v, g, &dmin_t);
+        e = evaluate(&P, v, g, &dmin_t, 0);
         T[T_IT] = 0;
         T[T_LEN] = 0;
         T[T_START] = 0;
@@ -427,9 +439,11 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
         for (int ls = 0; ls < 40; ++ls) {
             for (int i = 0; i < n2; ++i)
                 vt[i] = v[i] + step * q[i];
-            et = value_grad(&P, vt, gt, &dmin_t);
+            et = evaluate(&P, vt, gt, &dmin_t, 1);
             if (isfinite(et) && et <= e + (1e-4 * step) * slope && !(guard && dmin_t <= 0.0)) {
                 accepted = 1;
+                if (P.mode)
+                    lift_grad(&P, gt);
                 break;
             }
             step *= 0.5;
