@@ -26,6 +26,7 @@ smallest det, and the new eps solves chi(D_-, eps_new) = mu, i.e. eps_new = 2 sq
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -162,24 +163,91 @@ def _chi_scalar(d: float, eps: float) -> float:
     return 0.5 * (d + root) if d >= 0.0 else 0.5 * eps * eps / (root - d)
 
 
+class _Blocks:
+    """Preallocated per-corner arrays of one energy, with views of their blocks made once.
+
+    `_eval` fills them and `_grad` reads what the last `_eval` left, so one evaluation is in
+    flight at a time (as in `_lbfgs`: the gradient right after the accepted trial point).
+    Constants are full-length arrays: NumPy multiplies two arrays faster than an array and a
+    Python float, with the same result.
+    """
+
+    def __init__(self, m: int, w00: np.ndarray, w01: np.ndarray, w11: np.ndarray):
+        def blocks(k: int) -> tuple[np.ndarray, ...]:
+            a = np.empty(k * m)
+            return a, *(a[i * m : (i + 1) * m] for i in range(k))
+
+        two = [np.concatenate([w, w]) for w in (w00, w01, w11)]
+        self.w00, self.w01, self.w11 = two  # W^-1 entries for [x, y] pairs of blocks
+        # z[gather] = [x1, y1, x2, y2, x0, y0]; e1 = [e1x, e1y], e2 = [e2x, e2y]
+        self.c, *_ = blocks(6)
+        self.c1, self.c2, self.c0 = self.c[: 2 * m], self.c[2 * m : 4 * m], self.c[4 * m :]
+        self.e, *_ = blocks(4)
+        self.e1, self.e2 = self.e[: 2 * m], self.e[2 * m :]
+        self.j, self.j00, self.j10, self.j01, self.j11 = blocks(4)
+        self.ja, self.jb = self.j[: 2 * m], self.j[2 * m :]  # [j00, j10], [j01, j11]
+        self.sq, self.s00, self.s10, self.s01, self.s11 = blocks(4)  # squares of j
+        self.g, self.g00, self.g10, self.g01, self.g11 = blocks(4)  # dF/dJ
+        self.ga, self.gb = self.g[: 2 * m], self.g[2 * m :]
+        # dF/dE per corner node: [ge1x, ge1y, ge2x, ge2y, -(ge1x + ge2x), -(ge1y + ge2y)]
+        self.ge, *_ = blocks(6)
+        self.ge1, self.ge2, self.ge0 = self.ge[: 2 * m], self.ge[2 * m : 4 * m], self.ge[4 * m :]
+        for name in ("d", "t", "dd", "root", "chi", "num", "inv_chi", "u", "a", "b", "tmp"):
+            setattr(self, name, np.empty(m))
+        for name, value in (("half", 0.5), ("one", 1.0), ("theta", THETA)):
+            setattr(self, name, np.full(m, value))
+        self.one_theta = np.full(m, 1.0 - THETA)
+        self.two_one_theta = np.full(m, 2.0 * (1.0 - THETA))
+        self.two_theta = np.full(m, 2.0 * THETA)
+
+
 class _Energy:
-    """F_eps over the corner triangles that touch a free node, with its gradient."""
+    """F_eps over the corner triangles that touch a free node, with its gradient.
+
+    The hot path works on one flat coordinate vector z and a layout (gather index, scatter
+    index, length of z): `value_grad(x, y)` uses z = [x, y]; `_lbfgs` uses z = [v, fixed
+    coordinates], so it never unpacks or packs. `_eval` gives F and min det J (all a line
+    search needs), `_grad` the gradient of the point `_eval` saw last. Per-corner quantities
+    live in `_Blocks` (one NumPy call per block of M, no temporaries); every value is the same
+    float operation on the same operands as the per-entry formula beside it.
+    """
 
     def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
+        tabs = self._prepare(points, groups)
+        if tabs is None:
+            return
+        arity, size = tabs
+        i0, i1, i2, eid = self.v0, self.v1, self.v2, self.veid
+        keep = free[i0] | free[i1] | free[i2]  # other corners have a constant energy
+        self._set_corners(i0[keep], i1[keep], i2[keep], arity[eid[keep]], size[eid[keep]])
+
+    def _prepare(self, points: np.ndarray, groups: Mapping[int, np.ndarray]):
+        """Tables, validity corners, reference sizes and preconditioner: (arity, size), or
+        None (and no energy corners) when there are no elements."""
         self.n_nodes = points.shape[0]
         faces, arity, edges, edge_elem = _tables(groups)
         self.n_elem = arity.shape[0]
         # validity check: every corner of every element (triangles: one is enough)
         self.v0, self.v1, self.v2, self.veid = _corners(faces, all_corners=False)
+        self.power = 1.0
+        self._full = None  # the layout of z = [x, y], built on first use
+        self._pack = None  # (state, layout, fixed coordinates) of the last _lbfgs call
         if self.n_elem == 0:
             self.i0 = self.i1 = self.i2 = np.zeros(0, dtype=np.int64)
-            return
+            return None
         size, hnode = _reference_sizes(points, arity, edges, edge_elem)
-        i0, i1, i2, eid = self.v0, self.v1, self.v2, self.veid
-        keep = free[i0] | free[i1] | free[i2]  # other corners have a constant energy
-        self.i0, self.i1, self.i2 = i0[keep], i1[keep], i2[keep]
-        n = arity[eid[keep]].astype(np.float64)
-        s = size[eid[keep]]
+        # Diagonal L-BFGS preconditioner: with uniform weights the Hessian at a node scales
+        # like 1 / size^2, so moves are scaled by size^2.
+        self.precond = (hnode / float(np.mean(hnode))) ** 2
+        self.h_mean = float(np.mean(size))
+        return arity, size
+
+    def _set_corners(
+        self, i0: np.ndarray, i1: np.ndarray, i2: np.ndarray, arity: np.ndarray, s: np.ndarray
+    ) -> None:
+        """Energy corners (k, k+1, k-1) with their element's arity and reference size."""
+        self.i0, self.i1, self.i2 = i0, i1, i2
+        n = arity.astype(np.float64)
         a = (n - 2.0) * np.pi / n
         # W = s [[1, cos a], [0, sin a]]  ->  W^-1 = [[1, -cot a], [0, 1 / sin a]] / s
         self.w00 = 1.0 / s
@@ -189,76 +257,139 @@ class _Energy:
         # area weights let small elements absorb all distortion (see the docs).
         self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
         self.idx = np.concatenate([self.i1, self.i2, self.i0])
-        # Diagonal L-BFGS preconditioner: with uniform weights the Hessian at a node scales
-        # like 1 / size^2, so moves are scaled by size^2.
-        self.precond = (hnode / float(np.mean(hnode))) ** 2
-        self.h_mean = float(np.mean(size))
-        self.power = 1.0
+        self._bk = _Blocks(i0.size, self.w00, self.w01, self.w11)
 
-    def _jac(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
-        x0 = x[self.i0]
-        y0 = y[self.i0]
-        e1x = x[self.i1] - x0
-        e1y = y[self.i1] - y0
-        e2x = x[self.i2] - x0
-        e2y = y[self.i2] - y0
-        j00 = e1x * self.w00
-        j10 = e1y * self.w00
-        j01 = e1x * self.w01 + e2x * self.w11
-        j11 = e1y * self.w01 + e2y * self.w11
-        return j00, j01, j10, j11
+    # -- flat layouts ----------------------------------------------------------------------
+    def _layout(self, pos: np.ndarray) -> tuple[np.ndarray, int]:
+        """(index, length) for a flat z holding coordinate c of node i at pos[c, i].
+
+        z[index] = [x1, y1, x2, y2, x0, y0] (blocks of M; corner nodes i1, i2, i0), and the
+        same index bins the corner gradients [e1x, e1y, e2x, e2y, e0x, e0y]: each bin adds
+        its terms in `idx` order (e1, e2, then -(e1 + e2)), as one bincount over idx per axis.
+        """
+        index = pos[:, np.stack([self.i1, self.i2, self.i0])]  # (axis, node, corner)
+        return np.ascontiguousarray(index.transpose(1, 0, 2)).ravel(), pos.size
+
+    def _full_layout(self) -> tuple[np.ndarray, int]:
+        if self._full is None:
+            self._full = self._layout(np.arange(2 * self.n_nodes).reshape(2, self.n_nodes))
+        return self._full
+
+    def _packed(self, st: _State) -> tuple[tuple[np.ndarray, int], np.ndarray]:
+        """Layout of z = [v, x_fixed, y_fixed] for `st`, and the fixed part of z (cached)."""
+        if self._pack is None or self._pack[0] is not st:
+            fixed = np.ones(self.n_nodes, dtype=bool)
+            fixed[st.fidx] = False
+            fix = np.flatnonzero(fixed)
+            nf, nx = st.nf, fix.size
+            pos = np.empty((2, self.n_nodes), dtype=np.int64)
+            pos[0, st.fidx] = np.arange(nf)
+            pos[1, st.fidx] = np.arange(nf, 2 * nf)
+            pos[0, fix] = np.arange(2 * nf, 2 * nf + nx)
+            pos[1, fix] = np.arange(2 * nf + nx, 2 * nf + 2 * nx)
+            self._pack = (st, self._layout(pos), np.concatenate([st.x[fix], st.y[fix]]))
+        return self._pack[1], self._pack[2]
+
+    # -- corner Jacobians ------------------------------------------------------------------
+    def _jac(self, z: np.ndarray, index: np.ndarray) -> None:
+        """J = [j00, j10, j01, j11] and d = det J of every corner into the blocks."""
+        bk = self._bk
+        z.take(index, None, bk.c, "clip")  # = z[index]
+        np.subtract(bk.c1, bk.c0, bk.e1)  # e1x = x[i1] - x[i0], e1y = y[i1] - y[i0]
+        np.subtract(bk.c2, bk.c0, bk.e2)  # e2x = x[i2] - x[i0], e2y
+        np.multiply(bk.e1, bk.w00, bk.ja)  # j00 = e1x w00, j10 = e1y w00
+        np.multiply(bk.e1, bk.w01, bk.jb)
+        np.add(bk.jb, np.multiply(bk.e2, bk.w11, bk.e2), bk.jb)  # j01 = e1x w01 + e2x w11
+        np.multiply(bk.j00, bk.j11, bk.d)  # d = j00 j11 - j01 j10
+        np.subtract(bk.d, np.multiply(bk.j01, bk.j10, bk.tmp), bk.d)
+
+    def _frob(self) -> np.ndarray:
+        """t = j00^2 + j01^2 + j10^2 + j11^2 (in that order) of the blocks' J."""
+        bk = self._bk
+        np.multiply(bk.j, bk.j, bk.sq)
+        np.add(bk.s00, bk.s01, bk.t)
+        np.add(bk.t, bk.s10, bk.t)
+        return np.add(bk.t, bk.s11, bk.t)
+
+    def _scatter(self, a: np.ndarray, b: np.ndarray, n_bins: int, index: np.ndarray):
+        """Node gradient (flat, layout order) of dF/dJ = a J + b cof(J), cof(J) = [[j11, -j10],
+        [-j01, j00]], through dF/dE = dF/dJ W^-T with E = [e1, e2]."""
+        bk = self._bk
+        mul, tmp = np.multiply, bk.tmp
+        np.add(mul(a, bk.j00, bk.g00), mul(b, bk.j11, tmp), bk.g00)  # g00 = a j00 + b j11
+        np.subtract(mul(a, bk.j10, bk.g10), mul(b, bk.j01, tmp), bk.g10)  # g10 = a j10 - b j01
+        np.subtract(mul(a, bk.j01, bk.g01), mul(b, bk.j10, tmp), bk.g01)  # g01 = a j01 - b j10
+        np.add(mul(a, bk.j11, bk.g11), mul(b, bk.j00, tmp), bk.g11)  # g11 = a j11 + b j00
+        mul(bk.ga, bk.w00, bk.ge1)
+        np.add(bk.ge1, mul(bk.gb, bk.w01, bk.ga), bk.ge1)  # ge1x = g00 w00 + g01 w01, ge1y
+        mul(bk.gb, bk.w11, bk.ge2)  # ge2x = g01 w11, ge2y = g11 w11
+        np.negative(np.add(bk.ge1, bk.ge2, bk.ge0), bk.ge0)  # -(ge1 + ge2)
+        return np.bincount(index, bk.ge, n_bins)
+
+    def _xy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(J, d) at the node positions x, y (copies)."""
+        self._jac(np.concatenate([x, y]), self._full_layout()[0])
+        return self._bk.j.copy(), self._bk.d.copy()
 
     def dets(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """det J of every energy corner."""
-        j00, j01, j10, j11 = self._jac(x, y)
-        return j00 * j11 - j01 * j10
+        return self._xy(x, y)[1]
 
     def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
         """F_eps."""
-        j00, j01, j10, j11 = self._jac(x, y)
-        d = j00 * j11 - j01 * j10
-        num = (1.0 - THETA) * (j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11)
+        self._jac(np.concatenate([x, y]), self._full_layout()[0])
+        d = self._bk.d.copy()
+        num = (1.0 - THETA) * self._frob()
         num += THETA * (d * d + 1.0)
         chi = _chi(d, eps, np.sqrt(eps * eps + d * d))
         u = num / chi
         if self.power != 1.0:
             u = (0.5 * u) ** self.power
-        return float(np.sum(self.weight * u))
+        return float(np.add.reduce(self.weight * u))
 
     def value_grad(
         self, x: np.ndarray, y: np.ndarray, eps: float
     ) -> tuple[float, np.ndarray, np.ndarray, float]:
         """F_eps, dF/dx, dF/dy over all nodes (non-free rows included), and min det J."""
-        j00, j01, j10, j11 = self._jac(x, y)
-        d = j00 * j11 - j01 * j10
-        t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
-        root = np.sqrt(eps * eps + d * d)
-        chi = _chi(d, eps, root)
-        num = (1.0 - THETA) * t + THETA * (d * d + 1.0)
-        inv_chi = self.weight / chi
+        n = self.n_nodes
+        layout = self._full_layout()
+        e, dmin, ok = self._eval(np.concatenate([x, y]), layout, eps)
+        g = self._grad(layout) if ok else np.zeros(layout[1])
+        return e, g[:n], g[n:], dmin
+
+    def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
+        """(F_eps, min det J, whether `_grad` may follow) at the flat coordinates z."""
+        bk = self._bk
+        self._jac(z, layout[0])
+        d, dd, root, chi, num, inv_chi = bk.d, bk.dd, bk.root, bk.chi, bk.num, bk.inv_chi
+        dmin = float(np.minimum.reduce(d))
+        np.multiply(d, d, dd)
+        np.sqrt(np.add(dd, eps * eps, root), root)  # sqrt(eps^2 + d^2)
+        if dmin >= 0.0:  # no D < 0: chi's first branch, 0.5 (d + root), everywhere
+            np.multiply(bk.half, np.add(d, root, chi), chi)
+        else:
+            chi[:] = _chi(d, eps, root)
+        np.multiply(bk.one_theta, self._frob(), num)  # (1 - theta) t + theta (d^2 + 1)
+        np.add(num, np.multiply(bk.theta, np.add(dd, bk.one, bk.tmp), bk.tmp), num)
+        np.divide(self.weight, chi, inv_chi)
         if self.power != 1.0:  # F = sum w (u / 2)^p with u = num / chi
             u = 0.5 * num / chi
             up = u**self.power
-            energy = float(np.sum(self.weight * up))
-            inv_chi = inv_chi * (0.5 * self.power) * (up / u)
+            energy = float(np.add.reduce(self.weight * up))
+            np.multiply(inv_chi, 0.5 * self.power, inv_chi)  # inv_chi (p / 2) (up / u)
+            np.multiply(inv_chi, up / u, inv_chi)
         else:
-            energy = float(np.sum(num * inv_chi))
-        # dF/dJ = a J + b cof(J); cof(J) = [[j11, -j10], [-j01, j00]]; dchi/dD = chi / root
-        a = (2.0 * (1.0 - THETA)) * inv_chi
-        b = inv_chi * (2.0 * THETA * d - num / root)
-        g00 = a * j00 + b * j11
-        g01 = a * j01 - b * j10
-        g10 = a * j10 - b * j01
-        g11 = a * j11 + b * j00
-        # dF/dE = dF/dJ W^-T with E = [e1, e2]
-        ge1x = g00 * self.w00 + g01 * self.w01
-        ge1y = g10 * self.w00 + g11 * self.w01
-        ge2x = g01 * self.w11
-        ge2y = g11 * self.w11
-        n = self.n_nodes
-        gx = np.bincount(self.idx, np.concatenate([ge1x, ge2x, -(ge1x + ge2x)]), minlength=n)
-        gy = np.bincount(self.idx, np.concatenate([ge1y, ge2y, -(ge1y + ge2y)]), minlength=n)
-        return energy, gx, gy, float(np.min(d))
+            energy = float(np.add.reduce(np.multiply(num, inv_chi, bk.tmp)))
+        return energy, dmin, True
+
+    def _grad(self, layout) -> np.ndarray:
+        """dF/dz at the point `_eval` saw last."""
+        bk = self._bk
+        # dF/dJ = a J + b cof(J); dchi/dD = chi / root
+        a = np.multiply(bk.two_one_theta, bk.inv_chi, bk.a)  # 2 (1 - theta) inv_chi
+        b = np.multiply(bk.two_theta, bk.d, bk.b)  # inv_chi (2 theta d - num / root)
+        np.multiply(bk.inv_chi, np.subtract(b, np.divide(bk.num, bk.root, bk.tmp), b), b)
+        return self._scatter(a, b, layout[1], layout[0])
 
     def n_inverted(self, x: np.ndarray, y: np.ndarray) -> int:
         """Elements with a corner det <= 0 (SPEC section 3)."""
@@ -282,33 +413,23 @@ class _LiftEnergy(_Energy):
     """
 
     def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
-        super().__init__(points, groups, free)
+        tabs = self._prepare(points, groups)
         self.qc = 0.0
-        if self.n_elem == 0:
+        if tabs is None:
             return
-        _faces, arity, edges, edge_elem = _tables(groups)
-        size, _ = _reference_sizes(points, arity, edges, edge_elem)
-        self.i0, self.i1, self.i2, self.eid = self.v0, self.v1, self.v2, self.veid
-        n = arity[self.eid].astype(np.float64)
-        s = size[self.eid]
-        a = (n - 2.0) * np.pi / n
-        self.w00 = 1.0 / s
-        self.w01 = -np.cos(a) / (np.sin(a) * s)
-        self.w11 = 1.0 / (np.sin(a) * s)
-        self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
+        arity, size = tabs
+        self.eid = self.veid
+        self._set_corners(self.v0, self.v1, self.v2, arity[self.eid], size[self.eid])
         self.n_corners = np.bincount(self.eid, minlength=self.n_elem).astype(np.float64)
-        self.idx = np.concatenate([self.i1, self.i2, self.i0])
-
-    def _corner_u(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
-        j00, j01, j10, j11 = self._jac(x, y)
-        d = j00 * j11 - j01 * j10
-        t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
-        u = 0.5 * t / np.where(d > 0.0, d, np.inf)  # 1 / q_k; inf (q_k = 0) when not positive
-        return j00, j01, j10, j11, d, t, u
+        self._neg_inv_nc = -1.0 / self.n_corners[self.eid]  # dq_e / du_k = this / u_k^2
+        self._barrier_w = LIFT_BARRIER * self.weight
+        self._gap = np.empty(0)  # the last `_eval`'s (qc - q_e)_+ / qc
 
     def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(E,) mean ratio of each element (0 where a corner is not positive)."""
-        *_, d, _t, u = self._corner_u(x, y)
+        self._jac(np.concatenate([x, y]), self._full_layout()[0])
+        d = self._bk.d
+        u = 0.5 * self._frob() / np.where(d > 0.0, d, np.inf)  # 1 / q_k; inf: q_k = 0
         q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
         bad = np.bincount(self.eid, d <= 0.0, minlength=self.n_elem) > 0
         return np.where(bad, 0.0, q)
@@ -316,36 +437,32 @@ class _LiftEnergy(_Energy):
     def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
         return self.value_grad(x, y, eps)[0]
 
-    def value_grad(
-        self, x: np.ndarray, y: np.ndarray, eps: float
-    ) -> tuple[float, np.ndarray, np.ndarray, float]:
-        j00, j01, j10, j11, d, _t, u = self._corner_u(x, y)
-        dmin = float(np.min(d))
-        n = self.n_nodes
+    def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
+        bk = self._bk
+        self._jac(z, layout[0])
+        d, u = bk.d, bk.u
+        dmin = float(np.minimum.reduce(d))
         if not dmin > 0.0:  # only reached by rejected trial steps: infinite energy
-            z = np.zeros(n)
-            return float("inf"), z, z, dmin
-        q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
+            return float("inf"), dmin, False
+        np.divide(np.multiply(bk.half, self._frob(), u), d, u)  # 1 / q_k = 0.5 t / d
+        q = np.bincount(self.eid, np.divide(bk.one, u, bk.tmp), self.n_elem) / self.n_corners
         gap = np.maximum(self.qc - q, 0.0) / self.qc
-        energy = float(np.sum(LIFT_PENALTY * gap * gap - q))
-        energy += LIFT_BARRIER * float(np.sum(self.weight * u))
-        de_dq = -1.0 - (2.0 * LIFT_PENALTY / self.qc) * gap  # dF / dq_e
+        energy = float(np.add.reduce(LIFT_PENALTY * gap * gap - q))
+        energy += LIFT_BARRIER * float(np.add.reduce(np.multiply(self.weight, u, bk.tmp)))
+        self._gap = gap
+        return energy, dmin, True
+
+    def _grad(self, layout) -> np.ndarray:
+        bk = self._bk
+        d, u, tmp = bk.d, bk.u, bk.tmp
+        de_dq = -1.0 - (2.0 * LIFT_PENALTY / self.qc) * self._gap  # dF / dq_e
         # dq_e / du_k = -1 / (n_e u_k^2); u_k = t / (2 d): du/dJ = J / d - u cof(J) / d
-        de_du = de_dq[self.eid] * (-1.0 / self.n_corners[self.eid]) / (u * u)
-        de_du = de_du + LIFT_BARRIER * self.weight
-        a = de_du / d
-        b = -de_du * u / d
-        g00 = a * j00 + b * j11
-        g01 = a * j01 - b * j10
-        g10 = a * j10 - b * j01
-        g11 = a * j11 + b * j00
-        ge1x = g00 * self.w00 + g01 * self.w01
-        ge1y = g10 * self.w00 + g11 * self.w01
-        ge2x = g01 * self.w11
-        ge2y = g11 * self.w11
-        gx = np.bincount(self.idx, np.concatenate([ge1x, ge2x, -(ge1x + ge2x)]), minlength=n)
-        gy = np.bincount(self.idx, np.concatenate([ge1y, ge2y, -(ge1y + ge2y)]), minlength=n)
-        return energy, gx, gy, dmin
+        de_du = np.multiply(de_dq[self.eid], self._neg_inv_nc, bk.a)
+        np.divide(de_du, np.multiply(u, u, tmp), de_du)
+        np.add(de_du, self._barrier_w, de_du)
+        b = np.divide(np.multiply(np.negative(de_du, bk.b), u, bk.b), d, bk.b)  # -de_du u / d
+        a = np.divide(de_du, d, bk.a)
+        return self._scatter(a, b, layout[1], layout[0])
 
 
 def _active_submesh(
@@ -426,14 +543,29 @@ def _lbfgs(
     Stops after max_it iterations, when 5 iterations lower F by less than rel_tol (relative),
     or when tick(iterations so far), called every TICK_EVERY iterations, returns False.
     Returns the last accepted point and the number of iterations done.
+
+    Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
+    comments: the energy sees z = [v, fixed coordinates] (`_Energy._packed`), whose first
+    2 nf gradient entries are the packed gradient, and only accepted points get a gradient;
+    dot products are `_dot`'s pairwise sums through one scratch buffer; scalar factors go
+    through 0-d arrays (cheaper NumPy operands than floats); s.y of a pair is kept.
     """
+    layout, fixed = en._packed(st)
+    evaluate, gradient = en._eval, en._grad
+    mul, red, amax = np.multiply, np.add.reduce, np.maximum.reduce
+    n2 = 2 * st.nf
+    z = np.concatenate([v0, fixed])  # the energy's input: trial points go into z[:n2]
+    zv = z[:n2]
+    tmp = np.empty(n2)  # scratch: a product before its sum, a scaled vector
+    c0 = np.empty(())  # scratch: a scalar factor
     v = v0
-    e, gx, gy, _ = en.value_grad(*st.unpack(v), eps)
-    g = st.pack(gx, gy)
+    e, _, ok = evaluate(z, layout, eps)
+    g = gradient(layout)[:n2] if ok else np.zeros(n2)
     dpre = np.tile(en.precond[st.fidx], 2)
     s_hist: list[np.ndarray] = []
     y_hist: list[np.ndarray] = []
     rho_hist: list[float] = []
+    sy_hist: list[float] = []  # s.y of each pair (1 / rho)
     e_hist = [e]
     h0 = 0.1 * en.h_mean  # first step: the fastest node moves a tenth of a typical edge
     it = 0
@@ -442,34 +574,38 @@ def _lbfgs(
         q = -g
         alphas = []
         for s, yv, rho in zip(reversed(s_hist), reversed(y_hist), reversed(rho_hist), strict=True):
-            al = rho * _dot(s, q)
+            al = rho * red(mul(s, q, tmp))  # rho _dot(s, q)
             alphas.append(al)
-            q -= al * yv
+            c0[()] = al
+            q -= mul(yv, c0, tmp)  # q -= al yv
         if s_hist:
-            q *= dpre * (_dot(s_hist[-1], y_hist[-1]) / _dot(y_hist[-1], dpre * y_hist[-1]))
+            yl = y_hist[-1]
+            c0[()] = sy_hist[-1] / red(mul(yl, dpre * yl, tmp))  # _dot(s, y) / _dot(y, dpre y)
+            q *= mul(dpre, c0, tmp)
             for s, yv, rho, al in zip(s_hist, y_hist, rho_hist, reversed(alphas), strict=True):
-                q += (al - rho * _dot(yv, q)) * s
+                c0[()] = al - rho * red(mul(yv, q, tmp))
+                q += mul(s, c0, tmp)  # q += (al - rho _dot(yv, q)) s
             step = 1.0
         else:
             q *= dpre
-            qmax = float(np.max(np.abs(q)))
+            qmax = float(amax(np.abs(q, out=tmp)))
             step = h0 / qmax if qmax > 0.0 else 0.0
-        slope = _dot(g, q)
+        slope = float(red(mul(g, q, tmp)))
         if not slope < 0.0:  # not a descent direction: restart from preconditioned descent
-            s_hist, y_hist, rho_hist = [], [], []
+            s_hist, y_hist, rho_hist, sy_hist = [], [], [], []
             q = -dpre * g
-            slope = _dot(g, q)
-            qmax = float(np.max(np.abs(q)))
+            slope = float(red(mul(g, q, tmp)))
+            qmax = float(amax(np.abs(q, out=tmp)))
             step = h0 / qmax if qmax > 0.0 else 0.0
             if not slope < 0.0:
                 break
         accepted = False
         for _ in range(40):
-            vt = v + step * q
-            xt, yt = st.unpack(vt)
-            et, gxt, gyt, dmin_t = en.value_grad(xt, yt, eps)
+            c0[()] = step
+            np.add(v, mul(q, c0, tmp), zv)  # vt = v + step q
+            et, dmin_t, ok = evaluate(z, layout, eps)
             if (
-                np.isfinite(et)
+                math.isfinite(et)
                 and et <= e + 1e-4 * step * slope
                 and not (guard and dmin_t <= 0.0)
             ):
@@ -478,19 +614,22 @@ def _lbfgs(
             step *= 0.5
         if not accepted:
             if s_hist:  # drop the memory and retry once from plain descent
-                s_hist, y_hist, rho_hist = [], [], []
+                s_hist, y_hist, rho_hist, sy_hist = [], [], [], []
                 continue
             break
-        gt = st.pack(gxt, gyt)
+        gt = gradient(layout)[:n2]
+        vt = zv.copy()
         s = vt - v
         yv = gt - g
-        sy = _dot(s, yv)
-        if sy > 1e-12 * float(np.sqrt(_dot(s, s) * _dot(yv, yv))):
+        sy = float(red(mul(s, yv, tmp)))
+        ss = float(red(mul(s, s, tmp)))
+        if sy > 1e-12 * math.sqrt(ss * float(red(mul(yv, yv, tmp)))):
             s_hist.append(s)
             y_hist.append(yv)
             rho_hist.append(1.0 / sy)
+            sy_hist.append(sy)
             if len(s_hist) > LBFGS_MEMORY:
-                del s_hist[0], y_hist[0], rho_hist[0]
+                del s_hist[0], y_hist[0], rho_hist[0], sy_hist[0]
         v, e, g = vt, et, gt
         if not guard and dmin_t > 0.0:  # just became valid: hand over to the guarded polish
             break
