@@ -27,6 +27,18 @@ class NumpyEngine:
     name = "numpy"
 
     def __init__(self, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams):
+        self._setup(points, faces, free, params, None)
+
+    def restarted(self, points: np.ndarray) -> NumpyEngine:
+        """A fresh engine for the same run at new positions whose fixed nodes are where they
+        are here: it shares the nearest-boundary search (its queries are exact, whatever
+        element centroids it was refined for) instead of building another one."""
+        engine = NumpyEngine.__new__(NumpyEngine)
+        engine._setup(points, self.faces, self.free, self.params, self.nearest)
+        return engine
+
+    def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest) -> None:
+        """State at `points`; `nearest`: a search over these fixed nodes (None: build it)."""
         self.params = params
         self.faces = faces
         self.x = np.ascontiguousarray(points[:, 0], dtype=np.float64).copy()
@@ -37,14 +49,16 @@ class NumpyEngine:
         self.corner_nodes = np.concatenate([g.nodes.ravel() for g in self.groups])
         self.q = [group_quality(*self._gather(g)) for g in self.groups]
         self.lbar, min_edge = self._edge_lengths()
-        fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
-        cx, cy = self._centroids()
-        self.nearest = NearestBoundary(
-            self.x[fixed_idx], self.y[fixed_idx], cx, cy, min_cell=0.5 * min_edge
-        )
+        centroids = self._centroids()
+        if nearest is None:
+            fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
+            nearest = NearestBoundary(
+                self.x[fixed_idx], self.y[fixed_idx], *centroids, min_cell=0.5 * min_edge
+            )
+        self.nearest = nearest
         self.inv_d_pow: list[np.ndarray] = []
         self.iteration = 0
-        self._refresh_distances()
+        self._refresh_distances(centroids)
         self.best_x = self.x.copy()
         self.best_y = self.y.copy()
 
@@ -72,11 +86,12 @@ class NumpyEngine:
             lbar = span
         return lbar, float(positive.min()) if positive.size else span
 
-    def _refresh_distances(self) -> None:
-        """f_j = (lbar / d_j)^c from element vertex centroids to the nearest fixed node."""
+    def _refresh_distances(self, centroids: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """f_j = (lbar / d_j)^c from element vertex centroids (those of the current positions,
+        computed unless given) to the nearest fixed node."""
         c = self.params.c
         floor = _DIST_FLOOR * self.lbar
-        cx, cy = self._centroids()
+        cx, cy = self._centroids() if centroids is None else centroids
         f = (self.lbar / np.maximum(self.nearest.query(cx, cy), floor)) ** c
         self.inv_d_pow = np.split(f, np.cumsum([g.size for g in self.groups])[:-1])
 

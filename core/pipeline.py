@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .backends import make_engine
+from .engine_numpy import NumpyEngine
 from .faces import as_faceset
 from .params import EEGTParams
 from .quality import Stats, _check_points
@@ -238,7 +239,10 @@ class _Run:
         if info.get("status") == "untangled" and self.params.lift_rounds > 0:
             pts = self.lift(pts, groups)
         pts[~self.free] = self.p[~self.free]  # fixed rows bit-identical, whatever happened
-        self.engine, _ = make_engine(self.backend, pts, self.fs, self.free, self.params)
+        if isinstance(self.engine, NumpyEngine):  # same mesh, same fixed nodes: reuse set-up
+            self.engine = self.engine.restarted(pts)
+        else:
+            self.engine, _ = make_engine(self.backend, pts, self.fs, self.free, self.params)
         current = self.engine.stats()
         if current.better_than(self.best):
             self.best, self.best_pts = current, None
