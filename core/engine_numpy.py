@@ -19,6 +19,38 @@ from .transform import _edge_sum, group_transform_delta
 __all__ = ["NumpyEngine"]
 
 _DIST_FLOOR = 1e-3  # d_j never below this fraction of the mean edge length
+_DIRECT_PAIRS = 1 << 14  # centroid/fixed-node pairs up to which distances skip the quadtree
+
+
+class _FixedNodeDistance:
+    """Distance from element centroids to the nearest fixed node: over all pairs while they
+    are few (small meshes), else by the `NearestBoundary` quadtree, built on first use and
+    refined for the first centroids seen. Both give the exact minimum of the same
+    (bx - qx)^2 + (by - qy)^2, so the result does not depend on which one answers."""
+
+    def __init__(self, bx: np.ndarray, by: np.ndarray, hint_x, hint_y, min_cell: float):
+        if bx.size == 0:
+            raise ValueError("no boundary nodes to measure distances to")
+        self.bx, self.by = bx, by
+        self._hints = (hint_x, hint_y, min_cell)
+        self._tree: NearestBoundary | None = None
+
+    @property
+    def tree(self) -> NearestBoundary:
+        if self._tree is None:
+            hx, hy, min_cell = self._hints
+            self._tree = NearestBoundary(self.bx, self.by, hx, hy, min_cell=min_cell)
+        return self._tree
+
+    def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
+        if self.bx.size * qx.size > _DIRECT_PAIRS:
+            return self.tree.query(qx, qy)
+        dx = self.bx[:, None] - qx[None, :]  # (fixed node, query)
+        dy = self.by[:, None] - qy[None, :]
+        dx *= dx
+        dy *= dy
+        dx += dy
+        return np.sqrt(np.minimum.reduce(dx, axis=0))
 
 
 class NumpyEngine:
@@ -34,11 +66,16 @@ class NumpyEngine:
         are here: it shares the nearest-boundary search (its queries are exact, whatever
         element centroids it was refined for) instead of building another one."""
         engine = NumpyEngine.__new__(NumpyEngine)
-        engine._setup(points, self.faces, self.free, self.params, self.nearest)
+        engine._setup(points, self.faces, self.free, self.params, self._distance)
         return engine
 
+    @property
+    def nearest(self) -> NearestBoundary:
+        """The quadtree over the fixed nodes (refined for the first engine's centroids)."""
+        return self._distance.tree
+
     def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest) -> None:
-        """State at `points`; `nearest`: a search over these fixed nodes (None: build it)."""
+        """State at `points`; `nearest`: distances to these fixed nodes (None: set them up)."""
         self.params = params
         self.faces = faces
         self.x = np.ascontiguousarray(points[:, 0], dtype=np.float64).copy()
@@ -52,10 +89,10 @@ class NumpyEngine:
         centroids = self._centroids()
         if nearest is None:
             fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
-            nearest = NearestBoundary(
-                self.x[fixed_idx], self.y[fixed_idx], *centroids, min_cell=0.5 * min_edge
+            nearest = _FixedNodeDistance(
+                self.x[fixed_idx], self.y[fixed_idx], *centroids, 0.5 * min_edge
             )
-        self.nearest = nearest
+        self._distance = nearest
         self.inv_d_pow: list[np.ndarray] = []
         self.iteration = 0
         self._refresh_distances(centroids)
@@ -92,7 +129,7 @@ class NumpyEngine:
         c = self.params.c
         floor = _DIST_FLOOR * self.lbar
         cx, cy = self._centroids() if centroids is None else centroids
-        f = (self.lbar / np.maximum(self.nearest.query(cx, cy), floor)) ** c
+        f = (self.lbar / np.maximum(self._distance.query(cx, cy), floor)) ** c
         self.inv_d_pow = np.split(f, np.cumsum([g.size for g in self.groups])[:-1])
 
     def _quality_all(self) -> list[np.ndarray]:
