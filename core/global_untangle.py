@@ -547,8 +547,9 @@ def _lbfgs(
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
     comments: the energy sees z = [v, fixed coordinates] (`_Energy._packed`), whose first
     2 nf gradient entries are the packed gradient, and only accepted points get a gradient;
-    dot products are `_dot`'s pairwise sums through one scratch buffer; scalar factors go
-    through 0-d arrays (cheaper NumPy operands than floats); s.y of a pair is kept.
+    dot products are `_dot`'s pairwise sums (one scratch buffer; the four of a new pair as
+    the rows of one reduce, each row summed exactly as alone); a scalar factor is filled into
+    an array first (a cheaper NumPy operand than a float or a 0-d array).
     """
     layout, fixed = en._packed(st)
     evaluate, gradient = en._eval, en._grad
@@ -557,15 +558,15 @@ def _lbfgs(
     z = np.concatenate([v0, fixed])  # the energy's input: trial points go into z[:n2]
     zv = z[:n2]
     tmp = np.empty(n2)  # scratch: a product before its sum, a scaled vector
-    c0 = np.empty(())  # scratch: a scalar factor
+    c0 = np.empty(n2)  # scratch: a scalar factor, filled in (faster operand than a float)
+    prods = np.empty((4, n2))  # s y, s s, y y, y (dpre y) of a new pair
+    sy_, ss_, yy_, ydy_ = prods
     v = v0
     e, _, ok = evaluate(z, layout, eps)
     g = gradient(layout)[:n2] if ok else np.zeros(n2)
     dpre = np.tile(en.precond[st.fidx], 2)
-    s_hist: list[np.ndarray] = []
-    y_hist: list[np.ndarray] = []
-    rho_hist: list[float] = []
-    sy_hist: list[float] = []  # s.y of each pair (1 / rho)
+    # memory: (s, y, rho = 1 / s.y, s.y, y.(dpre y)) per pair, oldest first
+    mem: list[tuple[np.ndarray, np.ndarray, float, float, float]] = []
     e_hist = [e]
     h0 = 0.1 * en.h_mean  # first step: the fastest node moves a tenth of a typical edge
     it = 0
@@ -573,17 +574,16 @@ def _lbfgs(
         it += 1
         q = -g
         alphas = []
-        for s, yv, rho in zip(reversed(s_hist), reversed(y_hist), reversed(rho_hist), strict=True):
+        for s, yv, rho, *_ in reversed(mem):
             al = rho * red(mul(s, q, tmp))  # rho _dot(s, q)
             alphas.append(al)
-            c0[()] = al
+            c0.fill(al)
             q -= mul(yv, c0, tmp)  # q -= al yv
-        if s_hist:
-            yl = y_hist[-1]
-            c0[()] = sy_hist[-1] / red(mul(yl, dpre * yl, tmp))  # _dot(s, y) / _dot(y, dpre y)
-            q *= mul(dpre, c0, tmp)
-            for s, yv, rho, al in zip(s_hist, y_hist, rho_hist, reversed(alphas), strict=True):
-                c0[()] = al - rho * red(mul(yv, q, tmp))
+        if mem:
+            c0.fill(mem[-1][3] / mem[-1][4])
+            q *= mul(dpre, c0, tmp)  # q *= dpre (_dot(s, y) / _dot(y, dpre y)) of the last pair
+            for (s, yv, rho, *_), al in zip(mem, reversed(alphas), strict=True):
+                c0.fill(al - rho * red(mul(yv, q, tmp)))
                 q += mul(s, c0, tmp)  # q += (al - rho _dot(yv, q)) s
             step = 1.0
         else:
@@ -592,7 +592,7 @@ def _lbfgs(
             step = h0 / qmax if qmax > 0.0 else 0.0
         slope = float(red(mul(g, q, tmp)))
         if not slope < 0.0:  # not a descent direction: restart from preconditioned descent
-            s_hist, y_hist, rho_hist, sy_hist = [], [], [], []
+            mem = []
             q = -dpre * g
             slope = float(red(mul(g, q, tmp)))
             qmax = float(amax(np.abs(q, out=tmp)))
@@ -601,7 +601,7 @@ def _lbfgs(
                 break
         accepted = False
         for _ in range(40):
-            c0[()] = step
+            c0.fill(step)
             np.add(v, mul(q, c0, tmp), zv)  # vt = v + step q
             et, dmin_t, ok = evaluate(z, layout, eps)
             if (
@@ -613,23 +613,23 @@ def _lbfgs(
                 break
             step *= 0.5
         if not accepted:
-            if s_hist:  # drop the memory and retry once from plain descent
-                s_hist, y_hist, rho_hist, sy_hist = [], [], [], []
+            if mem:  # drop the memory and retry once from plain descent
+                mem = []
                 continue
             break
         gt = gradient(layout)[:n2]
         vt = zv.copy()
         s = vt - v
         yv = gt - g
-        sy = float(red(mul(s, yv, tmp)))
-        ss = float(red(mul(s, s, tmp)))
-        if sy > 1e-12 * math.sqrt(ss * float(red(mul(yv, yv, tmp)))):
-            s_hist.append(s)
-            y_hist.append(yv)
-            rho_hist.append(1.0 / sy)
-            sy_hist.append(sy)
-            if len(s_hist) > LBFGS_MEMORY:
-                del s_hist[0], y_hist[0], rho_hist[0], sy_hist[0]
+        mul(s, yv, sy_)
+        mul(s, s, ss_)
+        mul(yv, yv, yy_)
+        mul(yv, mul(dpre, yv, tmp), ydy_)
+        sy, ss, yy, ydy = red(prods, 1).tolist()  # _dot(s, y), _dot(s, s), ...
+        if sy > 1e-12 * math.sqrt(ss * yy):
+            mem.append((s, yv, 1.0 / sy, sy, ydy))
+            if len(mem) > LBFGS_MEMORY:
+                del mem[0]
         v, e, g = vt, et, gt
         if not guard and dmin_t > 0.0:  # just became valid: hand over to the guarded polish
             break
