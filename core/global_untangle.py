@@ -424,6 +424,9 @@ class _LiftEnergy(_Energy):
         self._neg_inv_nc = -1.0 / self.n_corners[self.eid]  # dq_e / du_k = this / u_k^2
         self._barrier_w = LIFT_BARRIER * self.weight
         self._gap = np.empty(0)  # the last `_eval`'s (qc - q_e)_+ / qc
+        ne = self.n_elem  # per-element constants (array operands: faster than floats)
+        self._zero_e, self._pen_e, self._m1_e = (np.full(ne, c) for c in (0.0, LIFT_PENALTY, -1.0))
+        self._qc_e = np.empty(ne)  # filled with qc, then with 2 PENALTY / qc
 
     def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(E,) mean ratio of each element (0 where a corner is not positive)."""
@@ -446,8 +449,12 @@ class _LiftEnergy(_Energy):
             return float("inf"), dmin, False
         np.divide(np.multiply(bk.half, self._frob(), u), d, u)  # 1 / q_k = 0.5 t / d
         q = np.bincount(self.eid, np.divide(bk.one, u, bk.tmp), self.n_elem) / self.n_corners
-        gap = np.maximum(self.qc - q, 0.0) / self.qc
-        energy = float(np.add.reduce(LIFT_PENALTY * gap * gap - q))
+        qc = self._qc_e
+        qc.fill(self.qc)
+        gap = np.subtract(qc, q)  # (qc - q)_+ / qc
+        np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
+        w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
+        energy = float(np.add.reduce(np.subtract(np.multiply(w, gap, w), q, w)))
         energy += LIFT_BARRIER * float(np.add.reduce(np.multiply(self.weight, u, bk.tmp)))
         self._gap = gap
         return energy, dmin, True
@@ -455,7 +462,9 @@ class _LiftEnergy(_Energy):
     def _grad(self, layout) -> np.ndarray:
         bk = self._bk
         d, u, tmp = bk.d, bk.u, bk.tmp
-        de_dq = -1.0 - (2.0 * LIFT_PENALTY / self.qc) * self._gap  # dF / dq_e
+        k = self._qc_e
+        k.fill(2.0 * LIFT_PENALTY / self.qc)
+        de_dq = np.subtract(self._m1_e, np.multiply(k, self._gap, k), k)  # -1 - k gap = dF/dq_e
         # dq_e / du_k = -1 / (n_e u_k^2); u_k = t / (2 d): du/dJ = J / d - u cof(J) / d
         de_du = np.multiply(de_dq[self.eid], self._neg_inv_nc, bk.a)
         np.divide(de_du, np.multiply(u, u, tmp), de_du)
