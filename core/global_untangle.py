@@ -168,6 +168,7 @@ class _Blocks:
 
     `_eval` fills them and `_grad` reads what the last `_eval` left, so one evaluation is in
     flight at a time (as in `_lbfgs`: the gradient right after the accepted trial point).
+    Scratch that is dead by then shares memory: squares of J with dF/dJ, edges with dF/dE.
     Constants are full-length arrays: NumPy multiplies two arrays faster than an array and a
     Python float, with the same result.
     """
@@ -182,16 +183,15 @@ class _Blocks:
         # z[gather] = [x1, y1, x2, y2, x0, y0]; e1 = [e1x, e1y], e2 = [e2x, e2y]
         self.c, *_ = blocks(6)
         self.c1, self.c2, self.c0 = self.c[: 2 * m], self.c[2 * m : 4 * m], self.c[4 * m :]
-        self.e, *_ = blocks(4)
-        self.e1, self.e2 = self.e[: 2 * m], self.e[2 * m :]
         self.j, self.j00, self.j10, self.j01, self.j11 = blocks(4)
         self.ja, self.jb = self.j[: 2 * m], self.j[2 * m :]  # [j00, j10], [j01, j11]
-        self.sq, self.s00, self.s10, self.s01, self.s11 = blocks(4)  # squares of j
         self.g, self.g00, self.g10, self.g01, self.g11 = blocks(4)  # dF/dJ
         self.ga, self.gb = self.g[: 2 * m], self.g[2 * m :]
+        self.sq, self.s00, self.s10, self.s01, self.s11 = self.g, *self.g.reshape(4, m)  # j^2
         # dF/dE per corner node: [ge1x, ge1y, ge2x, ge2y, -(ge1x + ge2x), -(ge1y + ge2y)]
         self.ge, *_ = blocks(6)
         self.ge1, self.ge2, self.ge0 = self.ge[: 2 * m], self.ge[2 * m : 4 * m], self.ge[4 * m :]
+        self.e1, self.e2 = self.ge1, self.ge2  # edge vectors (only while J is computed)
         for name in ("d", "t", "dd", "root", "chi", "num", "inv_chi", "u", "a", "b", "tmp"):
             setattr(self, name, np.empty(m))
         for name, value in (("half", 0.5), ("one", 1.0), ("theta", THETA)):
