@@ -583,7 +583,7 @@ def _lbfgs(
         it += 1
         q = -g
         alphas = []
-        for s, yv, rho, *_ in reversed(mem):
+        for s, yv, rho, _, _ in reversed(mem):
             al = rho * red(mul(s, q, tmp))  # rho _dot(s, q)
             alphas.append(al)
             c0.fill(al)
@@ -591,7 +591,7 @@ def _lbfgs(
         if mem:
             c0.fill(mem[-1][3] / mem[-1][4])
             q *= mul(dpre, c0, tmp)  # q *= dpre (_dot(s, y) / _dot(y, dpre y)) of the last pair
-            for (s, yv, rho, *_), al in zip(mem, reversed(alphas), strict=True):
+            for (s, yv, rho, _, _), al in zip(mem, reversed(alphas), strict=True):
                 c0.fill(al - rho * red(mul(yv, q, tmp)))
                 q += mul(s, c0, tmp)  # q += (al - rho _dot(yv, q)) s
             step = 1.0
