@@ -123,7 +123,9 @@ def _reference_sizes(
     """
     n_nodes = points.shape[0]
     n_elem = arity.shape[0]
-    d = points[edges[1]] - points[edges[0]]
+    p0 = points.take(edges[0], axis=0)  # = points[edges[0]]
+    p1 = points.take(edges[1], axis=0)
+    d = p1 - p0
     elen = np.hypot(d[:, 0], d[:, 1])
     positive = elen[elen > 0]
     floor = 1e-3 * (float(np.mean(positive)) if positive.size else 1.0)
@@ -141,8 +143,8 @@ def _reference_sizes(
         le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     size = np.exp(le)
     ref_area = arity * size**2 / (4.0 * np.tan(np.pi / arity))
-    x0, y0 = points[edges[0]].T
-    x1, y1 = points[edges[1]].T
+    x0, y0 = p0.T
+    x1, y1 = p1.T
     dom_area = 0.5 * float(np.sum(x0 * y1 - x1 * y0))
     total = float(np.sum(ref_area))
     if dom_area > 0.0 and total > 0.0:
