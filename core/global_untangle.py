@@ -435,7 +435,8 @@ class _LiftEnergy(_Energy):
         self._jac(np.concatenate([x, y]), self._full_layout()[0])
         d = self._bk.d
         u = 0.5 * self._frob() / np.where(d > 0.0, d, np.inf)  # 1 / q_k; inf: q_k = 0
-        q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
+        with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
+            q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
         bad = np.bincount(self.eid, d <= 0.0, minlength=self.n_elem) > 0
         return np.where(bad, 0.0, q)
 
