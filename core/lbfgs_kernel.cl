@@ -22,7 +22,9 @@
 #define SQRT(x) __builtin_sqrt(x)
 #define FABS(x) __builtin_fabs(x)
 
-#define M 8              // LBFGS_MEMORY
+#ifndef M
+#define M 4  // LBFGS_MEMORY (the host passes it)
+#endif
 #define THETA 0.0625     // global_untangle.THETA
 #define PENALTY 1000.0   // LIFT_PENALTY
 #define BARRIER 0.01     // LIFT_BARRIER

@@ -85,13 +85,15 @@ class OpenCLLbfgs:
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
         self.is_cpu = bool(rt.device.type & rt.cl.device_type.CPU)
-        prg = rt.programs.get("lbfgs")
+        key = f"lbfgs M={gu.LBFGS_MEMORY}"
+        prg = rt.programs.get(key)
         if prg is None:
             try:
-                prg = self.cl.Program(self.ctx, KERNEL_FILE.read_text()).build()
+                src = KERNEL_FILE.read_text()
+                prg = self.cl.Program(self.ctx, src).build(options=[f"-DM={gu.LBFGS_MEMORY}"])
             except Exception as exc:
                 prg = RuntimeError(f"L-BFGS kernel build failed on {rt.name}: {_build_error(exc)}")
-            rt.programs["lbfgs"] = prg
+            rt.programs[key] = prg
         if isinstance(prg, RuntimeError):
             raise prg
         self.kernel = self.cl.Kernel(prg, "lbfgs_run")
