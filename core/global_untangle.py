@@ -53,7 +53,7 @@ LIFT_PENALTY = 1000.0  # weight of the one-sided quadratic floor penalty
 LIFT_BARRIER = 0.01  # weight of sum 1/q_corner (keeps every corner away from det = 0)
 LIFT_RINGS = 6  # rounds after the first move only the nodes within this many rings of ...
 LIFT_ACTIVE = 1.0  # ... the elements with q < LIFT_ACTIVE * floor (a small local problem)
-LIFT_REL_TOL = 1e-6  # a lift run stops when 5 iterations lower F by less than this (relative)
+LIFT_REL_TOL = 1e-5  # a lift run stops when 5 iterations lower F by less than this (relative)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
 
