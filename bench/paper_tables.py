@@ -110,6 +110,7 @@ MESHES = [
 # Paper mode is slow here (thousands of iterations on ~10k faces): one run, said in the table.
 PAPER_ONE_RUN = {"naca_deform", "two_holes_twist"}
 BLENDER_FACTOR, BLENDER_REPEAT = 0.5, 100
+SMALL_REPEATS = 15  # runs of the defaults on meshes done in under 0.1 s (noisy at 3)
 
 
 def load_table1() -> tuple[np.ndarray, np.ndarray]:
@@ -246,27 +247,44 @@ class Blender:
         return before, after, bfaces, statistics.median(times), select
 
 
-def run_ours(points: np.ndarray, faces, params, repeats: int, backend: str = "numpy"):
+def run_ours(points: np.ndarray, faces, params, repeats: int):
     from core import untangle_and_smooth
 
-    untangle_and_smooth(points, faces, params=params, backend=backend)  # warm (kernel builds)
     times, res = [], None
     for _ in range(repeats):
         t = time.perf_counter()
-        res = untangle_and_smooth(points, faces, params=params, backend=backend)
+        res = untangle_and_smooth(points, faces, params=params)
         times.append(time.perf_counter() - t)
     return res, statistics.median(times)
 
 
-def auto_row(p: np.ndarray, faces, numpy_res, repeats: int) -> Row:
-    """The defaults with backend="auto" (issue 6's speed target): same points as NumPy?"""
-    from core import EEGTParams
+def run_numpy_and_auto(points: np.ndarray, faces, params, repeats: int):
+    """The defaults with backend="numpy" and "auto", timed alternately (the machine's speed
+    drifts; alternating keeps the two comparable); small meshes get more repeats."""
+    from core import untangle_and_smooth
 
-    res, sec = run_ours(p, faces, EEGTParams(), repeats, backend="auto")
+    t = time.perf_counter()
+    untangle_and_smooth(points, faces, params=params, backend="auto")  # warm (kernel builds)
+    untangle_and_smooth(points, faces, params=params, backend="numpy")
+    if time.perf_counter() - t < 0.2:
+        repeats = max(repeats, SMALL_REPEATS)
+    times: dict[str, list[float]] = {"numpy": [], "auto": []}
+    res = {}
+    for _ in range(repeats):
+        for backend in times:
+            t = time.perf_counter()
+            res[backend] = untangle_and_smooth(points, faces, params=params, backend=backend)
+            times[backend].append(time.perf_counter() - t)
+    return (res["numpy"], statistics.median(times["numpy"]), res["auto"],
+            statistics.median(times["auto"]), repeats)
+
+
+def auto_row(res, sec: float, numpy_res, repeats: int) -> Row:
+    """The defaults with backend="auto" (issue 6's speed target): same points as NumPy?"""
     same = np.array_equal(res.points, numpy_res.points)
     note = f"backend used: {res.backend}; " + (
         "points bit-identical to the NumPy run" if same else "points differ from the NumPy run"
-    )
+    ) + f"; median of {repeats}, alternating with the NumPy runs"
     a = res.after
     return Row("ours, auto backend, `EEGTParams()`", "measured", a.n_inverted, a.q_min, a.q_avg,
                sec, note)
@@ -339,11 +357,14 @@ def mesh_table(
                     f"{faces.n_faces} faces, {len(p)} nodes"))
     for mode, params in (("paper", EEGTParams.paper()), ("defaults", EEGTParams())):
         n = 1 if mode == "paper" and key in PAPER_ONE_RUN else repeats
-        res, sec = run_ours(p, faces, params, n)
         if mode == "defaults":
-            rows.append(auto_row(p, faces, res, repeats))
+            res, sec, ares, asec, n = run_numpy_and_auto(p, faces, params, repeats)
+            rows.append(auto_row(ares, asec, res, n))
+        else:
+            res, sec = run_ours(p, faces, params, n)
         a = res.after
-        note = its(res) + ("" if n == repeats else f"; {n} run (slow)")
+        note = its(res) + ("" if n == repeats else f"; {n} run (slow)" if n == 1 else
+                           f"; median of {n}")
         if res.status == "failed" and np.array_equal(res.points, p):
             note += "; no iterate beat the input, so the input is returned"
         rows.append(Row(f"ours, {'`EEGTParams.paper()`' if mode == 'paper' else '`EEGTParams()` (defaults)'}",
