@@ -12,7 +12,7 @@ from .. import __package__ as base_package
 
 DEFAULT_BACKEND_ITEMS = (
     ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
-    ("AUTO", "Auto", "OpenCL when a device is available, else NumPy"),
+    ("AUTO", "Auto", "OpenCL where it is faster when a device is available, else NumPy"),
     ("OPENCL", "OpenCL", "OpenCL (falls back to NumPy when pyopencl or a device is missing)"),
 )
 

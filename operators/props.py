@@ -62,7 +62,7 @@ BACKEND_ITEMS: tuple[tuple[str, str, str], ...] = (
     ("PREFS", "Default", "Use the default backend of the add-on preferences"),
     ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
     ("OPENCL", "OpenCL", "OpenCL device (NumPy when pyopencl or a device is missing)"),
-    ("AUTO", "Auto", "OpenCL when available, else NumPy"),
+    ("AUTO", "Auto", "OpenCL where it is faster (small meshes: its global stage only), else NumPy"),
 )
 
 
