@@ -99,6 +99,10 @@ class OpenCLLbfgs:
         self.kernel = self.cl.Kernel(prg, "lbfgs_run")
         self._tables: dict[int, tuple[gu._Energy, _Tables]] = {}
 
+    def release(self) -> None:
+        """Forget the uploaded tables (and the energies they came from): end of a run."""
+        self._tables = {}
+
     def _buffer(self, a: np.ndarray):
         mf = self.cl.mem_flags
         return self.cl.Buffer(self.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=a)

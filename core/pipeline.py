@@ -230,14 +230,18 @@ class _Run:
             self.n_global = iterations
             self.report(base + iterations, "global", Stats(n_inv, self.best.q_min, self.best.q_avg))
 
-        pts, info = untangle_global(
-            start, groups, self.free, polish_iter=polish, progress=relay, lbfgs=self.lbfgs
-        )
-        self.n_global = int(info["iterations"])
-        if info.get("status") == "cancelled":
-            raise _CancelRun
-        if info.get("status") == "untangled" and self.params.lift_rounds > 0:
-            pts = self.lift(pts, groups)
+        try:
+            pts, info = untangle_global(
+                start, groups, self.free, polish_iter=polish, progress=relay, lbfgs=self.lbfgs
+            )
+            self.n_global = int(info["iterations"])
+            if info.get("status") == "cancelled":
+                raise _CancelRun
+            if info.get("status") == "untangled" and self.params.lift_rounds > 0:
+                pts = self.lift(pts, groups)
+        finally:
+            if self.lbfgs is not None:  # the device solver outlives the run: not its tables
+                self.lbfgs.release()
         pts[~self.free] = self.p[~self.free]  # fixed rows bit-identical, whatever happened
         if isinstance(self.engine, NumpyEngine):  # same mesh, same fixed nodes: reuse set-up
             self.engine = self.engine.restarted(pts)

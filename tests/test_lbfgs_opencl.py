@@ -160,3 +160,11 @@ def test_auto_small_mesh_numpy_steps_device_global_stage_same_result(solver):
     assert fs.n_faces >= backends.AUTO_ENGINE_MIN_FACES
     eng, name = backends.make_engine("auto", p, fs, free_nodes(len(p), fs), EEGTParams())
     assert name == "opencl" and type(eng).__name__ == "OpenCLEngine"
+
+
+def test_device_solver_keeps_no_tables_after_a_run(solver):
+    """The per-process solver forgets a run's energies and device tables when it ends."""
+    p, fs, _groups, _free = mesh("quad_hole")
+    res = untangle_and_smooth(p, fs, backend="opencl")
+    assert res.global_iterations > 0
+    assert lo.device_solver()._tables == {}
