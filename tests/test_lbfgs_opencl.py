@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
 
 from core import global_untangle as gu
 from core.faces import as_faceset
@@ -19,6 +20,7 @@ from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 
 eo = pytest.importorskip("core.engine_opencl")
 lo = pytest.importorskip("core.lbfgs_opencl")
+from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -168,3 +170,51 @@ def test_device_solver_keeps_no_tables_after_a_run(solver):
     res = untangle_and_smooth(p, fs, backend="opencl")
     assert res.global_iterations > 0
     assert lo.device_solver()._tables == {}
+
+
+@settings(
+    max_examples=8,
+    deadline=None,
+    derandomize=True,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+@given(case=polygon_meshes())
+def test_random_polygon_meshes_with_pins_bit_identical(solver, case):
+    """Random tri/quad/hexagon meshes, some pinned nodes, some inverted faces: the device
+    global stage (untangling, polish, lift) equals the host's."""
+    pts, faces, pinned = case
+    fs = as_faceset(faces, len(pts))
+    free = free_nodes(len(pts), fs, pinned)
+    if not free.any():
+        return
+    groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in fs.groups}
+    host = gu.untangle_global(pts, groups, free, polish_iter=100)
+    dev = gu.untangle_global(pts, groups, free, polish_iter=100, lbfgs=solver)
+    assert np.array_equal(host[0], dev[0]) and host[1]["iterations"] == dev[1]["iterations"]
+    if host[1]["status"] == "untangled":
+        a = gu.lift_min_quality(host[0], groups, free, rounds=3)
+        b = gu.lift_min_quality(host[0], groups, free, rounds=3, lbfgs=solver)
+        assert np.array_equal(a[0], b[0]) and a[1]["iterations"] == b[1]["iterations"]
+
+
+@pytest.mark.parametrize("what", ["20-gon", "one free node"])
+def test_big_ngon_and_single_free_node(solver, what):
+    """A 20-gon (20 corners in one element) and a mesh with one free node (2 unknowns,
+    corner arrays padded from fewer than 4 corners on a triangle fan) match the host."""
+    if what == "20-gon":
+        pts, faces = big_ngon_mesh()
+        pts = pts.copy()
+        pts[0] += 0.3  # push a free inner node further off
+    else:
+        ang = np.linspace(0.0, 2 * np.pi, 7)[:-1]
+        pts = np.vstack([np.column_stack([np.cos(ang), np.sin(ang)]), [[0.5, 0.2]]])
+        faces = [[k, (k + 1) % 6, 6] for k in range(6)]
+    fs = as_faceset(faces, len(pts))
+    free = free_nodes(len(pts), fs)
+    groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in fs.groups}
+    host = gu.untangle_global(pts, groups, free, polish_iter=50)
+    dev = gu.untangle_global(pts, groups, free, polish_iter=50, lbfgs=solver)
+    assert host[1]["iterations"] > 0 and np.array_equal(host[0], dev[0])
+    a = gu.lift_min_quality(host[0], groups, free, rounds=2)
+    b = gu.lift_min_quality(host[0], groups, free, rounds=2, lbfgs=solver)
+    assert np.array_equal(a[0], b[0])
