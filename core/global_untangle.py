@@ -37,7 +37,7 @@ __all__ = ["lift_min_quality", "untangle_global"]
 
 THETA = 1.0 / 16.0  # weight of the area term g against the shape term f
 LBFGS_MEMORY = 4  # L-BFGS (s, y) pairs kept (8 was 15-20% slower, same iterations: docs)
-INNER_ITER = 60  # L-BFGS iterations between two eps updates
+INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on spun holes: docs)
 SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma

@@ -232,7 +232,13 @@ class _Run:
 
         try:
             pts, info = untangle_global(
-                start, groups, self.free, polish_iter=polish, progress=relay, lbfgs=self.lbfgs
+                start,
+                groups,
+                self.free,
+                max_iter=self.params.max_untangle_iterations + polish,
+                polish_iter=polish,
+                progress=relay,
+                lbfgs=self.lbfgs,
             )
             self.n_global = int(info["iterations"])
             if info.get("status") == "cancelled":

@@ -294,3 +294,49 @@ def test_lift_leaves_inverted_input_unchanged_and_can_cancel() -> None:
     polished = untangle_global(pts, groups, free)[0]
     out, info = lift_min_quality(polished, groups, free, progress=lambda it, r: False)
     assert info["status"] == "cancelled" and np.array_equal(out, polished)
+
+
+def spun_hole(rings: int, around: int, degrees: float, triangles: bool):
+    """An annulus (hole radius 1, outer radius 2) whose hole boundary alone is spun by
+    `degrees`: every face of the innermost ring folds, the rest of the mesh is at rest."""
+    r = np.linspace(1.0, 2.0, rings + 1)
+    t = np.linspace(0.0, 2 * np.pi, around, endpoint=False)
+    rr, tt = np.meshgrid(r, t, indexing="ij")
+    tt = tt + np.where(rr == 1.0, np.radians(degrees), 0.0)
+    pts = np.column_stack([(rr * np.cos(tt)).ravel(), (rr * np.sin(tt)).ravel()])
+    i, j = np.meshgrid(np.arange(rings), np.arange(around), indexing="ij")
+    a = (i * around + j).ravel()
+    b = (i * around + (j + 1) % around).ravel()
+    c, d = b + around, a + around
+    if triangles:
+        return pts, {3: np.concatenate([np.column_stack([a, c, b]), np.column_stack([a, d, c])])}
+    return pts, {4: np.column_stack([a, d, c, b])}
+
+
+@pytest.mark.parametrize(("degrees", "triangles"), [(120, False), (120, True), (100, False)])
+def test_spun_hole_untangles_regression_inner_runs_too_short(degrees, triangles) -> None:
+    """Regression: with 60 L-BFGS iterations per eps round the interior could not turn far
+    enough before eps shrank, and a hole boundary spun 100-120 degrees stayed folded (57-64
+    inner-ring faces inverted after 5300 iterations, 30000 did not help). Rounds now run to
+    convergence: about 1300-1500 iterations."""
+    pts, groups = spun_hole(12, 64, degrees, triangles)
+    free = ~boundary_mask(len(pts), groups)
+    assert quality(pts, groups)[2] == 64  # the whole inner ring is inverted
+    out, info = untangle_global(pts, groups, free, max_iter=5300)
+    assert np.array_equal(out[~free], pts[~free])
+    q_min, _q_avg, n_inv = quality(out, groups)
+    assert info["status"] == "untangled" and n_inv == 0 and q_min > 0.0
+    assert info["iterations"] < 2500
+
+
+def test_spun_hole_180_degrees_needs_more_than_3000_iterations() -> None:
+    """The pipeline's global stage may use max_untangle_iterations (+ polish), not the old
+    fixed 3000: a hole spun half a turn (either way round is valid) untangles in ~4000."""
+    from core import EEGTParams, untangle_and_smooth
+
+    pts, groups = spun_hole(6, 32, 180, False)
+    res = untangle_and_smooth(pts, groups[4])
+    assert res.status == "untangled" and res.after.n_inverted == 0 < res.before.n_inverted
+    assert res.global_iterations > 3000
+    capped = untangle_and_smooth(pts, groups[4], params=EEGTParams(max_untangle_iterations=2700))
+    assert capped.status == "failed" and capped.global_iterations == 3000
