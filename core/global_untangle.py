@@ -45,7 +45,7 @@ TICK_EVERY = 20  # progress is reported this often inside a long polish run
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
 # lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
 LIFT_FIRST_ITER = 150  # L-BFGS iterations of the first run (floor = the input's q_min)
-LIFT_ITER = 100  # L-BFGS iterations per later round
+LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_deform: docs)
 LIFT_GROW = 1.15  # floor of the next round: min(q_min * GROW, q_min + GAP * (q_avg - q_min))
 LIFT_GAP = 0.15
 LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE times as much
