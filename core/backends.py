@@ -13,11 +13,12 @@ from .engine_numpy import NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
 
-__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "make_engine"]
+__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine"]
 
 BACKENDS = ("numpy", "opencl", "auto")
 AUTO_ENGINE_MIN_FACES = 4000  # 'auto': the OpenCL engine from this many faces on
 HYBRID = "opencl (global stage) + numpy (EEGT steps, small mesh)"
+SMALL_ON_GPU = "numpy (auto: a small mesh; a GPU's set-up costs more than it saves)"
 _warned: set[str] = set()
 
 
@@ -30,6 +31,14 @@ def _opencl_engine_class():
     return engine_opencl.available()
 
 
+def _device_is_cpu() -> bool:
+    """Whether the OpenCL device runs would use is a CPU (pocl and the like)."""
+    from .engine_opencl import _runtime
+
+    rt = _runtime()
+    return bool(rt.device.type & rt.cl.device_type.CPU)
+
+
 def make_engine(
     backend: str, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams
 ):
@@ -39,7 +48,9 @@ def make_engine(
     if backend in ("opencl", "auto"):
         cls, why = _opencl_engine_class()
         if cls is not None and backend == "auto" and faces.n_faces < AUTO_ENGINE_MIN_FACES:
-            return NumpyEngine(points, faces, free, params), HYBRID
+            # the global stage's device solver runs on CPU devices only (one work-item)
+            name = HYBRID if _device_is_cpu() else SMALL_ON_GPU
+            return NumpyEngine(points, faces, free, params), name
         if cls is not None:
             try:
                 return cls(points, faces, free, params), cls.name

@@ -218,3 +218,15 @@ def test_big_ngon_and_single_free_node(solver, what):
     a = gu.lift_min_quality(host[0], groups, free, rounds=2)
     b = gu.lift_min_quality(host[0], groups, free, rounds=2, lbfgs=solver)
     assert np.array_equal(a[0], b[0])
+
+
+def test_auto_small_mesh_on_a_gpu_runs_numpy_and_says_so(solver, monkeypatch):
+    """With a GPU device, 'auto' on a small mesh is NumPy throughout (the device solver is
+    for CPU devices) and its name does not claim OpenCL."""
+    from core import backends
+
+    monkeypatch.setattr(backends, "_device_is_cpu", lambda: False)
+    p, fs, _groups, _free = mesh("quad_hole")
+    res = untangle_and_smooth(p, fs, backend="auto")
+    assert res.backend == backends.SMALL_ON_GPU and not res.backend.startswith("opencl")
+    assert np.array_equal(res.points, untangle_and_smooth(p, fs, backend="numpy").points)
