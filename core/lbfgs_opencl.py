@@ -132,10 +132,13 @@ class OpenCLLbfgs:
         rel_tol: float = 1e-7,
         tick: Callable[[int], bool] | None = None,
     ) -> tuple[np.ndarray, int]:
+        kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
         if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernel: the host's
-            kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
             return gu._lbfgs(en, st, v0, eps, **kw)
-        tb = self._tables_for(en, st)
+        try:
+            tb = self._tables_for(en, st)
+        except ValueError:  # indices beyond 32 bits: the host solver, same result
+            return gu._lbfgs(en, st, v0, eps, **kw)
         cl, queue = self.cl, self.queue
         state = np.zeros(tb.state_len, dtype=np.float64)
         state[:4] = eps, getattr(en, "qc", 0.0), 0.1 * en.h_mean, rel_tol
