@@ -35,8 +35,7 @@ def _device_is_cpu() -> bool:
     """Whether the OpenCL device runs would use is a CPU (pocl and the like)."""
     from .engine_opencl import _runtime
 
-    rt = _runtime()
-    return bool(rt.device.type & rt.cl.device_type.CPU)
+    return _runtime().is_cpu
 
 
 def make_engine(

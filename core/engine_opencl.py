@@ -150,21 +150,29 @@ class _Runtime:
     queue: object
     programs: dict = field(default_factory=dict)
 
-    def program(self, maxn: int):
-        """The kernels built for this device (once per process and n-gon size class); a
-        failed build is remembered too, so it is reported, not retried, on later runs."""
-        prg = self.programs.get(maxn)
+    @property
+    def is_cpu(self) -> bool:
+        """A CPU device (pocl and the like), where single work-item kernels pay off."""
+        return bool(self.device.type & self.cl.device_type.CPU)
+
+    def build(self, key: str, source: str, options: list[str], what: str = "kernel"):
+        """`source` built for this device once per process and `key`; a failed build is
+        remembered too, so it is reported, not retried, on later runs (RuntimeError)."""
+        prg = self.programs.get(key)
         if prg is None:
             try:
-                prg = self.cl.Program(self.ctx, kernel_source()).build(
-                    options=[f"-DMAXN={maxn}", f"-DCH={_CH}", f"-DNCACHE={_NCACHE}"]
-                )
+                prg = self.cl.Program(self.ctx, source).build(options=options)
             except Exception as exc:
-                prg = RuntimeError(f"kernel build failed on {self.name}: {_build_error(exc)}")
-            self.programs[maxn] = prg
+                prg = RuntimeError(f"{what} build failed on {self.name}: {_build_error(exc)}")
+            self.programs[key] = prg
         if isinstance(prg, RuntimeError):
             raise prg
         return prg
+
+    def program(self, maxn: int):
+        """The EEGT kernels, built once per n-gon size class."""
+        options = [f"-DMAXN={maxn}", f"-DCH={_CH}", f"-DNCACHE={_NCACHE}"]
+        return self.build(f"eegt MAXN={maxn}", kernel_source(), options)
 
 
 def _build_error(exc: Exception) -> str:

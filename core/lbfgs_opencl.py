@@ -4,8 +4,9 @@
 last bit): the energy tables are uploaded once per energy object, the whole solve runs in
 one single-work-item kernel (core/lbfgs_kernel.cl), and only the solution comes back. The
 kernel pauses every `TICK_EVERY` iterations when the caller passes a progress tick, so
-progress and cancelling work as on the host. Meant for CPU devices, where one compiled loop
-beats NumPy's per-call overhead at every mesh size; a GPU would run it on one thread.
+progress and cancelling work as on the host. Meant for CPU devices (`device_solver` gives
+none elsewhere), where one compiled loop beats NumPy's per-call overhead at every mesh size;
+a GPU would run it on one thread.
 """
 
 from __future__ import annotations
@@ -24,12 +25,15 @@ _ST_TICK = 1  # kernel status: paused for a progress tick
 _solvers: dict[str, OpenCLLbfgs] = {}
 
 
-def device_solver() -> OpenCLLbfgs:
+def device_solver() -> OpenCLLbfgs | None:
     """The solver of the chosen OpenCL device, made once per process and device (a kernel
-    object costs ~0.5 ms); RuntimeError when there is no device or the kernel does not build."""
+    object costs ~0.5 ms); None on a non-CPU device (one work-item would run on one GPU
+    thread); RuntimeError when there is no device or the kernel does not build."""
     from .engine_opencl import _runtime
 
     rt = _runtime()
+    if not rt.is_cpu:
+        return None
     solver = _solvers.get(rt.name)
     if solver is None:
         solver = _solvers[rt.name] = OpenCLLbfgs()
@@ -79,23 +83,17 @@ class OpenCLLbfgs:
     """`_lbfgs` for `untangle_global` / `lift_min_quality`, run by an OpenCL kernel."""
 
     def __init__(self) -> None:
-        from .engine_opencl import _build_error, _runtime
+        from .engine_opencl import _runtime
 
         rt = _runtime()
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
-        self.is_cpu = bool(rt.device.type & rt.cl.device_type.CPU)
-        key = f"lbfgs M={gu.LBFGS_MEMORY}"
-        prg = rt.programs.get(key)
-        if prg is None:
-            try:
-                src = KERNEL_FILE.read_text()
-                prg = self.cl.Program(self.ctx, src).build(options=[f"-DM={gu.LBFGS_MEMORY}"])
-            except Exception as exc:
-                prg = RuntimeError(f"L-BFGS kernel build failed on {rt.name}: {_build_error(exc)}")
-            rt.programs[key] = prg
-        if isinstance(prg, RuntimeError):
-            raise prg
+        prg = rt.build(
+            f"lbfgs M={gu.LBFGS_MEMORY}",
+            KERNEL_FILE.read_text(),
+            [f"-DM={gu.LBFGS_MEMORY}"],
+            what="L-BFGS kernel",
+        )
         self.kernel = self.cl.Kernel(prg, "lbfgs_run")
         self._tables: dict[int, tuple[gu._Energy, _Tables]] = {}
 

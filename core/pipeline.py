@@ -122,8 +122,8 @@ class _CancelRun(Exception):
 
 
 def _device_lbfgs(backend_name: str):
-    """The global stage's L-BFGS on the OpenCL device when the run uses OpenCL on a CPU device
-    (one work-item: a GPU would run it on one thread); None = the host's NumPy solver."""
+    """The global stage's L-BFGS on the OpenCL device when the run uses OpenCL and the device
+    is a CPU (`device_solver` gives none elsewhere); None = the host's NumPy solver."""
     if not backend_name.startswith("opencl"):
         return None
     from .lbfgs_opencl import device_solver
@@ -135,7 +135,7 @@ def _device_lbfgs(backend_name: str):
 
         warnings.warn(f"{exc}; global stage on NumPy", RuntimeWarning, stacklevel=4)
         return None
-    return solver if solver.is_cpu else None
+    return solver
 
 
 class _Run:
@@ -149,7 +149,7 @@ class _Run:
         self.best_pts: np.ndarray | None = None  # None: the engine's best buffer holds it
         self.engine.save_best()
         self.n_untangle = self.n_smooth = self.n_global = 0
-        self.lbfgs = _device_lbfgs(self.backend_name)
+        self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
 
     def report(self, it: int, phase: str, s: Stats) -> None:
         if self.progress is None:
@@ -230,6 +230,7 @@ class _Run:
             self.n_global = iterations
             self.report(base + iterations, "global", Stats(n_inv, self.best.q_min, self.best.q_avg))
 
+        self.lbfgs = _device_lbfgs(self.backend_name)  # built here: not for runs without one
         try:
             pts, info = untangle_global(
                 start,

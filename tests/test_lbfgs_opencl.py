@@ -230,3 +230,16 @@ def test_auto_small_mesh_on_a_gpu_runs_numpy_and_says_so(solver, monkeypatch):
     res = untangle_and_smooth(p, fs, backend="auto")
     assert res.backend == backends.SMALL_ON_GPU and not res.backend.startswith("opencl")
     assert np.array_equal(res.points, untangle_and_smooth(p, fs, backend="numpy").points)
+
+
+def test_no_device_solver_on_a_gpu_and_opencl_runs_keep_the_host_global_stage(
+    solver, monkeypatch
+):
+    """On a non-CPU device there is no device solver (one work-item would be one GPU thread):
+    an 'opencl' run keeps its engine on the device and the global stage on the host."""
+    monkeypatch.setattr(eo._Runtime, "is_cpu", property(lambda self: False))
+    assert lo.device_solver() is None
+    p, fs, _groups, _free = mesh("quad_hole")
+    res = untangle_and_smooth(p, fs, backend="opencl")
+    assert res.backend == "opencl" and res.global_iterations > 0
+    assert np.array_equal(res.points, untangle_and_smooth(p, fs, backend="numpy").points)
