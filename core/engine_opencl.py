@@ -205,6 +205,14 @@ def _runtime() -> _Runtime:
     return rt
 
 
+def bincount_csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(row pointer, positions): each key's entries in ascending position, the order in
+    which `np.bincount(keys, w)` adds them, so a kernel's gather sums like NumPy."""
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
+    return ptr, np.argsort(keys, kind="stable")
+
+
 def _pow_mode(e: float) -> int:
     """How NumPy's ndarray ** scalar evaluates: its fast paths, else pow (kernel np_pow)."""
     return {2.0: 1, 1.0: 2, 0.0: 3, 0.5: 4, -1.0: 5}.get(float(e), 0)
@@ -259,11 +267,9 @@ class OpenCLEngine:
         corner_face = np.concatenate(
             [np.tile(np.arange(g.size, dtype=np.int64) + fo, g.n) for g, fo in self._fo(groups)]
         )
-        keep = ref.free[ref.corner_nodes]
-        order = np.argsort(ref.corner_nodes, kind="stable")
-        order = order[keep[order]]
-        row = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(np.bincount(ref.corner_nodes[keep], minlength=n), out=row[1:])
+        kept = np.flatnonzero(ref.free[ref.corner_nodes])
+        row, order = bincount_csr(ref.corner_nodes[kept], n)
+        order = kept[order]
         self.row = buf(row.astype(np.int32))
         self.ccorner = buf(np.ascontiguousarray(order, dtype=np.int32))
         self.cface = buf(np.ascontiguousarray(corner_face[order], dtype=np.int32))

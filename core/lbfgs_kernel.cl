@@ -129,7 +129,7 @@ typedef double4 V;
 typedef long4 VL;
 
 typedef struct {
-    int nn, nf, nc, nc4, ne, mode;
+    int nf, nc, nc4, ne, mode;
     __global const int *fidx, *i0, *i1, *i2, *gptr, *gpos, *eid, *eptr, *ecorn;
     __global const double *w00, *w01, *w11, *weight, *dpre, *ncorn;
     __global double *X, *Y, *c1x, *c1y, *c2x, *c2y, *ct, *cr, *et, *edq, *eni;
@@ -327,7 +327,6 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
     const int max_it = T[T_MAXIT], guard = T[T_GUARD], tick_every = T[T_TICK];
     const double h0 = S[2], rel_tol = S[3];
     Problem P;
-    P.nn = nn;
     P.nf = nf;
     P.nc = nc;
     P.nc4 = nc4;

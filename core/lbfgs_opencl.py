@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import global_untangle as gu
+from .engine_opencl import _runtime, bincount_csr
 
 __all__ = ["KERNEL_FILE", "OpenCLLbfgs", "device_solver"]
 
@@ -29,8 +30,6 @@ def device_solver() -> OpenCLLbfgs | None:
     """The solver of the chosen OpenCL device, made once per process and device (a kernel
     object costs ~0.5 ms); None on a non-CPU device (one work-item would run on one GPU
     thread); RuntimeError when there is no device or the kernel does not build."""
-    from .engine_opencl import _runtime
-
     rt = _runtime()
     if not rt.is_cpu:
         return None
@@ -38,13 +37,6 @@ def device_solver() -> OpenCLLbfgs | None:
     if solver is None:
         solver = _solvers[rt.name] = OpenCLLbfgs()
     return solver
-
-
-def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(row pointer, positions) of each key's entries in ascending position (bincount order)."""
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
-    return ptr, np.argsort(keys, kind="stable")
 
 
 class _Tables:
@@ -56,14 +48,14 @@ class _Tables:
         ne = en.n_elem if lift else 0
         pad = np.minimum(np.arange(-(-nc // 4) * 4), nc - 1)  # corner arrays: 4-wide, padded
         nc4 = pad.size
-        gptr, gpos = _csr(en.idx, nn)
+        gptr, gpos = bincount_csr(en.idx, nn)
         part, corner = np.divmod(gpos, nc)  # entry of [e1, e2, -(e1 + e2)], coded for gather
         gpos = np.where(part == 0, corner, np.where(part == 1, nc4 + corner, -1 - corner))
         ints = [st.fidx, en.i0[pad], en.i1[pad], en.i2[pad], gptr, gpos]
         dbls = [st.x, st.y, en.w00[pad], en.w01[pad], en.w11[pad], en.weight[pad]]
         dbls.append(np.tile(en.precond[st.fidx], 2))
         if lift:
-            eptr, ecorn = _csr(en.eid, ne)
+            eptr, ecorn = bincount_csr(en.eid, ne)
             ints += [en.eid[pad], eptr, ecorn]
             dbls.append(en.n_corners)
         flat = np.concatenate([np.asarray(a, dtype=np.int64) for a in ints])
@@ -83,8 +75,6 @@ class OpenCLLbfgs:
     """`_lbfgs` for `untangle_global` / `lift_min_quality`, run by an OpenCL kernel."""
 
     def __init__(self) -> None:
-        from .engine_opencl import _runtime
-
         rt = _runtime()
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
