@@ -656,6 +656,15 @@ def _lbfgs(
 # --------------------------------------------------------------------------- driver
 
 
+def _checked_input(points, free) -> tuple[np.ndarray, np.ndarray]:
+    """A float64 copy of the (N, 2) points and the (N,) bool free mask; ValueError else."""
+    P = np.array(points, dtype=np.float64, copy=True)
+    free = np.asarray(free, dtype=bool).reshape(-1)
+    if P.ndim != 2 or P.shape[1] != 2 or free.shape[0] != P.shape[0]:
+        raise ValueError("points must be (N, 2) and free (N,)")
+    return P, free
+
+
 def untangle_global(
     points: np.ndarray,
     groups: Mapping[int, np.ndarray],
@@ -687,10 +696,7 @@ def untangle_global(
     "nothing to do").
     """
     t_start = time.perf_counter()
-    P = np.array(points, dtype=np.float64, copy=True)
-    free = np.asarray(free, dtype=bool).reshape(-1)
-    if P.ndim != 2 or P.shape[1] != 2 or free.shape[0] != P.shape[0]:
-        raise ValueError("points must be (N, 2) and free (N,)")
+    P, free = _checked_input(points, free)
     if not np.all(np.isfinite(P)):
         raise ValueError("points contain NaN or inf")
     if not polish_power > 0.0:
@@ -819,10 +825,7 @@ def lift_min_quality(
     lbfgs: a drop-in for `_lbfgs` (same arguments and result), e.g. the OpenCL solver.
     """
     t_start = time.perf_counter()
-    P = np.array(points, dtype=np.float64, copy=True)
-    free = np.asarray(free, dtype=bool).reshape(-1)
-    if P.ndim != 2 or P.shape[1] != 2 or free.shape[0] != P.shape[0]:
-        raise ValueError("points must be (N, 2) and free (N,)")
+    P, free = _checked_input(points, free)
     run_lbfgs = lbfgs or _lbfgs
     en = _LiftEnergy(P, groups, free)
     st = _State(P, free)
