@@ -110,7 +110,7 @@ MESHES = [
 # Paper mode is slow here (thousands of iterations on ~10k faces): one run, said in the table.
 PAPER_ONE_RUN = {"naca_deform", "two_holes_twist"}
 BLENDER_FACTOR, BLENDER_REPEAT = 0.5, 100
-SMALL_REPEATS = 15  # runs of the defaults on meshes done in under 0.1 s (noisy at 3)
+SMALL_REPEATS = 15  # timed rounds when the first round took under 0.2 s (noisy at 3)
 
 
 def load_table1() -> tuple[np.ndarray, np.ndarray]:
@@ -247,36 +247,28 @@ class Blender:
         return before, after, bfaces, statistics.median(times), select
 
 
-def run_ours(points: np.ndarray, faces, params, repeats: int):
+def run_ours(points: np.ndarray, faces, params, repeats: int, backends=("numpy",),
+             warm: bool = False):
+    """({backend: (last result, median seconds)}, repeats). Backends are timed alternately
+    (the machine's speed drifts; alternating keeps them comparable). warm: one untimed run
+    each first (kernel builds), and SMALL_REPEATS when the first timed round took < 0.2 s."""
     from core import untangle_and_smooth
 
-    times, res = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        res = untangle_and_smooth(points, faces, params=params)
-        times.append(time.perf_counter() - t)
-    return res, statistics.median(times)
-
-
-def run_numpy_and_auto(points: np.ndarray, faces, params, repeats: int):
-    """The defaults with backend="numpy" and "auto", timed alternately (the machine's speed
-    drifts; alternating keeps the two comparable); small meshes get more repeats."""
-    from core import untangle_and_smooth
-
-    t = time.perf_counter()
-    untangle_and_smooth(points, faces, params=params, backend="auto")  # warm (kernel builds)
-    untangle_and_smooth(points, faces, params=params, backend="numpy")
-    if time.perf_counter() - t < 0.2:
-        repeats = max(repeats, SMALL_REPEATS)
-    times: dict[str, list[float]] = {"numpy": [], "auto": []}
+    if warm:
+        for backend in backends:
+            untangle_and_smooth(points, faces, params=params, backend=backend)
+    times: dict[str, list[float]] = {b: [] for b in backends}
     res = {}
-    for _ in range(repeats):
-        for backend in times:
+    done = 0
+    while done < repeats:
+        for backend in backends:
             t = time.perf_counter()
             res[backend] = untangle_and_smooth(points, faces, params=params, backend=backend)
             times[backend].append(time.perf_counter() - t)
-    return (res["numpy"], statistics.median(times["numpy"]), res["auto"],
-            statistics.median(times["auto"]), repeats)
+        done += 1
+        if warm and done == 1 and sum(v[0] for v in times.values()) < 0.2:
+            repeats = max(repeats, SMALL_REPEATS)
+    return {b: (res[b], statistics.median(times[b])) for b in backends}, repeats
 
 
 def auto_row(res, sec: float, numpy_res, repeats: int) -> Row:
@@ -358,10 +350,12 @@ def mesh_table(
     for mode, params in (("paper", EEGTParams.paper()), ("defaults", EEGTParams())):
         n = 1 if mode == "paper" and key in PAPER_ONE_RUN else repeats
         if mode == "defaults":
-            res, sec, ares, asec, n = run_numpy_and_auto(p, faces, params, repeats)
-            rows.append(auto_row(ares, asec, res, n))
+            runs, n = run_ours(p, faces, params, repeats, ("numpy", "auto"), warm=True)
+            res, sec = runs["numpy"]
+            rows.append(auto_row(*runs["auto"], res, n))
         else:
-            res, sec = run_ours(p, faces, params, n)
+            runs, _ = run_ours(p, faces, params, n)
+            res, sec = runs["numpy"]
         a = res.after
         note = its(res) + ("" if n == repeats else f"; {n} run (slow)" if n == 1 else
                            f"; median of {n}")
