@@ -8,14 +8,19 @@ import bpy
 from . import props
 
 
-class VIEW3D_PT_eegt(bpy.types.Panel):
+class _EEGTTab:
+    """Where every panel of the extension lives: the 3D View sidebar's EEGT tab."""
+
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "EEGT"
+
+
+class VIEW3D_PT_eegt(_EEGTTab, bpy.types.Panel):
     """Parameters, pins, analysis and the Untangle & Smooth button"""
 
     bl_label = "EEGT Untangle & Smooth"
     bl_idname = "VIEW3D_PT_eegt"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "EEGT"
 
     def draw(self, context: bpy.types.Context) -> None:
         layout = self.layout
@@ -37,14 +42,11 @@ class VIEW3D_PT_eegt(bpy.types.Panel):
         row.prop(settings, "project")
 
 
-class VIEW3D_PT_eegt_params(bpy.types.Panel):
+class VIEW3D_PT_eegt_params(_EEGTTab, bpy.types.Panel):
     """Every EEGT parameter (defaults of the operator)"""
 
     bl_label = "Parameters"
     bl_idname = "VIEW3D_PT_eegt_params"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "EEGT"
     bl_parent_id = "VIEW3D_PT_eegt"
     bl_options = {"DEFAULT_CLOSED"}  # noqa: RUF012
 
@@ -57,14 +59,11 @@ class VIEW3D_PT_eegt_params(bpy.types.Panel):
             layout.prop(settings, f.name)
 
 
-class VIEW3D_PT_eegt_last_run(bpy.types.Panel):
+class VIEW3D_PT_eegt_last_run(_EEGTTab, bpy.types.Panel):
     """Statistics of the last run on the active object"""
 
     bl_label = "Last Run"
     bl_idname = "VIEW3D_PT_eegt_last_run"
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = "EEGT"
     bl_parent_id = "VIEW3D_PT_eegt"
 
     def draw(self, context: bpy.types.Context) -> None:

@@ -39,6 +39,10 @@ def test_register_unregister_twice(bpy, ext):
     for name in ("MESH_OT_eegt_analyze", "MESH_OT_eegt_select_inverted", "MESH_OT_eegt_pin",
                  "MESH_OT_eegt_unpin", "VIEW3D_PT_eegt"):
         assert hasattr(bpy.types, name), name
+    for name in ("VIEW3D_PT_eegt", "VIEW3D_PT_eegt_params", "VIEW3D_PT_eegt_last_run"):
+        panel = getattr(bpy.types, name)  # all in the 3D View sidebar's EEGT tab
+        assert (panel.bl_space_type, panel.bl_region_type, panel.bl_category) == (
+            "VIEW_3D", "UI", "EEGT"), name
     # the redo panel carries every core parameter
     op_props = bpy.ops.mesh.eegt_untangle_smooth.get_rna_type().properties.keys()
     for f in ext.core.EEGTParams.field_names():
