@@ -94,6 +94,10 @@ class FaceSet:
         pos = np.arange(self.indices.size)
         return FaceSet(self.offsets, self.indices[starts + ends - 1 - pos])
 
+    def by_arity(self) -> dict[int, np.ndarray]:
+        """arity -> (F_n, n) node array, a face per row: the global stage's mesh format."""
+        return {g.n: np.ascontiguousarray(g.nodes.T) for g in self.groups}
+
     def to_lists(self) -> list[list[int]]:
         return [self.indices[a:b].tolist() for a, b in zip(self.offsets[:-1], self.offsets[1:])]
 

@@ -223,7 +223,7 @@ class _Run:
         from .global_untangle import untangle_global
 
         start = self.best_points()
-        groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in self.fs.groups}
+        groups = self.fs.by_arity()
         base = self.n_untangle
 
         def relay(iterations: int, _max_iter: int, n_inv: int) -> None:

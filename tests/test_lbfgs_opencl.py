@@ -37,7 +37,7 @@ def mesh(name: str):
     v, f = read_obj(DATA / f"{name}.obj")
     p = np.ascontiguousarray(v[:, :2])
     fs = as_faceset(f, len(p))
-    groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in fs.groups}
+    groups = fs.by_arity()
     return p, fs, groups, free_nodes(len(p), fs)
 
 
@@ -187,7 +187,7 @@ def test_random_polygon_meshes_with_pins_bit_identical(solver, case):
     free = free_nodes(len(pts), fs, pinned)
     if not free.any():
         return
-    groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in fs.groups}
+    groups = fs.by_arity()
     host = gu.untangle_global(pts, groups, free, polish_iter=100)
     dev = gu.untangle_global(pts, groups, free, polish_iter=100, lbfgs=solver)
     assert np.array_equal(host[0], dev[0]) and host[1]["iterations"] == dev[1]["iterations"]
@@ -211,7 +211,7 @@ def test_big_ngon_and_single_free_node(solver, what):
         faces = [[k, (k + 1) % 6, 6] for k in range(6)]
     fs = as_faceset(faces, len(pts))
     free = free_nodes(len(pts), fs)
-    groups = {g.n: np.ascontiguousarray(g.nodes.T) for g in fs.groups}
+    groups = fs.by_arity()
     host = gu.untangle_global(pts, groups, free, polish_iter=50)
     dev = gu.untangle_global(pts, groups, free, polish_iter=50, lbfgs=solver)
     assert host[1]["iterations"] > 0 and np.array_equal(host[0], dev[0])

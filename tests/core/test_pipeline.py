@@ -222,3 +222,13 @@ def test_cancel_during_global_stage_returns_input():
     res = untangle_and_smooth(p, f, progress=progress)
     assert res.status == "cancelled" and np.array_equal(res.points, p)
     assert phases[-1] == "global"
+
+
+def test_faceset_by_arity_rows_are_the_faces_in_order():
+    from core import as_faceset
+
+    faces = [[0, 1, 4, 3], [1, 2, 4], [2, 5, 4], [3, 4, 5, 7, 6]]
+    by = as_faceset(faces, 8).by_arity()
+    assert sorted(by) == [3, 4, 5]
+    assert by[3].tolist() == [[1, 2, 4], [2, 5, 4]] and by[4].tolist() == [[0, 1, 4, 3]]
+    assert by[5].tolist() == [[3, 4, 5, 7, 6]] and all(a.flags.c_contiguous for a in by.values())
