@@ -85,11 +85,11 @@ class OpenCLLbfgs:
             what="L-BFGS kernel",
         )
         self.kernel = self.cl.Kernel(prg, "lbfgs_run")
-        self._tables: dict[int, tuple[gu._Energy, _Tables]] = {}
+        self._last: tuple[gu._Energy, gu._State, _Tables] | None = None  # reused per round
 
     def release(self) -> None:
-        """Forget the uploaded tables (and the energies they came from): end of a run."""
-        self._tables = {}
+        """Forget the uploaded tables (and the energy they came from): end of a run."""
+        self._last = None
 
     def _buffer(self, a: np.ndarray):
         mf = self.cl.mem_flags
@@ -99,14 +99,11 @@ class OpenCLLbfgs:
         return self.cl.Buffer(self.ctx, self.cl.mem_flags.READ_WRITE, max(int(nbytes), 8))
 
     def _tables_for(self, en: gu._Energy, st: gu._State) -> _Tables:
-        hit = self._tables.get(id(en))
-        if hit is None or hit[0] is not en:
-            self._tables = {k: t for k, t in self._tables.items() if t[0] is not en}
-            hit = (en, _Tables(self, en, st))
-            self._tables[id(en)] = hit
-            if len(self._tables) > 4:  # lift rounds make a new energy each: keep a few
-                del self._tables[next(iter(self._tables))]
-        return hit[1]
+        """The device tables of (en, st): untangle_global solves one energy many times; each
+        lift round makes a new one, solved once."""
+        if self._last is None or self._last[0] is not en or self._last[1] is not st:
+            self._last = (en, st, _Tables(self, en, st))
+        return self._last[2]
 
     def __call__(
         self,
