@@ -12,6 +12,7 @@ import numpy as np
 
 from .distance import NearestBoundary
 from .faces import FaceSet
+from .fpmath import power
 from .params import EEGTParams
 from .quality import Stats, group_quality, stats_of
 from .transform import _edge_sum, group_transform_delta
@@ -129,7 +130,7 @@ class NumpyEngine:
         c = self.params.c
         floor = _DIST_FLOOR * self.lbar
         cx, cy = self._centroids() if centroids is None else centroids
-        f = (self.lbar / np.maximum(self._distance.query(cx, cy), floor)) ** c
+        f = power(self.lbar / np.maximum(self._distance.query(cx, cy), floor), c)
         self.inv_d_pow = np.split(f, np.cumsum([g.size for g in self.groups])[:-1])
 
     def _quality_all(self) -> list[np.ndarray]:
@@ -147,7 +148,7 @@ class NumpyEngine:
         for g, q, f in zip(self.groups, self.q, self.inv_d_pow):
             X, Y = self._gather(g)
             DX, DY = group_transform_delta(X, Y, p.a * (1.0 - q), p.scaling)
-            gq = np.where(q > 0, (1.0 - q) ** p.eta, p.inverted_weight)
+            gq = np.where(q > 0, power(1.0 - q, p.eta), p.inverted_weight)
             w = f * gq
             wx.append((DX * w).ravel())
             wy.append((DY * w).ravel())

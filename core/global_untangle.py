@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from . import fpmath
+
 __all__ = ["lift_min_quality", "untangle_global"]
 
 THETA = 1.0 / 16.0  # weight of the area term g against the shape term f
@@ -112,6 +114,12 @@ def _corners(
     return np.concatenate(i0), np.concatenate(i1), np.concatenate(i2), np.concatenate(eid)
 
 
+def _per_arity(arity: np.ndarray, fn: Callable[[int], float]) -> np.ndarray:
+    """fn(n) for each entry of an integer arity array, evaluated once per distinct n."""
+    values, inverse = np.unique(arity, return_inverse=True)
+    return np.array([fn(int(n)) for n in values], dtype=np.float64)[inverse]
+
+
 def _reference_sizes(
     points: np.ndarray, arity: np.ndarray, edges: np.ndarray, edge_elem: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -126,7 +134,8 @@ def _reference_sizes(
     p0 = points.take(edges[0], axis=0)  # = points[edges[0]]
     p1 = points.take(edges[1], axis=0)
     d = p1 - p0
-    elen = np.hypot(d[:, 0], d[:, 1])
+    dx, dy = d[:, 0], d[:, 1]
+    elen = np.sqrt(dx * dx + dy * dy)
     positive = elen[elen > 0]
     floor = 1e-3 * (float(np.mean(positive)) if positive.size else 1.0)
     elen = np.maximum(elen, floor)
@@ -134,22 +143,22 @@ def _reference_sizes(
     hn = np.bincount(edges[0], weights=elen, minlength=n_nodes)
     hn = hn + np.bincount(edges[1], weights=elen, minlength=n_nodes)
     hn = np.maximum(hn / np.maximum(2.0 * cnt, 1.0), floor)
-    lh = np.log(hn)
+    lh = fpmath.log(hn)
     deg = arity.astype(np.float64)
     le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     for _ in range(SIZE_SMOOTHING):
         lh = np.bincount(edges[0], weights=le[edge_elem], minlength=n_nodes)
-        lh = np.where(cnt > 0, lh / np.maximum(cnt, 1.0), np.log(floor))
+        lh = np.where(cnt > 0, lh / np.maximum(cnt, 1.0), fpmath.log(np.array(floor)))
         le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
-    size = np.exp(le)
-    ref_area = arity * size**2 / (4.0 * np.tan(np.pi / arity))
+    size = fpmath.exp(le)
+    ref_area = arity * size**2 / (4.0 * _per_arity(arity, fpmath.tan_pi_over))
     x0, y0 = p0.T
     x1, y1 = p1.T
     dom_area = 0.5 * float(np.sum(x0 * y1 - x1 * y0))
     total = float(np.sum(ref_area))
     if dom_area > 0.0 and total > 0.0:
         size = size * np.sqrt(dom_area / total)
-    return size, np.exp(lh)
+    return size, fpmath.exp(lh)
 
 
 # --------------------------------------------------------------------------- energy
@@ -250,11 +259,12 @@ class _Energy:
         """Energy corners (k, k+1, k-1) with their element's arity and reference size."""
         self.i0, self.i1, self.i2 = i0, i1, i2
         n = arity.astype(np.float64)
-        a = (n - 2.0) * np.pi / n
+        cos_a = _per_arity(arity, lambda k: fpmath.regular_corner(k)[0])
+        sin_a = _per_arity(arity, lambda k: fpmath.regular_corner(k)[1])
         # W = s [[1, cos a], [0, sin a]]  ->  W^-1 = [[1, -cot a], [0, 1 / sin a]] / s
         self.w00 = 1.0 / s
-        self.w01 = -np.cos(a) / (np.sin(a) * s)
-        self.w11 = 1.0 / (np.sin(a) * s)
+        self.w01 = -cos_a / (sin_a * s)
+        self.w11 = 1.0 / (sin_a * s)
         # One weight per element (spread over its corners): uniform, not the reference area;
         # area weights let small elements absorb all distortion (see the docs).
         self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
@@ -346,7 +356,7 @@ class _Energy:
         chi = _chi(d, eps, np.sqrt(eps * eps + d * d))
         u = num / chi
         if self.power != 1.0:
-            u = (0.5 * u) ** self.power
+            u = fpmath.power(0.5 * u, self.power)
         return float(np.add.reduce(self.weight * u))
 
     def value_grad(
@@ -376,7 +386,7 @@ class _Energy:
         np.divide(self.weight, chi, inv_chi)
         if self.power != 1.0:  # F = sum w (u / 2)^p with u = num / chi
             u = 0.5 * num / chi
-            up = u**self.power
+            up = fpmath.power(u, self.power)
             energy = float(np.add.reduce(self.weight * up))
             np.multiply(inv_chi, 0.5 * self.power, inv_chi)  # inv_chi (p / 2) (up / u)
             np.multiply(inv_chi, up / u, inv_chi)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .faces import as_faceset
+from .fpmath import regular_corner
 
 __all__ = ["Stats", "group_quality", "mesh_stats", "quality", "stats_of"]
 
@@ -40,8 +41,8 @@ class Stats:
 
 def corner_constants(n: int) -> tuple[float, float]:
     """(cos a, 1 / sin a) of the regular n-gon's interior angle a = (n - 2) pi / n."""
-    a = (n - 2) * np.pi / n
-    return float(np.cos(a)), float(1.0 / np.sin(a))
+    cos_a, sin_a = regular_corner(n)  # CPU-independent bits (core.fpmath)
+    return cos_a, 1.0 / sin_a
 
 
 def group_quality(X: np.ndarray, Y: np.ndarray) -> np.ndarray:

@@ -1,0 +1,112 @@
+"""Elementary functions built from IEEE basic operations only: the same bits on every CPU.
+
+NumPy evaluates float64 log, exp, tan and power with code chosen at run time by CPU
+feature (AVX-512 kernels where the CPU has them, libm elsewhere), and the two differ in the
+last bit. A long optimization turns one ulp into another trajectory, so the core never calls
+them: these use only +, -, *, /, sqrt (correctly rounded everywhere), frexp / ldexp / rint
+(exact) and fixed polynomial orders. Accuracy is 1-3 ulp, which is all the core needs.
+The OpenCL kernels implement `power` with the same operations in the same order.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["exp", "log", "power", "regular_corner", "sin_cos", "tan_pi_over"]
+
+_SQRT_HALF = 0.7071067811865476  # the double nearest sqrt(1/2)
+_LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2^20
+_LN2_LO = 1.90821492927058770002e-10
+_INV_LN2 = 1.4426950408889634
+# log(m) = 2 atanh(f) = 2 f sum_k s^k / (2k + 1), f = (m - 1) / (m + 1), s = f^2 <= 0.0295
+LOG_COEFFS = tuple(1.0 / (2 * k + 1) for k in range(12))
+# exp(r) = sum_j r^j / j!, |r| <= ln(2) / 2
+EXP_COEFFS = tuple(1.0 / math.factorial(j) for j in range(14))
+_EXP_MAX, _EXP_MIN = 709.782712893384, -745.1332191019412
+
+
+def log(x: np.ndarray) -> np.ndarray:
+    """Natural log of positive finite values (others: NaN or -inf as math says)."""
+    x = np.asarray(x, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m, e = np.frexp(x)  # x = m 2^e, 0.5 <= m < 1
+        low = m < _SQRT_HALF
+        m = np.where(low, m * 2.0, m)  # now sqrt(1/2) <= m < sqrt(2)
+        k = (e - low).astype(np.float64)
+        f = (m - 1.0) / (m + 1.0)
+        s = f * f
+        p = np.full_like(s, LOG_COEFFS[-1])
+        for c in LOG_COEFFS[-2::-1]:
+            p = p * s + c
+        out = k * _LN2_HI + (k * _LN2_LO + 2.0 * f * p)
+    out = np.where(x > 0.0, out, np.where(x == 0.0, -np.inf, np.nan))
+    return np.where(np.isposinf(x), np.inf, out)
+
+
+def exp(x: np.ndarray) -> np.ndarray:
+    """e^x (overflow gives inf, underflow 0; NaN stays NaN)."""
+    x = np.asarray(x, dtype=np.float64)
+    xc = np.clip(x, _EXP_MIN, _EXP_MAX)
+    k = np.rint(xc * _INV_LN2)
+    r = (xc - k * _LN2_HI) - k * _LN2_LO
+    p = np.full_like(r, EXP_COEFFS[-1])
+    for c in EXP_COEFFS[-2::-1]:
+        p = p * r + c
+    out = np.ldexp(p, np.nan_to_num(k).astype(np.intc))
+    out = np.where(x > _EXP_MAX, np.inf, np.where(x < _EXP_MIN, 0.0, out))
+    return np.where(np.isnan(x), np.nan, out)
+
+
+def power(x: np.ndarray, e: float) -> np.ndarray:
+    """x^e for x >= 0: NumPy's exact fast paths for e in {2, 1, 0, 0.5, -1} (what `x ** e`
+    computes there), exp(e log x) otherwise."""
+    x = np.asarray(x, dtype=np.float64)
+    e = float(e)
+    if e == 2.0:
+        return x * x
+    if e == 1.0:
+        return x.copy()
+    if e == 0.0:
+        return np.ones_like(x)
+    if e == 0.5:
+        return np.sqrt(x)
+    if e == -1.0:
+        return 1.0 / x
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        return exp(e * log(x))
+
+
+def sin_cos(t: float) -> tuple[float, float]:
+    """(sin t, cos t) for 0 <= t <= pi by fixed-length Taylor series on Python floats."""
+    t = float(t)
+    h = 0.5 * t  # series at t / 2, then the double-angle formulas (cos from 1 - 2 sin^2)
+    s = c = 0.0
+    term_s, term_c = h, 1.0
+    h2 = h * h
+    for j in range(1, 16):
+        s += term_s
+        c += term_c
+        term_s = -term_s * h2 / ((2 * j) * (2 * j + 1))
+        term_c = -term_c * h2 / ((2 * j - 1) * (2 * j))
+    return 2.0 * s * c, (c - s) * (c + s)
+
+
+def tan_pi_over(n: int) -> float:
+    """tan(pi / n) for n >= 3, exact where the value is a square root."""
+    special = {3: math.sqrt(3.0), 4: 1.0, 6: 1.0 / math.sqrt(3.0)}
+    if n in special:
+        return special[n]
+    s, c = sin_cos(math.pi / n)
+    return s / c
+
+
+def regular_corner(n: int) -> tuple[float, float]:
+    """(cos a, sin a) of the regular n-gon's interior angle a = (n - 2) pi / n."""
+    half3 = 0.5 * math.sqrt(3.0)
+    special = {3: (0.5, half3), 4: (0.0, 1.0), 6: (-0.5, half3)}
+    if n in special:
+        return special[n]
+    s, c = sin_cos(2.0 * math.pi / n)  # a = pi - 2 pi / n
+    return -c, s
