@@ -118,6 +118,21 @@ def faces_from_csr(loop_start, loop_total, corner_verts, n_nodes: int | None = N
     return FaceSet(offsets, indices, n_nodes)
 
 
+def _integer_indices(flat: np.ndarray) -> np.ndarray:
+    """int64 copy of whole-number indices given as floats; ValueError for anything else
+    (strings, None, booleans, fractions, NaN)."""
+    if flat.dtype.kind in "US":
+        raise ValueError("face indices must be integers, got strings")
+    if flat.dtype.kind != "f":
+        bad = next((v for v in flat.tolist() if not isinstance(v, int) or isinstance(v, bool)),
+                   flat[0])
+        raise ValueError(f"face indices must be integers, got {bad!r}")
+    whole = np.isfinite(flat) & (flat == np.round(flat))
+    if not whole.all():
+        raise ValueError(f"face indices must be integers, got {flat[~whole][0]!r}")
+    return flat.astype(np.int64)
+
+
 def as_faceset(faces, n_nodes: int) -> FaceSet:
     """Accept a FaceSet, an (F, k) integer array or a sequence of index sequences."""
     if isinstance(faces, FaceSet):
@@ -125,7 +140,7 @@ def as_faceset(faces, n_nodes: int) -> FaceSet:
         return faces
     if isinstance(faces, np.ndarray) and faces.ndim == 2:
         if faces.size and not np.issubdtype(faces.dtype, np.integer):
-            raise ValueError("face indices must be integers")
+            faces = _integer_indices(faces.reshape(-1)).reshape(faces.shape)
         f, k = faces.shape
         if f == 0:
             raise ValueError("mesh has no faces")
@@ -134,11 +149,12 @@ def as_faceset(faces, n_nodes: int) -> FaceSet:
         raise ValueError("faces must be a sequence of vertex-index sequences")
     if len(faces) == 0:
         raise ValueError("mesh has no faces")
-    counts = np.fromiter((len(f) for f in faces), dtype=np.int64, count=len(faces))
-    flat = np.concatenate([np.asarray(f).reshape(-1) for f in faces])
+    try:
+        counts = np.fromiter((len(f) for f in faces), dtype=np.int64, count=len(faces))
+        flat = np.concatenate([np.asarray(f).reshape(-1) for f in faces])
+    except (TypeError, ValueError):
+        raise ValueError("faces must be a sequence of vertex-index sequences") from None
     if flat.size and not np.issubdtype(flat.dtype, np.integer):
-        if not np.all(np.isfinite(flat)) or np.any(flat != np.round(flat)):
-            raise ValueError("face indices must be integers")
-        flat = flat.astype(np.int64)
+        flat = _integer_indices(flat)
     offsets = np.concatenate([[0], np.cumsum(counts)])
     return FaceSet(offsets, flat, n_nodes)

@@ -43,7 +43,8 @@ INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on sp
 SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
-TICK_EVERY = 20  # progress is reported this often inside a long polish run
+TICK_EVERY = 20  # progress is reported at most this many L-BFGS iterations apart ...
+TICK_CORNERS = 500_000  # ... and every TICK_CORNERS / corners iterations (big meshes: often)
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
 # lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
 LIFT_FIRST_ITER = 150  # L-BFGS iterations of the first run (floor = the input's q_min)
@@ -112,6 +113,12 @@ def _corners(
         z = np.zeros(0, dtype=np.int64)
         return z, z, z, z
     return np.concatenate(i0), np.concatenate(i1), np.concatenate(i2), np.concatenate(eid)
+
+
+def stops(answer: Any) -> bool:
+    """A progress callback's answer cancels when it is falsy but not None (False, np.False_,
+    0); None (a callback that returns nothing) and truthy values continue."""
+    return answer is not None and not answer
 
 
 def _per_arity(arity: np.ndarray, fn: Callable[[int], float]) -> np.ndarray:
@@ -224,7 +231,7 @@ class _Energy:
     """
 
     def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
-        tabs = self._prepare(points, groups)
+        tabs = self._prepare(points, groups, free)
         if tabs is None:
             return
         arity, size = tabs
@@ -232,14 +239,21 @@ class _Energy:
         keep = free[i0] | free[i1] | free[i2]  # other corners have a constant energy
         self._set_corners(i0[keep], i1[keep], i2[keep], arity[eid[keep]], size[eid[keep]])
 
-    def _prepare(self, points: np.ndarray, groups: Mapping[int, np.ndarray]):
+    def _prepare(
+        self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray
+    ):
         """Tables, validity corners, reference sizes and preconditioner: (arity, size), or
         None (and no energy corners) when there are no elements."""
         self.n_nodes = points.shape[0]
         faces, arity, edges, edge_elem = _tables(groups)
         self.n_elem = arity.shape[0]
-        # validity check: every corner of every element (triangles: one is enough)
-        self.v0, self.v1, self.v2, self.veid = _corners(faces, all_corners=False)
+        # validity check: every corner of every element (triangles: one is enough), except
+        # frozen ones: made of fixed nodes only and not positive, so no move can change them
+        v0, v1, v2, veid = _corners(faces, all_corners=False)
+        x, y = points[:, 0], points[:, 1]
+        det = (x[v1] - x[v0]) * (y[v2] - y[v0]) - (y[v1] - y[v0]) * (x[v2] - x[v0])
+        keep = free[v0] | free[v1] | free[v2] | (det > 0.0)
+        self.v0, self.v1, self.v2, self.veid = v0[keep], v1[keep], v2[keep], veid[keep]
         self.power = 1.0
         self._full = None  # the layout of z = [x, y], built on first use
         self._pack = None  # (state, layout, fixed coordinates) of the last _lbfgs call
@@ -269,6 +283,7 @@ class _Energy:
         # area weights let small elements absorb all distortion (see the docs).
         self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
         self.idx = np.concatenate([self.i1, self.i2, self.i0])
+        self.tick_every = max(1, min(TICK_EVERY, TICK_CORNERS // max(i0.size, 1)))
         self._bk = _Blocks(i0.size, self.w00, self.w01, self.w11)
 
     # -- flat layouts ----------------------------------------------------------------------
@@ -425,7 +440,7 @@ class _LiftEnergy(_Energy):
     """
 
     def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
-        tabs = self._prepare(points, groups)
+        tabs = self._prepare(points, groups, free)
         self.qc = 0.0
         if tabs is None:
             return
@@ -563,7 +578,7 @@ def _lbfgs(
     guard: reject trial points with a corner det <= 0 (used once the mesh is valid); without
     it, stop as soon as every corner is positive.
     Stops after max_it iterations, when 5 iterations lower F by less than rel_tol (relative),
-    or when tick(iterations so far), called every TICK_EVERY iterations, returns False.
+    or when tick(iterations so far), called every `en.tick_every` iterations, cancels.
     Returns the last accepted point and the number of iterations done.
 
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
@@ -658,7 +673,7 @@ def _lbfgs(
         e_hist.append(e)
         if len(e_hist) > 5 and e_hist[-6] - e <= rel_tol * abs(e_hist[-6]):
             break
-        if tick is not None and it % TICK_EVERY == 0 and tick(it) is False:
+        if tick is not None and it % en.tick_every == 0 and stops(tick(it)):
             break
     return v, it
 
@@ -695,7 +710,9 @@ def untangle_global(
     the first valid iterate); polish_power p > 0 polishes sum (f / 2)^p instead of the
     paper's sum f (f / 2 = 1 / mean ratio for eps -> 0): p > 1 raises q_min and lowers q_avg,
     p < 1 the opposite (see the docs); time_limit (s) stops early.
-    progress(iterations, max_iter, n_inverted) is called after each round; False cancels.
+    progress(iterations, max_iter, n_inverted) is called after each round and every
+    `tick_every` L-BFGS iterations inside it (a few tenths of a second of work on any mesh
+    size); a falsy answer other than None cancels (`stops`).
     lbfgs: a drop-in for `_lbfgs` (same arguments and result), e.g. the OpenCL solver.
 
     Returns (new points, info); non-free rows are bit-identical to the input. Once valid, steps
@@ -754,11 +771,11 @@ def untangle_global(
         else:
             cap = min(max_iter - total, INNER_ITER)
         tick = None
-        if progress is not None and guard:  # long polish runs report (and cancel) from inside
+        if progress is not None:  # long runs report (and cancel) from inside
 
             def tick(it: int, done: int = total, n_now: int = best_inv) -> bool:
                 nonlocal cancel
-                cancel = cancel or progress(done + it, max_iter, n_now) is False
+                cancel = cancel or stops(progress(done + it, max_iter, n_now))
                 return not cancel
 
         v, its = run_lbfgs(en, st, v, eps, max_it=cap, guard=guard, tick=tick)
@@ -772,7 +789,7 @@ def untangle_global(
         n_inv = en.n_inverted(x, y)
         if n_inv <= best_inv:
             best_v, best_inv = v, n_inv
-        if cancel or (progress is not None and progress(total, max_iter, n_inv) is False):
+        if cancel or (progress is not None and stops(progress(total, max_iter, n_inv))):
             status = "cancelled"
             break
         decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
@@ -815,7 +832,7 @@ def lift_min_quality(
     free: np.ndarray,
     *,
     rounds: int = 6,
-    progress: Callable[[int, int], Any] | None = None,
+    progress: Callable[[int, int, float, float], Any] | None = None,
     lbfgs: Callable[..., tuple[np.ndarray, int]] | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Raise the worst element quality of a valid mesh without lowering its mean quality.
@@ -831,7 +848,9 @@ def lift_min_quality(
     nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
     q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
     status ("lifted", "unchanged", "cancelled").
-    progress(iterations, rounds_done) after each run; False cancels (the input is returned).
+    progress(iterations, rounds_done, q_min, q_avg) after each run and every few tenths of a
+    second inside one, with the kept iterate's qualities; a falsy answer other than None
+    cancels (`stops`) and the input is returned.
     lbfgs: a drop-in for `_lbfgs` (same arguments and result), e.g. the OpenCL solver.
     """
     t_start = time.perf_counter()
@@ -855,11 +874,23 @@ def lift_min_quality(
     total = 0
     trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run, kept or not
     info["trail"] = trail
+    cancel = False
     for r in range(rounds + 1):
         en.qc = m0 if r == 0 else min(cur_m * LIFT_GROW, cur_m + LIFT_GAP * (cur_a - cur_m))
+        tick = None
+        if progress is not None:
+
+            def tick(
+                it: int, done: int = total, r: int = r, m: float = cur_m, a: float = cur_a
+            ) -> bool:
+                nonlocal cancel
+                cancel = cancel or stops(progress(done + it, r, m, a))
+                return not cancel
+
         if r == 0:  # the whole mesh: maximise q_avg at the input's floor
             vt, its = run_lbfgs(
-                en, st, v, EPS_MIN, max_it=LIFT_FIRST_ITER, guard=True, rel_tol=LIFT_REL_TOL
+                en, st, v, EPS_MIN, max_it=LIFT_FIRST_ITER, guard=True, rel_tol=LIFT_REL_TOL,
+                tick=tick,
             )
             xt, yt = st.unpack(vt)
         else:  # only near the elements under the new floor: the rest is at its optimum
@@ -873,7 +904,7 @@ def lift_min_quality(
             sst = _State(sp, sfree)
             sv, its = run_lbfgs(
                 sen, sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER, guard=True,
-                rel_tol=LIFT_REL_TOL,
+                rel_tol=LIFT_REL_TOL, tick=tick,
             )
             sx, sy = sst.unpack(sv)
             xt, yt = x.copy(), y.copy()
@@ -883,7 +914,7 @@ def lift_min_quality(
         qt = en.element_quality(xt, yt)
         qm, qa = float(qt.min()), float(qt.mean())
         trail.append((qm, qa))
-        if progress is not None and progress(total, r) is False:
+        if cancel or (progress is not None and stops(progress(total, r, cur_m, cur_a))):
             info.update(iterations=total, status="cancelled", seconds=time.perf_counter() - t_start)
             return P, info
         if r == 0:  # the first run maximises q_avg at the input's floor: the start of the climb

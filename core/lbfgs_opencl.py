@@ -3,7 +3,7 @@
 `OpenCLLbfgs` is a drop-in for `global_untangle._lbfgs` (same arguments, same result to the
 last bit): the energy tables are uploaded once per energy object, the whole solve runs in
 one single-work-item kernel (core/lbfgs_kernel.cl), and only the solution comes back. The
-kernel pauses every `TICK_EVERY` iterations when the caller passes a progress tick, so
+kernel pauses every `en.tick_every` iterations when the caller passes a progress tick, so
 progress and cancelling work as on the host. Meant for CPU devices (`device_solver` gives
 none elsewhere), where one compiled loop beats NumPy's per-call overhead at every mesh size;
 a GPU would run it on one thread.
@@ -129,7 +129,7 @@ class OpenCLLbfgs:
         state[:4] = eps, getattr(en, "qc", 0.0), 0.1 * en.h_mean, rel_tol
         state[tb.v_at : tb.v_at + tb.n2] = v0
         S = self._buffer(state)
-        ticks = gu.TICK_EVERY if tick is not None else 0
+        ticks = en.tick_every if tick is not None else 0
         flags = np.array([0, 0, 0, 0, 1, 0, *tb.sizes, max_it, bool(guard), ticks], np.int32)
         T = self._buffer(flags)
         for i, buf in enumerate((tb.ints, tb.dbls, S, T, tb.work)):
@@ -137,7 +137,7 @@ class OpenCLLbfgs:
         while True:
             cl.enqueue_nd_range_kernel(queue, self.kernel, (1,), (1,))
             cl.enqueue_copy(queue, flags, T)
-            if flags[5] != _ST_TICK or tick(int(flags[0])) is False:
+            if flags[5] != _ST_TICK or gu.stops(tick(int(flags[0]))):
                 break
         v = np.empty(tb.n2, dtype=np.float64)
         cl.enqueue_copy(queue, v, S, src_offset=8 * tb.v_at)

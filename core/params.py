@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields, replace
+import math
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
+from numbers import Integral, Real
 
 __all__ = ["UNTANGLE_METHODS", "EEGTParams"]
 
@@ -77,6 +79,7 @@ class EEGTParams:
     )
 
     def __post_init__(self) -> None:
+        self._check_types()
         checks = [
             (self.a > 0, "a must be > 0"),
             (self.eta >= 0, "eta must be >= 0"),
@@ -98,6 +101,27 @@ class EEGTParams:
         for ok, message in checks:
             if not ok:
                 raise ValueError(f"invalid parameter: {message}")
+
+    def _check_types(self) -> None:
+        """Each field has its default's type (an int field takes any integer, a float field
+        any finite real); NaN and infinities are refused, since no knob means anything there."""
+        for f in fields(self):
+            value, default = getattr(self, f.name), f.default
+            if default is MISSING:
+                continue
+            if isinstance(default, str):
+                ok = isinstance(value, str)
+                kind = "a string"
+            elif isinstance(default, int):
+                ok = isinstance(value, Integral) and not isinstance(value, bool)
+                kind = "an integer"
+            else:
+                ok = isinstance(value, Real) and not isinstance(value, bool)
+                kind = "a finite number"
+                if ok and not math.isfinite(float(value)):
+                    raise ValueError(f"invalid parameter: {f.name} must be finite, got {value!r}")
+            if not ok:
+                raise ValueError(f"invalid parameter: {f.name} must be {kind}, got {value!r}")
 
     @classmethod
     def paper(cls) -> EEGTParams:

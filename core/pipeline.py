@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -10,9 +11,10 @@ import numpy as np
 
 from .backends import make_engine
 from .engine_numpy import NumpyEngine
-from .faces import as_faceset
+from .faces import FaceSet, as_faceset
+from .global_untangle import stops
 from .params import EEGTParams
-from .quality import Stats, _check_points
+from .quality import Stats, _check_points, group_quality, stats_of
 from .topology import EdgeInfo
 
 __all__ = ["Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
@@ -37,6 +39,7 @@ class EEGTResult:
     message: str
     moved: np.ndarray  # (N,) bool: nodes the run was allowed to move
     global_iterations: int = 0  # optimization iterations of the global stage (beyond the paper)
+    n_frozen: int = 0  # faces with a non-positive corner of fixed nodes only: never changeable
 
     def as_dict(self) -> dict:
         return {
@@ -49,6 +52,7 @@ class EEGTResult:
             "seconds": self.seconds,
             "backend": self.backend,
             "message": self.message,
+            "frozen_faces": self.n_frozen,
         }
 
 
@@ -68,6 +72,8 @@ def free_nodes(n_nodes: int, faces, fixed=None) -> np.ndarray:
         pinned = np.asarray(fixed)
         if pinned.shape != (n_nodes,):
             raise ValueError(f"fixed must be an ({n_nodes},) bool array, got shape {pinned.shape}")
+        if pinned.dtype.kind not in "biuf":
+            raise ValueError(f"fixed must be an ({n_nodes},) bool array, got {pinned.dtype} values")
         free &= ~pinned.astype(bool)
     return free
 
@@ -82,30 +88,46 @@ def untangle_and_smooth(
 ) -> EEGTResult:
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
-    `fixed` pins extra nodes; boundary, non-manifold and loose nodes never move. `progress`
-    is called as progress(iteration, phase, stats) after every iteration (phase "untangle",
-    "global" or "smooth"); returning False (or raising Cancelled) stops the run and returns
-    the input unchanged.
+    `fixed` pins extra nodes; boundary, non-manifold and loose nodes never move. The run
+    works in normalised coordinates (centred, scaled by a power of two), so its result does
+    not depend on the units: a mesh scaled by 2^k gives the same result scaled by 2^k, bit
+    for bit. Nodes that did not move are returned bit-identical.
+
+    `progress(iteration, phase, stats)` is called after every EEGT iteration and, inside the
+    global stage (phase "global"), every few L-BFGS iterations (about every 0.3 s of work,
+    whatever the mesh size); stats are the current iterate's where the stage knows them, else
+    the best so far. Returning a falsy value other than None (False, np.False_, 0) or raising
+    Cancelled stops the run and returns the input unchanged.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
+    if not isinstance(params, EEGTParams):
+        raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
     p = _check_points(points)
     fs = as_faceset(faces, p.shape[0])
     free = free_nodes(p.shape[0], fs, fixed)
     if not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
-    run = _Run(p, fs, free, params, backend, progress)
+    center, scale = _normalisation(p, fs)
+    work = (p - center) / scale
+    _check_orientation(work, fs)
+    frozen = frozen_faces(work, fs, free)
+    run = _Run(work, fs, free, params, backend, progress, frozen)
     try:
         status, message = run.execute()
     except _CancelRun:
         status, message = "cancelled", "cancelled: mesh left unchanged"
-    out, after = (p.copy(), run.before) if status == "cancelled" else (run.best_pts, run.best)
-    if out is None:
-        out = run.engine.best_points()
+    before = _stats_as_given(p, fs, center, scale)
+    out, after = p.copy(), before
+    if status != "cancelled":
+        best = run.best_pts if run.best_pts is not None else run.engine.best_points()
+        changed = np.any(best != work, axis=1) & free  # fixed rows stay the input's, always
+        out[changed] = best[changed] * scale + center
+        after = _stats_as_given(out, fs, center, scale) if changed.any() else before
     return EEGTResult(
         out,
         status,
-        run.before,
+        before,
         after,
         run.n_untangle,
         run.n_smooth,
@@ -114,7 +136,61 @@ def untangle_and_smooth(
         message,
         free,
         run.n_global,
+        int(frozen.sum()),
     )
+
+
+def _normalisation(p: np.ndarray, fs: FaceSet) -> tuple[np.ndarray, float]:
+    """(centre, scale) that map the used nodes into [-1, 1]^2: the bounding-box centre and a
+    power of two (so that scaling is exact), computed without overflow up to 1e308."""
+    used = p[fs.used_nodes(p.shape[0])]
+    lo, hi = used.min(axis=0), used.max(axis=0)
+    center = 0.5 * lo + 0.5 * hi
+    half = float(np.max(0.5 * hi - 0.5 * lo))
+    if not half > 0.0:
+        return center, 1.0
+    return center, math.ldexp(1.0, math.frexp(half)[1])
+
+
+def _stats_as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> Stats:
+    """Stats of the points as the caller has them (what `mesh_stats` of the result says);
+    in normalised coordinates where squares of the caller's would overflow or underflow."""
+    span = float(np.max(np.abs(p[fs.used_nodes(p.shape[0])])))
+    q = p if 1e-100 < scale and span < 1e100 else (p - center) / scale
+    return stats_of([group_quality(q[g.nodes, 0], q[g.nodes, 1]) for g in fs.groups])
+
+
+def _check_orientation(p: np.ndarray, fs: FaceSet) -> None:
+    """ValueError for clockwise input (total signed area < 0) or a mesh of zero area: folds
+    cannot change the total signed area, so its sign is the faces' intended orientation."""
+    total = 0.0
+    for g in fs.groups:
+        x, y = p[g.nodes, 0], p[g.nodes, 1]
+        total += float(np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y))
+    if total < 0.0:
+        raise ValueError(
+            "faces are clockwise (the mesh's total signed area is negative): reverse every "
+            "face's vertex order (in Blender: Mesh > Normals > Flip)"
+        )
+    if not total > 0.0:
+        raise ValueError("mesh has zero total area: cannot tell its orientation")
+
+
+def frozen_faces(p: np.ndarray, faces, free: np.ndarray) -> np.ndarray:
+    """(F,) bool: faces with a corner made of fixed nodes only whose det is <= 0 (straight or
+    inverted). No move can change such a corner, so these faces count as inverted forever
+    and are left out of the untangling goal."""
+    fs = as_faceset(faces, p.shape[0])
+    out = np.zeros(fs.n_faces, dtype=bool)
+    for g in fs.groups:
+        nxt, prv = np.roll(g.nodes, -1, axis=0), np.roll(g.nodes, 1, axis=0)
+        x, y = p[:, 0], p[:, 1]
+        det = (x[nxt] - x[g.nodes]) * (y[prv] - y[g.nodes]) - (y[nxt] - y[g.nodes]) * (
+            x[prv] - x[g.nodes]
+        )
+        stuck = ~(free[g.nodes] | free[nxt] | free[prv]) & (det <= 0.0)
+        out[g.ids] = stuck.any(axis=0)
+    return out
 
 
 class _CancelRun(Exception):
@@ -141,8 +217,10 @@ def _device_lbfgs(backend_name: str):
 class _Run:
     """One run of the pipeline: EEGT phases on an engine, the global stage on the host."""
 
-    def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress):
+    def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress, frozen):
         self.p, self.fs, self.free, self.params = p, fs, free, params
+        self.frozen = frozen
+        self.n_frozen = int(frozen.sum())  # inverted faces no move can change
         self.backend, self.progress = backend, progress
         self.engine, self.backend_name = make_engine(backend, p, fs, free, params)
         self.before = self.best = self.engine.stats()
@@ -155,7 +233,7 @@ class _Run:
         if self.progress is None:
             return
         try:
-            stop = self.progress(it, phase, s) is False
+            stop = stops(self.progress(it, phase, s))
         except Cancelled:
             stop = True
         if stop:
@@ -170,32 +248,45 @@ class _Run:
     def best_points(self) -> np.ndarray:
         return self.engine.best_points() if self.best_pts is None else self.best_pts
 
+    def tangled(self, s: Stats) -> bool:
+        """Some face that a move can change is inverted."""
+        return s.n_inverted > self.n_frozen
+
     def execute(self) -> tuple[str, str]:
         prm, before = self.params, self.before
-        self.report(0, "untangle" if before.n_inverted else "smooth", before)
+        tangled = self.tangled(before)
+        self.report(0, "untangle" if tangled else "smooth", before)
+        frozen = (
+            f"; {self.n_frozen} faces have a straight or inverted corner made of fixed "
+            "vertices only: they cannot change"
+            if self.n_frozen
+            else ""
+        )
         current = before
-        if before.n_inverted:
+        if tangled:
             if prm.untangle != "global":
                 current = self.untangle_eegt()
-            if self.best.n_inverted and prm.untangle != "eegt":
+            if self.tangled(self.best) and prm.untangle != "eegt":
                 current = self.global_stage(polish=prm.polish_iterations)
-            if self.best.n_inverted:
+            if self.tangled(self.best):
                 return "failed", (
-                    f"failed: {self.best.n_inverted} inverted faces remain after "
-                    f"{self.n_untangle} untangling iterations"
+                    f"failed: {self.best.n_inverted - self.n_frozen} inverted faces remain "
+                    f"after {self.n_untangle} untangling iterations"
                     + (f" and {self.n_global} global iterations" if self.n_global else "")
-                    + f" (best iterate kept; input had {before.n_inverted})"
+                    + f" (best iterate kept; input had {before.n_inverted - self.n_frozen})"
+                    + frozen
                 )
         if prm.polish_iterations > 0 and self.n_global == 0:  # the global stage polishes too
             current = self.global_stage(polish=prm.polish_iterations)
         self.smooth_eegt(current)
-        status = "untangled" if before.n_inverted else "valid"
-        verb = f"untangled in {self.n_untangle} iterations, " if before.n_inverted else ""
+        status = "untangled" if tangled else "valid"
+        verb = f"untangled in {self.n_untangle} iterations, " if tangled else ""
         glob = f"{self.n_global} optimization iterations, " if self.n_global else ""
         b = self.best
         return status, (
             f"{verb}{glob}smoothed in {self.n_smooth} iterations: "
             f"q_min {before.q_min:.4f} -> {b.q_min:.4f}, q_avg {before.q_avg:.4f} -> {b.q_avg:.4f}"
+            + frozen
         )
 
     def untangle_eegt(self) -> Stats:
@@ -208,7 +299,7 @@ class _Run:
             self.n_untangle += 1
             self.track(current)
             self.report(self.n_untangle, "untangle", current)
-            if current.n_inverted == 0:
+            if not self.tangled(current):
                 break
             if current.n_inverted < low:
                 low, since = current.n_inverted, 0
@@ -223,7 +314,7 @@ class _Run:
         from .global_untangle import untangle_global
 
         start = self.best_points()
-        groups = self.fs.by_arity()
+        groups = self._global_groups()
         base = self.n_untangle
 
         def relay(iterations: int, _max_iter: int, n_inv: int) -> None:
@@ -262,14 +353,23 @@ class _Run:
             self.best_pts = start if self.best_pts is None else self.best_pts
         return current
 
+    def _global_groups(self) -> dict[int, np.ndarray]:
+        """The global stage's faces: all but frozen faces whose every node is fixed (constant:
+        nothing to optimise, and an inverted one would block the lift's validity guard)."""
+        groups = {}
+        for g in self.fs.groups:
+            inert = self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0)
+            groups[g.n] = np.ascontiguousarray(g.nodes[:, ~inert].T)
+        return groups
+
     def lift(self, pts: np.ndarray, groups: dict) -> np.ndarray:
         """Raise q_min of the valid optimization result without lowering its q_avg."""
         from .global_untangle import lift_min_quality
 
         base = self.n_untangle + self.n_global
 
-        def relay(iterations: int, _rounds: int) -> None:
-            self.report(base + iterations, "global", self.best)
+        def relay(iterations: int, _rounds: int, q_min: float, q_avg: float) -> None:
+            self.report(base + iterations, "global", Stats(self.n_frozen, q_min, q_avg))
 
         out, info = lift_min_quality(
             pts, groups, self.free, rounds=self.params.lift_rounds, progress=relay, lbfgs=self.lbfgs

@@ -87,7 +87,10 @@ def stats_of(qs: list[np.ndarray]) -> Stats:
 
 
 def _check_points(points) -> np.ndarray:
-    p = np.array(points, dtype=np.float64)  # always a copy: callers' arrays stay untouched
+    try:  # always a copy: callers' arrays stay untouched
+        p = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"points must be an (N, 2) array of numbers ({exc})") from None
     if p.ndim != 2 or p.shape[1] != 2:
         raise ValueError(f"points must be an (N, 2) array, got shape {p.shape}")
     bad = ~np.isfinite(p).all(axis=1)

@@ -178,7 +178,9 @@ def test_bad_input_rejected() -> None:
         untangle_global(pts, groups, free[:-1])
 
 
-def test_unfixable_element_reported_not_looped() -> None:
+def test_unfixable_element_left_out_of_the_goal_not_looped() -> None:
+    """A corner of fixed nodes only that is inverted can never change: it is not a reason to
+    fail or to iterate (the pipeline counts such faces apart: test_frozen_faces_*)."""
     pts, groups, free = grid(10)
     tri = groups[3][0]
     fixed_free = free.copy()
@@ -187,8 +189,8 @@ def test_unfixable_element_reported_not_looped() -> None:
     bad[tri[1]] = bad[tri[0]] + [-0.01, 0.0]  # an inverted element no free node can repair
     assert quality(bad, groups)[2] == 1
     out, info = untangle_global(bad, groups, fixed_free)
-    assert info["status"] == "failed" and info["iterations"] < 500  # no futile 3000 iterations
-    assert quality(out, groups)[2] == 1 == info["n_inverted_out"]
+    assert info["status"] == "untangled" and info["iterations"] < 500  # no futile iterations
+    assert quality(out, groups)[2] == 1 and info["n_inverted_out"] == 0
     assert np.array_equal(out[~fixed_free], bad[~fixed_free]) and np.all(np.isfinite(out))
 
 
@@ -293,7 +295,7 @@ def test_lift_leaves_inverted_input_unchanged_and_can_cancel() -> None:
     out, info = lift_min_quality(pts, groups, free)  # 23 inverted: nothing to lift
     assert info["status"] == "unchanged" and np.array_equal(out, pts)
     polished = untangle_global(pts, groups, free)[0]
-    out, info = lift_min_quality(polished, groups, free, progress=lambda it, r: False)
+    out, info = lift_min_quality(polished, groups, free, progress=lambda it, r, q_min, q_avg: False)
     assert info["status"] == "cancelled" and np.array_equal(out, polished)
 
 
