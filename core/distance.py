@@ -11,6 +11,7 @@ tangled node can leave the domain) are answered by brute force.
 
 from __future__ import annotations
 
+import math
 from itertools import pairwise
 
 import numpy as np
@@ -56,7 +57,8 @@ class NearestBoundary:
         self.side = 2.0 * side
         self.origin = lo - 0.5 * side
         finest = min_cell if min_cell > 0 else self.side / 4096
-        self.depth = int(np.clip(np.ceil(np.log2(self.side / finest)), 1, 30))
+        m, e = math.frexp(self.side / finest)  # ceil(log2(ratio)), exactly (no libm)
+        self.depth = int(min(max(e - (m == 0.5), 1), 30))
         if hint_x is None:
             hx = hy = None
         else:

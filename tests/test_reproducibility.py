@@ -1,0 +1,119 @@
+"""Same input, same bits on every x86-64 CPU: the NumPy backend run with NumPy's SIMD dispatch
+restricted (as on a CPU without AVX-512, and on a baseline SSE3-only one) and OpenBLAS on
+other kernels gives points bit-identical to the unrestricted run on the shared meshes."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# default parameters on every shared mesh; the paper's mode on three (EEGT only)
+CHILD = r"""
+import hashlib, json, sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from core import EEGTParams, untangle_and_smooth, untangle_and_smooth_3d
+from core.obj_io import read_obj
+out = {}
+cases = [(n, "default") for n in ("quad_hole", "tri_two_holes", "mixed_quad_tri",
+         "polygon_voronoi", "tilted_plane", "naca_deform", "two_holes_twist")]
+cases += [(n, "paper") for n in ("quad_hole", "mixed_quad_tri", "tilted_plane")]
+for name, mode in cases:
+    p, fs = read_obj(f"{sys.argv[1]}/tests/data/{name}.obj")
+    prm = EEGTParams.paper() if mode == "paper" else EEGTParams()
+    if np.ptp(p[:, 2]) > 0:
+        r = untangle_and_smooth_3d(p, fs, params=prm)
+    else:
+        r = untangle_and_smooth(p[:, :2], fs, params=prm)
+    digest = hashlib.sha256(np.ascontiguousarray(r.points).tobytes()).hexdigest()
+    out[f"{name}/{mode}"] = [digest, r.status, r.global_iterations, r.after.q_min]
+print(json.dumps(out))
+"""
+
+
+def _numpy_cpu() -> tuple[list[str], dict[str, bool]]:
+    try:
+        from numpy._core import _multiarray_umath as mu  # NumPy 2
+    except ImportError:
+        from numpy.core import _multiarray_umath as mu  # NumPy 1.26
+    return list(mu.__cpu_dispatch__), dict(mu.__cpu_features__)
+
+
+def _run(env_extra: dict[str, str]) -> dict:
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE")}
+    env.update(env_extra)
+    done = subprocess.run([sys.executable, "-c", CHILD, str(ROOT)], env=env,
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow
+def test_shared_meshes_bit_identical_without_avx512_and_on_baseline_simd() -> None:
+    dispatch, found = _numpy_cpu()
+    have = [f for f in dispatch if found.get(f)]
+    if not have:
+        pytest.skip("this NumPy dispatches no SIMD extension on this CPU: nothing to restrict")
+    reference = _run({})
+    assert all(v[1] == "untangled" for v in reference.values()), reference
+    no_avx512 = [f for f in have if f.startswith("AVX512")]
+    variants = {"baseline": {"NPY_DISABLE_CPU_FEATURES": " ".join(have),
+                             "OPENBLAS_CORETYPE": "Prescott"}}
+    if no_avx512:  # what an AVX2 machine (e.g. AMD Zen 1-3, Intel Haswell) runs
+        variants["no AVX-512"] = {"NPY_DISABLE_CPU_FEATURES": " ".join(no_avx512),
+                                  "OPENBLAS_CORETYPE": "Haswell"}
+    for label, env in variants.items():
+        got = _run(env)
+        differ = sorted(k for k in reference if got[k] != reference[k])
+        assert not differ, f"{label}: {differ}: {[(reference[k], got[k]) for k in differ]}"
+
+
+def test_core_never_calls_cpu_dispatched_math() -> None:
+    """Static guard: no NumPy transcendental (dispatched by CPU feature) and no BLAS product
+    inside core/; core.fpmath provides the portable versions."""
+    import re
+
+    banned = re.compile(r"np\.(log|log2|log10|log1p|exp|exp2|expm1|power|tan|arctan2|arctan|"
+                        r"hypot|cbrt|dot|matmul|einsum|inner|vdot|linalg)\b|\s@\s|[\w)\]]\s*\*\*\s*[a-z(]")
+    hits = []
+    for path in sorted((ROOT / "core").glob("*.py")):
+        for no, line in enumerate(path.read_text().splitlines(), 1):
+            code = line.split("#", 1)[0]
+            if banned.search(code) and '"""' not in line:
+                hits.append(f"{path.name}:{no}: {line.strip()}")
+    assert not hits, "\n".join(hits)
+
+
+def test_fpmath_matches_libm_within_a_few_ulp() -> None:
+    from core import fpmath
+
+    rng = np.random.default_rng(7)
+    x = np.concatenate([np.exp(rng.uniform(-700, 700, 20000)), rng.uniform(0.5, 2, 20000)])
+    ulp = np.abs(fpmath.log(x) - np.log(x)) / np.spacing(np.abs(np.log(x)) + 1e-300)
+    assert ulp.max() <= 4
+    y = rng.uniform(-700, 700, 20000)
+    assert (np.abs(fpmath.exp(y) - np.exp(y)) / np.spacing(np.exp(y))).max() <= 4
+    z = rng.uniform(1e-3, 1e3, 20000)
+    rel = np.abs(fpmath.power(z, 1.7) - z**1.7) / z**1.7
+    assert rel.max() < 1e-14
+    assert np.array_equal(fpmath.power(z, 2.0), z * z)  # NumPy's own fast path, exactly
+    assert np.array_equal(fpmath.power(z, 0.5), np.sqrt(z))
+    assert fpmath.regular_corner(3) == (0.5, 0.5 * np.sqrt(3.0))
+    assert fpmath.regular_corner(4) == (0.0, 1.0)
+    for n in (5, 7, 8, 12, 50):
+        c, s = fpmath.regular_corner(n)
+        a = (n - 2) * np.pi / n
+        assert abs(c - np.cos(a)) < 1e-15 and abs(s - np.sin(a)) < 1e-15
+        assert abs(fpmath.tan_pi_over(n) - np.tan(np.pi / n)) < 1e-15 * np.tan(np.pi / n) * 4
+    specials = fpmath.exp(np.array([0.0, 800.0, -800.0, np.nan]))
+    assert specials[0] == 1.0 and specials[1] == np.inf and specials[2] == 0.0
+    assert np.isnan(specials[3])
