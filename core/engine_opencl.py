@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import fpmath
 from .engine_numpy import _DIST_FLOOR, NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
@@ -171,7 +172,7 @@ class _Runtime:
 
     def program(self, maxn: int):
         """The EEGT kernels, built once per n-gon size class."""
-        options = [f"-DMAXN={maxn}", f"-DCH={_CH}", f"-DNCACHE={_NCACHE}"]
+        options = [f"-DMAXN={maxn}", f"-DCH={_CH}", f"-DNCACHE={_NCACHE}", *fpmath_options()]
         return self.build(f"eegt MAXN={maxn}", kernel_source(), options)
 
 
@@ -213,8 +214,31 @@ def bincount_csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     return ptr, np.argsort(keys, kind="stable")
 
 
+def fpmath_options() -> list[str]:
+    """Build options defining core.fpmath's constants for the kernels' log / exp, as hex
+    floats: the kernel computes with the exact doubles the host's fpmath uses."""
+
+    def hexes(values) -> str:
+        return ",".join(float(v).hex() for v in values)
+
+    scalars = {
+        "FP_SQRT_HALF": fpmath._SQRT_HALF,
+        "FP_LN2_HI": fpmath._LN2_HI,
+        "FP_LN2_LO": fpmath._LN2_LO,
+        "FP_INV_LN2": fpmath._INV_LN2,
+        "FP_EXP_MAX": fpmath._EXP_MAX,
+        "FP_EXP_MIN": fpmath._EXP_MIN,
+    }
+    return [
+        f"-DFP_LOG_C={hexes(fpmath.LOG_COEFFS)}",
+        f"-DFP_EXP_C={hexes(fpmath.EXP_COEFFS)}",
+        *(f"-D{name}=({float(v).hex()})" for name, v in scalars.items()),
+    ]
+
+
 def _pow_mode(e: float) -> int:
-    """How NumPy's ndarray ** scalar evaluates: its fast paths, else pow (kernel np_pow)."""
+    """How core.fpmath.power evaluates x ** e: NumPy's exact fast paths (1-5), else 0,
+    exp(e log x) by fpmath's algorithm (kernel np_pow)."""
     return {2.0: 1, 1.0: 2, 0.0: 3, 0.5: 4, -1.0: 5}.get(float(e), 0)
 
 

@@ -1,12 +1,12 @@
 // EEGT iteration kernels (float64). Every formula is written in the same operation order as
 // the NumPy reference (core/quality.py, core/transform.py, core/engine_numpy.py) and FP
-// contraction is off, so results match NumPy to the last bits wherever the math library
-// calls (hypot, pow) agree. Faces come in arity groups laid out like NumPy's (n, F) arrays:
+// contraction is off, so results match NumPy to the last bit (no math library calls: powers
+// are core.fpmath's algorithm, below). Faces come in arity groups laid out like NumPy's (n, F) arrays:
 // corner k of face j of a group is nodes[k * F + j]. Host-side defines:
 //   MAXN  largest arity of a generic n-gon group (private array size)
 // Parameters are kernel arguments (one build per device serves every parameter set); the
-// pow modes say how NumPy evaluates x ** c and x ** eta (0 pow, 1 square, 2 identity, 3 ones,
-// 4 sqrt, 5 reciprocal), mirroring ndarray.__pow__'s fast paths for scalar exponents.
+// pow modes say how core.fpmath.power evaluates x ** c and x ** eta (0 exp(e log x), 1 square,
+// 2 identity, 3 ones, 4 sqrt, 5 reciprocal: NumPy's exact fast paths for those exponents).
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
@@ -28,6 +28,69 @@
 
 // ---- NumPy-compatible helpers ----------------------------------------------------------
 
+// core.fpmath's log / exp / power, operation for operation: +, -, *, / (FP_CONTRACT off),
+// exact bit-level frexp / ldexp and rint only, so these give NumPy's core.fpmath bits on every
+// device. The host passes fpmath's constants as hex-float defines (the exact same doubles):
+// FP_LOG_C / FP_EXP_C (polynomial coefficients, lowest order first), FP_SQRT_HALF,
+// FP_LN2_HI, FP_LN2_LO, FP_INV_LN2, FP_EXP_MAX, FP_EXP_MIN.
+#ifndef FP_LOG_C
+#error "build with core.engine_opencl's fpmath defines (fpmath_options())"
+#endif
+__constant double fp_log_c[] = {FP_LOG_C};
+__constant double fp_exp_c[] = {FP_EXP_C};
+#define FP_N_LOG ((int)(sizeof(fp_log_c) / sizeof(double)))
+#define FP_N_EXP ((int)(sizeof(fp_exp_c) / sizeof(double)))
+
+// 2^e for -1022 <= e <= 1023, exactly
+static inline double fp_pow2(const int e) { return as_double((long)(e + 1023) << 52); }
+
+// p 2^k rounded once (like C's ldexp), for p a positive normal double near 1 and
+// -1100 < k < 1100: one exact scaling, then at most one rounding (subnormal or overflow)
+static inline double fp_ldexp(const double p, const int k)
+{
+    if (k > 1000) return (p * fp_pow2(k - 100)) * fp_pow2(100);
+    if (k < -1000) return (p * fp_pow2(k + 100)) * fp_pow2(-100);
+    return p * fp_pow2(k);
+}
+
+// fpmath.log: x = m 2^e (frexp, 0.5 <= m < 1), m doubled below sqrt(1/2), then
+// log(m) = 2 f sum_k s^k / (2k + 1) with f = (m - 1) / (m + 1), s = f^2 (Horner)
+static inline double fp_log(const double x)
+{
+    if (!(x > 0.0)) return x == 0.0 ? -INFINITY : NAN;
+    if (isinf(x)) return INFINITY;
+    double xs = x;
+    int bias = 0;
+    if (xs < 0x1p-1022) {  // subnormal: scale into the normal range first (exact)
+        xs = xs * 0x1p54;
+        bias = 54;
+    }
+    const long bits = as_long(xs);
+    const int e = (int)((bits >> 52) & 0x7ff) - 1022 - bias;
+    double m = as_double((bits & 0x800fffffffffffffL) | (1022L << 52));
+    const int low = m < FP_SQRT_HALF;
+    if (low) m = m * 2.0;
+    const double k = (double)(e - low);
+    const double f = (m - 1.0) / (m + 1.0);
+    const double s = f * f;
+    double p = fp_log_c[FP_N_LOG - 1];
+    for (int i = FP_N_LOG - 2; i >= 0; --i) p = p * s + fp_log_c[i];
+    return k * FP_LN2_HI + (k * FP_LN2_LO + (2.0 * f) * p);
+}
+
+// fpmath.exp: k = rint(x / ln 2), r = x - k ln 2 (two parts), e^r by Taylor (Horner), 2^k
+static inline double fp_exp(const double x)
+{
+    if (isnan(x)) return x;
+    if (x > FP_EXP_MAX) return INFINITY;
+    if (x < FP_EXP_MIN) return 0.0;
+    const double k = __builtin_rint(x * FP_INV_LN2);
+    const double r = (x - k * FP_LN2_HI) - k * FP_LN2_LO;
+    double p = fp_exp_c[FP_N_EXP - 1];
+    for (int i = FP_N_EXP - 2; i >= 0; --i) p = p * r + fp_exp_c[i];
+    return fp_ldexp(p, (int)k);
+}
+
 static inline double np_pow(const double x, const double e, const int mode)
 {
     switch (mode) {
@@ -36,7 +99,7 @@ static inline double np_pow(const double x, const double e, const int mode)
     case 3: return 1.0;
     case 4: return SQRT(x);
     case 5: return 1.0 / x;
-    default: return pow(x, e);
+    default: return fp_exp(e * fp_log(x));  // fpmath.power's general case
     }
 }
 

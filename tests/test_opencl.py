@@ -77,6 +77,22 @@ def step_both(p, f, free, params, n_untangle: int, n_smooth: int) -> None:
     assert_close(ref.best_points(), eng.best_points(), scale, "best iterate")
 
 
+def step_exact(p, f, free, params, n_untangle: int, n_smooth: int) -> None:
+    """Step NumPy and OpenCL engines side by side: positions bit-identical every step."""
+    ref = NumpyEngine(p, f, free, params)
+    eng, name = backends.make_engine("opencl", p, f, free, params)
+    assert name == "opencl", name
+    for it in range(n_untangle + n_smooth):
+        phase = "untangle" if it < n_untangle else "smooth"
+        ref.step(phase)
+        eng.step(phase)
+        a, b = ref.points(), eng.points()
+        if not np.array_equal(a, b):
+            rows = np.flatnonzero(np.any(a != b, axis=1))
+            d = float(np.abs(a - b).max())
+            pytest.fail(f"iteration {it + 1} ({phase}): {rows.size} nodes differ (max {d:.3e})")
+
+
 # ---- parity ----------------------------------------------------------------------------
 
 
@@ -99,6 +115,16 @@ def test_per_iteration_parity_on_shared_meshes(device, name):
 def test_parity_with_other_parameters(device, params):
     p, f = load2d("mixed_quad_tri")
     step_both(p, f, free_nodes(len(p), f), params, 10, 10)
+
+
+@pytest.mark.parametrize("c, eta", [(1.5, 2.7), (3.0, 1.3)])
+@pytest.mark.parametrize("name", ["quad_hole", "mixed_quad_tri", "polygon_voronoi"])
+def test_general_powers_bit_identical_on_shared_meshes(device, name, c, eta):
+    """Non-special exponents: both engines use core.fpmath's exp(e log x), operation for
+    operation, so the positions are the same bits (no libm pow on either side)."""
+    p, f = load2d(name)
+    params = EEGTParams(c=c, eta=eta, distance_refresh=3)
+    step_exact(p, f, free_nodes(len(p), f), params, 12, 8)
 
 
 @pytest.mark.parametrize(
@@ -196,6 +222,27 @@ def test_parity_on_random_polygon_meshes(device, mesh):
     step_both(pts, fs, free, EEGTParams(), 12, 6)
 
 
+@settings(
+    max_examples=8,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
+@given(
+    mesh=polygon_meshes(),
+    c=st.floats(0.1, 4.0).filter(lambda v: v not in (0.5, 1.0, 2.0)),
+    eta=st.floats(0.1, 4.0).filter(lambda v: v not in (0.5, 1.0, 2.0)),
+)
+def test_general_powers_bit_identical_on_random_meshes(device, mesh, c, eta):
+    pts, faces, pinned = mesh
+    fs = as_faceset(faces, len(pts))
+    free = free_nodes(len(pts), fs, pinned)
+    if not free.any():
+        return
+    step_exact(pts, fs, free, EEGTParams(c=c, eta=eta, distance_refresh=2), 10, 6)
+
+
 def big_ngon_mesh() -> tuple[np.ndarray, list[list[int]]]:
     """A 20-gon ringed by 20 quads (beyond the 16-corner n-gon kernel: its own build)."""
     k = 20
@@ -213,6 +260,45 @@ def test_mixed_arity_with_a_big_ngon(device):
     fs = as_faceset(faces, len(pts))
     assert {g.n for g in fs.groups} == {4, 20}
     step_both(pts, fs, free_nodes(len(pts), fs), EEGTParams(), 10, 10)
+
+
+def test_kernel_power_matches_fpmath_bits(device):
+    """The kernels' fp_log / fp_exp / np_pow (mode 0) give core.fpmath's bits, subnormal,
+    overflow and special inputs included."""
+    from core import fpmath
+
+    cl, rt = eo._import_cl(), eo._runtime()
+    src = eo.kernel_source() + """
+    __kernel void probe(__global const double *x, const double e, __global double *out) {
+        const int i = get_global_id(0);
+        out[3 * i] = np_pow(x[i], e, 0);
+        out[3 * i + 1] = fp_log(x[i]);
+        out[3 * i + 2] = fp_exp(x[i]);
+    }"""
+    options = ["-DMAXN=16", "-DCH=32", "-DNCACHE=8", *eo.fpmath_options()]
+    prg = cl.Program(rt.ctx, src).build(options=options)
+    rng = np.random.default_rng(5)
+    special = [0.0, 5e-324, 1e-310, 2.2250738585072014e-308, 1.0, 0.5, np.inf, -1.0, np.nan]
+    special += [709.78, 709.79, -745.1, -745.2, 1e308, -1e-300]
+    x = np.concatenate(
+        [rng.uniform(0, 1, 20000), 10.0 ** rng.uniform(-320, 308, 20000),
+         rng.uniform(-800, 800, 20000), special]
+    )
+    mf = cl.mem_flags
+    xb = cl.Buffer(rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=x)
+    ob = cl.Buffer(rt.ctx, mf.WRITE_ONLY, 3 * x.nbytes)
+    probe = cl.Kernel(prg, "probe")
+    for e in (1.5, 2.7, 1.3, 0.1, 7.77, 250.0, -3.3):
+        probe(rt.queue, (x.size,), None, xb, np.float64(e), ob)
+        out = np.empty((x.size, 3))
+        cl.enqueue_copy(rt.queue, out, ob)
+        with np.errstate(all="ignore"):
+            ref = np.column_stack([fpmath.power(x, e), fpmath.log(x), fpmath.exp(x)])
+        same = (out == ref) | (np.isnan(out) & np.isnan(ref))
+        for k, what in enumerate(("power", "log", "exp")):
+            bad = np.flatnonzero(~same[:, k])
+            got, want = out[bad[:3], k], ref[bad[:3], k]
+            assert bad.size == 0, f"{what} e={e}: x={x[bad[:3]]}: {got} != {want}"
 
 
 # ---- determinism, pinning, cancel ------------------------------------------------------
