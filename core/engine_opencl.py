@@ -1,11 +1,13 @@
 """The OpenCL backend: the NumPy engine's iteration as float64 kernels (pyopencl).
 
 Positions live on the device for the whole run (one upload, one download); per iteration
-only (n_inverted, q_min, sum q) and a "something was reverted" flag come back. Kernels
-follow the NumPy reference's operation order with FP contraction off, stitching is a gather
-over each node's incident corners in NumPy's bincount order (no float atomics), and every
-reduction has a fixed order, so two runs on one device are bit-identical and results match
-NumPy to round-off. The initial state (mean edge length, distance quadtree, first weights)
+only per-block stats (count, min, partial sums of q) and a "something was reverted" flag
+come back. Kernels follow the NumPy reference's operation order with FP contraction off
+(powers by core.fpmath's algorithm, no math library calls), stitching is a gather over each
+node's incident corners in NumPy's bincount order (no float atomics), and every sum is added
+in NumPy's order: a one-face group's corner sums pairwise like NumPy's reduction over a
+size-1 axis, q_avg from the blocks of NumPy's pairwise q.sum() (`_SumPlan`). Two runs on one
+device are bit-identical, and on a CPU device the results are NumPy's bits. The initial state (mean edge length, distance quadtree, first weights)
 is the NumPy engine's own, built on the host once and uploaded.
 
 Device choice: `select_device(spec)` (the extension's preferences) or the environment
@@ -40,7 +42,7 @@ _NO_PLATFORM_HINT = (
     "in /etc/OpenCL/vendors or a folder named by OCL_ICD_VENDORS"
 )
 _WG = 64  # work-group size for face and node kernels
-_CH = 32  # faces per work-item of the quality kernels (one stats row each)
+_BLOCK = 128  # NumPy's pairwise_sum base-case length (PW_BLOCKSIZE)
 _NCACHE = 8  # nearest boundary nodes cached per face for the distance refresh
 _NGON_MAXN = 16  # private-array size of the generic n-gon kernels (bigger faces: own build)
 
@@ -172,7 +174,7 @@ class _Runtime:
 
     def program(self, maxn: int):
         """The EEGT kernels, built once per n-gon size class."""
-        options = [f"-DMAXN={maxn}", f"-DCH={_CH}", f"-DNCACHE={_NCACHE}", *fpmath_options()]
+        options = [f"-DMAXN={maxn}", f"-DNCACHE={_NCACHE}", *fpmath_options()]
         return self.build(f"eegt MAXN={maxn}", kernel_source(), options)
 
 
@@ -240,6 +242,58 @@ def _pow_mode(e: float) -> int:
     """How core.fpmath.power evaluates x ** e: NumPy's exact fast paths (1-5), else 0,
     exp(e log x) by fpmath's algorithm (kernel np_pow)."""
     return {2.0: 1, 1.0: 2, 0.0: 3, 0.5: 4, -1.0: 5}.get(float(e), 0)
+
+
+class _SumPlan:
+    """`np.sum` of a contiguous float64 array of n values, split for the device. NumPy adds
+    buffer-sized chunks (np.getbufsize(), 8192) in order, each by pairwise_sum: halves
+    (at n / 2 rounded down to a multiple of 8) down to blocks of <= 128 values, which it adds
+    with 8 interleaved partial sums. `bounds` delimits those blocks (the quality kernel sums
+    one per work-item, the same way); `total(block_sums)` adds the block sums in NumPy's
+    order: the result is `q.sum()`'s bits."""
+
+    def __init__(self, n: int, bufsize: int | None = None):
+        bufsize = int(bufsize or np.getbufsize())
+        bounds = [0]
+
+        def tree(off: int, m: int):  # a block's index, or (left, right)
+            if m <= _BLOCK:
+                bounds.append(off + m)
+                return len(bounds) - 2
+            m2 = m // 2 - (m // 2) % 8
+            return tree(off, m2), tree(off + m2, m - m2)
+
+        chunks = [tree(o, min(bufsize, n - o)) for o in range(0, n, bufsize)]
+        self.bounds = np.array(bounds, dtype=np.int32)
+        self.n_blocks = len(bounds) - 1
+        # the additions level by level (each level's are independent): (dst, left, right)
+        # slots, blocks first
+        levels: dict[int, list[tuple[int, int, int]]] = {}
+        n_slots = self.n_blocks
+
+        def schedule(node) -> tuple[int, int]:  # (slot, height)
+            nonlocal n_slots
+            if isinstance(node, int):
+                return node, 0
+            (a, ha), (b, hb) = schedule(node[0]), schedule(node[1])
+            h = max(ha, hb) + 1
+            levels.setdefault(h, []).append((n_slots, a, b))
+            n_slots += 1
+            return n_slots - 1, h
+
+        self.roots = [schedule(c)[0] for c in chunks]
+        self.levels = [np.array(levels[h], dtype=np.int64).T for h in sorted(levels)]
+        self.n_slots = n_slots
+
+    def total(self, block_sums: np.ndarray) -> float:
+        v = np.empty(self.n_slots)
+        v[: self.n_blocks] = block_sums
+        for dst, a, b in self.levels:
+            v[dst] = v[a] + v[b]
+        out = 0.0
+        for r in self.roots:  # the chunks in order, from 0 (the reduction's identity)
+            out = out + float(v[r])
+        return out
 
 
 def _roundup(n: int, m: int) -> int:
@@ -328,9 +382,11 @@ class OpenCLEngine:
             empty(16 * nf),
             empty(32 * nf),
         )
-        # stats: one (count, min, sum, 0) row per quality work-item (_CH faces), folded on
-        # the host in a fixed order; row 0's last slot is the smoothing's "reverted" flag
-        self.n_rows = sum(-(-g.size // _CH) for g in groups)
+        # stats: one (count, min, block sum, 0) row per quality work-item (a block of NumPy's
+        # pairwise q.sum() of its group), folded on the host in NumPy's order; row 0's last
+        # slot is the smoothing's "reverted" flag
+        self._plans = [_SumPlan(g.size) for g in groups]
+        self.n_rows = sum(plan.n_blocks for plan in self._plans)
         self.part = empty(32 * self.n_rows)
         self._host_part = np.zeros((self.n_rows, 4), dtype=np.float64)
         self._setup_kernels(groups, params)
@@ -374,9 +430,15 @@ class OpenCLEngine:
                 np.float64(cos_a),
                 np.float64(inv_sin),
             )
+            plan = self._plans[len(self._group_calls)]
+            rows = plan.n_blocks
+            bounds = self.cl.Buffer(
+                self.rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=plan.bounds
+            )
             kq = kernel(f"quality_{suf}")
-            kq.set_args(*gargs, self.P, self.q, two_sqrt3, self.part, np.int32(ro))
-            rows = -(-g.size // _CH)
+            kq.set_args(
+                *gargs, self.P, self.q, two_sqrt3, self.part, np.int32(ro), bounds, np.int32(rows)
+            )
             moves = []
             for refresh in (0, 1):  # plain move, and move with the distance refresh fused
                 km = kernel(f"move_{suf}_d" if refresh else f"move_{suf}")
@@ -403,7 +465,7 @@ class OpenCLEngine:
             kk.set_args(*gargs, self.q, self.flag)
             gs = _roundup(g.size, _WG)
             self._group_calls.append(
-                ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes)
+                ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes, bounds)
             )
             ro += rows
             co += g.n * g.size
@@ -432,9 +494,14 @@ class OpenCLEngine:
         return self._host_part
 
     def _to_stats(self, part: np.ndarray) -> Stats:
-        """Fold the rows: exact count and min, the sum in NumPy's fixed (pairwise) order."""
+        """Fold the rows like quality.stats_of: exact count and min; each group's q.sum() in
+        NumPy's pairwise order from its block sums, the groups added in order."""
         cnt = int(part[:, 0].sum())
-        return Stats(cnt, float(part[:, 1].min()), float(part[:, 2].sum()) / self.n_faces)
+        sums, ro = [], 0
+        for plan in self._plans:
+            sums.append(plan.total(part[ro : ro + plan.n_blocks, 2]))
+            ro += plan.n_blocks
+        return Stats(cnt, float(part[:, 1].min()), sum(sums) / self.n_faces)
 
     # -- the iteration -------------------------------------------------------------------
     def stats(self) -> Stats:

@@ -14,9 +14,6 @@
 #ifndef MAXN
 #define MAXN 8
 #endif
-#ifndef CH
-#define CH 32  // faces per work-item of the quality + stats kernels (the host passes it)
-#endif
 
 // Inline IEEE operations (correctly rounded, like NumPy's): pocl otherwise calls its
 // library functions for sqrt / fabs / fmin / floor, which blocks inlining and vectorization.
@@ -113,11 +110,112 @@ static inline void load_face(const int n, __global const int *nodes, const int F
     }
 }
 
-// Mean ratio of one face (quality.py: group_quality). cos_a, inv_sin: regular n-gon corner.
-static inline double mean_ratio(const int n, const double *X, const double *Y,
-                                const double cos_a, const double inv_sin, const double two_sqrt3)
+// ---- NumPy's float64 add.reduce order -------------------------------------------------
+// A sum over the corners of an (n, F) arity group (axis 0) runs the corners as NumPy's outer
+// loop when F > 1: sequential. With F == 1 (a group of one face) NumPy's iterator drops the
+// size-1 axis and the corners become its inner loop: pairwise_sum, whose base case adds 8
+// interleaved partial sums once n >= 8, and which halves runs longer than 128 (at n / 2
+// rounded down to a multiple of 8). Result: 0 + pairwise(V[0..n)) (n <= 8192, NumPy's
+// buffer size, beyond which it would also fold buffer-sized blocks in order).
+
+// pairwise_sum's base case (n <= 128): sequential below 8, else 8 interleaved partial sums
+// added as a fixed tree, then the remainder in order
+static inline double np_block_sum(const double *V, const int n)
 {
-    double EX[MAXN], EY[MAXN];
+    if (n < 8) {
+        double r = -0.0;
+        for (int i = 0; i < n; ++i) r = r + V[i];
+        return r;
+    }
+    double r0 = V[0], r1 = V[1], r2 = V[2], r3 = V[3];
+    double r4 = V[4], r5 = V[5], r6 = V[6], r7 = V[7];
+    int i = 8;
+    for (; i < n - (n % 8); i += 8) {
+        r0 = r0 + V[i];
+        r1 = r1 + V[i + 1];
+        r2 = r2 + V[i + 2];
+        r3 = r3 + V[i + 3];
+        r4 = r4 + V[i + 4];
+        r5 = r5 + V[i + 5];
+        r6 = r6 + V[i + 6];
+        r7 = r7 + V[i + 7];
+    }
+    double res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7));
+    for (; i < n; ++i) res = res + V[i];
+    return res;
+}
+
+// NumPy's pairwise_sum of V[0..n): the recursion n -> (n2, n - n2), n2 = n / 2 - (n / 2) % 8,
+// down to blocks of <= 128, evaluated with an explicit stack (OpenCL C has no recursion)
+static inline double np_pairwise(const double *V, const int n)
+{
+    if (n <= 128) return np_block_sum(V, n);
+#if MAXN > 128
+    int off[32], len[32], stage[32];  // stage 1: left half pending, 2: right half pending
+    double left[32];
+    int sp = 0;
+    off[0] = 0;
+    len[0] = n;
+    for (;;) {
+        if (len[sp] > 128) {  // descend into the left half
+            const int n2 = len[sp] / 2 - (len[sp] / 2) % 8;
+            stage[sp] = 1;
+            off[sp + 1] = off[sp];
+            len[sp + 1] = n2;
+            ++sp;
+            continue;
+        }
+        double r = np_block_sum(V + off[sp], len[sp]);
+        for (;;) {  // hand r up: a finished left half starts its right sibling
+            if (sp == 0) return r;
+            --sp;
+            if (stage[sp] == 1) {
+                const int n2 = len[sp] / 2 - (len[sp] / 2) % 8;
+                left[sp] = r;
+                stage[sp] = 2;
+                off[sp + 1] = off[sp] + n2;
+                len[sp + 1] = len[sp] - n2;
+                ++sp;
+                break;
+            }
+            r = left[sp] + r;
+        }
+    }
+#else
+    return np_block_sum(V, n);
+#endif
+}
+
+// X.sum(axis=0) of a group of F faces, for one face's n values
+static inline double sum_axis0(const int n, const double *V, const int F)
+{
+    if (F == 1) return 0.0 + np_pairwise(V, n);
+    double s = V[0];
+    for (int k = 1; k < n; ++k) s = s + V[k];
+    return s;
+}
+
+// X.mean(axis=0): the sum, then one division
+static inline double mean_axis0(const int n, const double *V, const int F)
+{
+    return sum_axis0(n, V, F) / (double)n;
+}
+
+// a loop `total += V[k]` from zeros (transform.py: _edge_sum): sequential for any F
+static inline double sum_of(const int n, const double *V)
+{
+    double s = V[0];
+    for (int k = 1; k < n; ++k) s = s + V[k];
+    return s;
+}
+
+// Mean ratio of one face (quality.py: group_quality). cos_a, inv_sin: regular n-gon corner;
+// F: the group's face count (the corner mean's summation order depends on it).
+static inline double mean_ratio(const int n, const double *X, const double *Y,
+                                const double cos_a, const double inv_sin, const double two_sqrt3,
+                                const int F)
+{
+    double EX[MAXN], EY[MAXN], QK[MAXN];
     for (int k = 0; k < n; ++k) {
         const int k1 = (k + 1 == n) ? 0 : k + 1;
         EX[k] = X[k1] - X[k];
@@ -131,7 +229,6 @@ static inline double mean_ratio(const int n, const double *X, const double *Y,
         return (two_area > 0.0 && ssq > 0.0) ? (two_sqrt3 * two_area) / ssq : 0.0;
     }
     const double scale = 2.0 * inv_sin;
-    double sum = 0.0;
     int ok = 1;
     for (int k = 0; k < n; ++k) {
         const int km = (k == 0) ? n - 1 : k - 1;
@@ -149,19 +246,10 @@ static inline double mean_ratio(const int n, const double *X, const double *Y,
             qk = det > 0.0 ? (scale * det) / fro : 0.0;
         }
         ok = ok && det > 0.0 && fro > 0.0;
-        sum = (k == 0) ? qk : sum + qk;
+        QK[k] = qk;
     }
-    return ok ? sum / (double)n : 0.0;
+    return ok ? mean_axis0(n, QK, F) : 0.0;
 }
-
-static inline double sum_of(const int n, const double *V)
-{
-    double s = V[0];
-    for (int k = 1; k < n; ++k) s = s + V[k];
-    return s;
-}
-
-static inline double mean_of(const int n, const double *V) { return sum_of(n, V) / (double)n; }
 
 // p^s - p for every corner of one face (transform.py: group_transform_delta), times w.
 static inline void transform_moves(const int n, const int R, const double *X, const double *Y,
@@ -189,12 +277,12 @@ static inline void transform_moves(const int n, const int R, const double *X, co
             const int k1 = (k + 1 == n) ? 0 : k + 1;
             L[k] = X[k] * Y[k1] - X[k1] * Y[k];
         }
-        before = SQRT(0.5 * FABS(sum_of(n, L)));
+        before = SQRT(0.5 * FABS(sum_axis0(n, L, F)));
         for (int k = 0; k < n; ++k) {
             const int k1 = (k + 1 == n) ? 0 : k + 1;
             L[k] = SX[k] * SY[k1] - SX[k1] * SY[k];
         }
-        after = SQRT(0.5 * FABS(sum_of(n, L)));
+        after = SQRT(0.5 * FABS(sum_axis0(n, L, F)));
     } else {  // mean edge length (paper): the ratio of edge-length sums
         for (int k = 0; k < n; ++k) {
             const int k1 = (k + 1 == n) ? 0 : k + 1;
@@ -210,8 +298,8 @@ static inline void transform_moves(const int n, const int R, const double *X, co
         after = sum_of(n, L);
     }
     const double s = after > 0.0 ? before / after : 1.0;
-    const double CX = mean_of(n, X);
-    const double CY = mean_of(n, Y);
+    const double CX = mean_axis0(n, X, F);
+    const double CY = mean_axis0(n, Y, F);
     const double oms = 1.0 - s;
     for (int k = 0; k < n; ++k) {
         const double DX = oms * (CX - X[k]) + s * NX[k];
@@ -376,25 +464,45 @@ static inline double nearest_d(const double qx, const double qy,
         __global int *restrict cache_k, __global int4 *restrict cache_l,                     \
         __global long2 *restrict cache_c, __global double4 *restrict cache_d
 
-// Quality: work-item g computes q of the faces [g * CH, (g + 1) * CH) of its group and
-// writes (count q == 0, min q, sum q in order, 0) to part[ro + g] (no barriers, no second
-// pass over q). QUALITY_BODY(j) defines v = q of face j.
+// Quality: work-item g computes q of the faces [bounds[g], bounds[g + 1]) of its group, one
+// of the blocks (<= 128 faces) into which NumPy's pairwise q.sum() splits the group (the
+// host's _SumPlan), and writes (count q == 0, min q, the block's sum, 0) to part[ro + g]:
+// the sum as pairwise_sum's base case adds it (8 interleaved partial sums over the first
+// m - m % 8 faces once m >= 8, a fixed tree of them, then the rest in order), so the host
+// can finish q.sum() in NumPy's order. The partial sums rotate through r0..r7 (face t adds
+// to r0, then r0 moves to r7), which keeps them in registers. QUALITY_BODY(j) defines v.
 #define QUALITY_KERNEL(SUF, QUALITY_BODY)                                                    \
     __kernel void quality_##SUF(GROUP_ARGS, __global const double2 *restrict P,              \
                                 __global double *restrict q, const double two_sqrt3,         \
-                                __global double4 *restrict part, const int ro)               \
+                                __global double4 *restrict part, const int ro,               \
+                                __global const int *restrict bounds, const int n_blocks)     \
     {                                                                                        \
         const int g = get_global_id(0);                                                      \
-        const int j0 = g * CH;                                                               \
-        if (j0 >= F) return;                                                                 \
-        const int j1 = min(j0 + CH, F);                                                      \
-        double cnt = 0.0, mn = INFINITY, s = 0.0;                                            \
+        if (g >= n_blocks) return;                                                           \
+        const int j0 = bounds[g], j1 = bounds[g + 1];                                        \
+        const int jb = j1 - j0 >= 8 ? j1 - (j1 - j0) % 8 : j0;                               \
+        double cnt = 0.0, mn = INFINITY, s = -0.0;                                           \
+        double r0 = 0.0, r1 = 0.0, r2 = 0.0, r3 = 0.0, r4 = 0.0, r5 = 0.0, r6 = 0.0;          \
+        double r7 = 0.0;                                                                     \
         for (int j = j0; j < j1; ++j) {                                                      \
             QUALITY_BODY(j)                                                                  \
             q[fo + j] = v;                                                                   \
             cnt += (v == 0.0) ? 1.0 : 0.0;                                                   \
             mn = FMIN(mn, v);                                                                \
-            s += v;                                                                          \
+            if (j < jb) {                                                                    \
+                const double acc = j - j0 < 8 ? v : r0 + v;                                  \
+                r0 = r1;                                                                     \
+                r1 = r2;                                                                     \
+                r2 = r3;                                                                     \
+                r3 = r4;                                                                     \
+                r4 = r5;                                                                     \
+                r5 = r6;                                                                     \
+                r6 = r7;                                                                     \
+                r7 = acc;                                                                    \
+                if (j + 1 == jb) s = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7));       \
+            } else {                                                                         \
+                s = s + v;                                                                   \
+            }                                                                                \
         }                                                                                    \
         part[ro + g] = (double4)(cnt, mn, s, 0.0);                                           \
     }
@@ -402,7 +510,7 @@ static inline double nearest_d(const double qx, const double qy,
 #define GENERIC_QUALITY(NN)                                                                  \
     double X[MAXN], Y[MAXN];                                                                 \
     load_face(NN, nodes, F, j, P, X, Y);                                                     \
-    const double v = mean_ratio(NN, X, Y, cos_a, inv_sin, two_sqrt3);
+    const double v = mean_ratio(NN, X, Y, cos_a, inv_sin, two_sqrt3, F);
 #define QUALITY_QUAD(j) GENERIC_QUALITY(4)
 #define QUALITY_NGON(j) GENERIC_QUALITY(n)
 
@@ -460,7 +568,7 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
         if (j >= F) return;                                                                  \
         double X[MAXN], Y[MAXN];                                                             \
         load_face(NN, nodes, F, j, P, X, Y);                                                 \
-        MOVE_WEIGHT(mean_of(NN, X), mean_of(NN, Y))                                          \
+        MOVE_WEIGHT(mean_axis0(NN, X, F), mean_axis0(NN, Y, F))                                          \
         transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j);                         \
     }
 #define MAKE_KERNELS(SUF, NN)                                                                \

@@ -41,6 +41,14 @@ def device() -> str:
     return eo._runtime().name
 
 
+@pytest.fixture(scope="module")
+def cpu_device(device) -> str:
+    """A CPU device, where the OpenCL engine promises NumPy's bits (a GPU: round-off)."""
+    if not eo._runtime().is_cpu:
+        pytest.skip(f"bit-identity is promised on CPU devices; {device} is not one")
+    return device
+
+
 @pytest.fixture(autouse=True)
 def _fresh_warnings(monkeypatch):
     """Each test sees the 'said once' fallback messages afresh."""
@@ -84,13 +92,13 @@ def step_exact(p, f, free, params, n_untangle: int, n_smooth: int) -> None:
     assert name == "opencl", name
     for it in range(n_untangle + n_smooth):
         phase = "untangle" if it < n_untangle else "smooth"
-        ref.step(phase)
-        eng.step(phase)
+        sa, sb = ref.step(phase), eng.step(phase)
         a, b = ref.points(), eng.points()
         if not np.array_equal(a, b):
             rows = np.flatnonzero(np.any(a != b, axis=1))
             d = float(np.abs(a - b).max())
             pytest.fail(f"iteration {it + 1} ({phase}): {rows.size} nodes differ (max {d:.3e})")
+        assert sa == sb, f"iteration {it + 1} ({phase}): stats {sa} != {sb}"
 
 
 # ---- parity ----------------------------------------------------------------------------
@@ -119,7 +127,7 @@ def test_parity_with_other_parameters(device, params):
 
 @pytest.mark.parametrize("c, eta", [(1.5, 2.7), (3.0, 1.3)])
 @pytest.mark.parametrize("name", ["quad_hole", "mixed_quad_tri", "polygon_voronoi"])
-def test_general_powers_bit_identical_on_shared_meshes(device, name, c, eta):
+def test_general_powers_bit_identical_on_shared_meshes(cpu_device, name, c, eta):
     """Non-special exponents: both engines use core.fpmath's exp(e log x), operation for
     operation, so the positions are the same bits (no libm pow on either side)."""
     p, f = load2d(name)
@@ -177,11 +185,11 @@ def test_tilted_plane_3d(device):
 
 
 @st.composite
-def polygon_meshes(draw):
+def polygon_meshes(draw, max_side: int = 7):
     """A jittered m x n grid of quads, some split into triangles, some pairs merged into
     hexagons; every face counterclockwise before the jitter, which may invert some."""
-    m = draw(st.integers(3, 7))
-    n = draw(st.integers(3, 7))
+    m = draw(st.integers(3, max_side))
+    n = draw(st.integers(3, max_side))
     seed = draw(st.integers(0, 2**31 - 1))
     jitter = draw(st.floats(0.05, 0.7))
     rng = np.random.default_rng(seed)
@@ -234,13 +242,201 @@ def test_parity_on_random_polygon_meshes(device, mesh):
     c=st.floats(0.1, 4.0).filter(lambda v: v not in (0.5, 1.0, 2.0)),
     eta=st.floats(0.1, 4.0).filter(lambda v: v not in (0.5, 1.0, 2.0)),
 )
-def test_general_powers_bit_identical_on_random_meshes(device, mesh, c, eta):
+def test_general_powers_bit_identical_on_random_meshes(cpu_device, mesh, c, eta):
     pts, faces, pinned = mesh
     fs = as_faceset(faces, len(pts))
     free = free_nodes(len(pts), fs, pinned)
     if not free.any():
         return
     step_exact(pts, fs, free, EEGTParams(c=c, eta=eta, distance_refresh=2), 10, 6)
+
+
+def merge_faces(rng, faces: list[list[int]], max_n: int, tries: int) -> list[list[int]]:
+    """Merge random pairs of faces that share exactly one edge into polygons of <= max_n
+    corners (as bench/fuzz.py does): irregular n-gons, often one face of its arity."""
+    faces = [list(f) for f in faces]
+    for _ in range(tries):
+        owner = {(f[k], f[(k + 1) % len(f)]): i for i, f in enumerate(faces) for k in range(len(f))}
+        pairs = sorted((i, owner[(v, u)], u, v) for (u, v), i in owner.items() if (v, u) in owner)
+        if not pairs:
+            break
+        ia, ib, u, v = pairs[int(rng.integers(len(pairs)))]
+        A, B = faces[ia], faces[ib]
+        if len(A) + len(B) - 2 > max_n or len(set(A) & set(B)) != 2:
+            continue
+        a, b = A.index(v), B.index(u)  # A = .. u v .., B = .. v u ..
+        faces[ia] = A[a:] + A[:a] + (B[b:] + B[:b])[1:-1]
+        del faces[ib]
+    return faces
+
+
+@st.composite
+def fuzz_cases(draw):
+    """A small tangled polygon mesh (a jittered grid of quads / triangle pairs / hexagons,
+    some neighbours merged into n-gons of up to 10 corners, some nodes pinned) and random
+    parameters (paper mode included): what bench/fuzz.py runs, kept small for CI."""
+    pts, faces, pinned = draw(polygon_meshes(max_side=5))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    faces = merge_faces(rng, faces, draw(st.integers(5, 10)), draw(st.integers(0, 8)))
+    exps = st.sampled_from([0.0, 0.5, 1.0, 2.0]) | st.floats(0.05, 4.0)
+    paper = EEGTParams.paper().with_(max_untangle_iterations=300, max_smooth_iterations=100)
+    params = st.just(paper) | st.builds(
+        EEGTParams,
+        a=st.floats(0.05, 0.5),
+        eta=exps,
+        c=exps,
+        tol=st.sampled_from([0.0, 1e-5, 1e-3]),
+        distance_refresh=st.integers(1, 12),
+        scaling=st.sampled_from(["edge", "area"]),
+        untangle=st.sampled_from(["eegt", "eegt+global", "global"]),
+        max_untangle_iterations=st.integers(0, 200),
+        max_smooth_iterations=st.integers(0, 100),
+        polish_iterations=st.integers(0, 100),
+        lift_rounds=st.integers(0, 2),
+    )
+    return pts, faces, pinned, draw(params)
+
+
+def run_both(pts, faces, pinned, params):
+    """(NumPy result, OpenCL result), or None when both refuse the input alike."""
+    out = []
+    for backend in ("numpy", "opencl"):
+        try:
+            out.append(untangle_and_smooth(pts, faces, pinned, params, backend=backend))
+        except ValueError as exc:
+            out.append(str(exc))
+    ra, rb = out
+    if isinstance(ra, str) or isinstance(rb, str):
+        assert ra == rb, f"only one backend refused the input: {ra!r} vs {rb!r}"
+        return None
+    assert rb.backend == "opencl", rb.backend
+    return ra, rb
+
+
+def assert_same_run(ra, rb) -> None:
+    if not np.array_equal(ra.points, rb.points):
+        rows = np.flatnonzero(np.any(ra.points != rb.points, axis=1))
+        d = float(np.abs(ra.points - rb.points).max())
+        pytest.fail(f"{rows.size} nodes differ (max {d:.3e}); {ra.message} | {rb.message}")
+    counts = (ra.untangle_iterations, ra.smooth_iterations, ra.global_iterations)
+    assert (ra.status, ra.after, counts) == (
+        rb.status,
+        rb.after,
+        (rb.untangle_iterations, rb.smooth_iterations, rb.global_iterations),
+    )
+
+
+@settings(
+    max_examples=100,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(case=fuzz_cases())
+def test_fuzz_pipeline_bit_identical(cpu_device, case):
+    """Whole runs on both backends give the same bits, iteration counts and stats; and a few
+    engine steps agree bit for bit, stats included (finds summation-order slips: a one-face
+    n-gon group's corner sums, the stats' pairwise q sums)."""
+    pts, faces, pinned, params = case
+    both = run_both(pts, faces, pinned, params)
+    if both is None:
+        return
+    assert_same_run(*both)
+    fs = as_faceset(faces, len(pts))
+    step_exact(pts, fs, both[0].moved, params, 4, 4)
+
+
+# bench/fuzz.py seed 0, case 1015 (24 nodes, coincident nodes 7 and 8): the one octagon is
+# a group of one face. NumPy sums a group's corners (centroid, shoelace area, corner-quality
+# mean: X.sum(axis=0) of an (n, F) array) in order when F > 1, but with F == 1 its iterator
+# drops the size-1 axis and the corners become the inner loop: pairwise_sum, which adds 8
+# interleaved partial sums once n >= 8. The kernels summed in order: 2 nodes differed by
+# 5.7e-14 after 294 iterations.
+ONE_FACE_OCTAGON = (
+    [
+        (106.97854498677938, 351.25260615596625), (108.36320685594498, 351.5402022409167),
+        (108.0756107709945, 352.9248641100823), (106.6909489018289, 352.63726802513185),
+        (107.19482388013552, 349.9678036027798), (109.05964042888759, 352.0645335614305),
+        (107.23533457316792, 353.18835425298283), (106.17948168425019, 352.917747388037),
+        (106.17948168425019, 352.917747388037), (111.12970269482734, 350.45139809094786),
+        (108.19538601016379, 355.350412273853), (105.26799237238944, 352.102581518899),
+        (105.9487346767149, 350.06628111119915), (110.11621424835398, 350.49368919072),
+        (110.428243936075, 355.02383471520073), (103.56939568116634, 353.5338650073891),
+        (105.28354840017639, 348.6140158110483), (110.99305006716332, 350.82339057527213),
+        (109.089541271455, 355.6418202174219), (104.45220876371218, 354.0666078741086),
+        (104.23588052624162, 347.07196127067607), (112.54385174123517, 348.79753778037895),
+        (110.81827523153227, 357.1055089953725), (102.51030401653871, 355.3799324856696),
+    ],
+    [
+        [17, 21, 22, 18], [16, 20, 21], [12, 16, 17, 13, 14, 10, 9, 8], [17, 18, 19, 15, 14, 13],
+        [7, 6, 5, 9, 10, 11], [7, 8, 4], [16, 12, 15, 19], [15, 12, 11, 10, 14], [8, 7, 11],
+        [16, 21, 17], [8, 11, 12], [19, 18, 22, 23, 20, 16], [5, 4, 8, 9], [6, 2, 1, 5],
+        [6, 7, 4, 0, 3, 2], [5, 1, 0, 4],
+    ],
+    EEGTParams(
+        a=0.407678506143948, eta=2.761159663722, c=0.5, inverted_weight=9.844802316764822,
+        max_untangle_iterations=294, max_smooth_iterations=44, distance_refresh=14,
+        untangle="eegt", stall_iterations=22,
+    ),
+)
+
+# bench/fuzz.py seed 0, case 1548 (a wheel of 13 triangles, tol 0): the device's q_avg was
+# a different sum than NumPy's q.sum() (rows of 32 faces in order, then the rows pairwise,
+# where NumPy adds a group's q pairwise with 8 partial sums, then the groups in order). One
+# ulp decided the smoothing's stop: 4 smoothing iterations on NumPy, 116 on OpenCL.
+WHEEL_TOL0 = (
+    [
+        (-1.2175641365296288, 0.12095000242683061), (-1.1780245452147793, 1.0111659826303239),
+        (-1.6441361084660089, 0.9024095607644167), (-2.0063157714237927, 0.5894976874943755),
+        (-2.1815925380425996, 0.14411470198949944), (-2.1298126134040842, -0.3317075212178763),
+        (-1.8628381542271915, -0.7289638450703558), (-1.4418297917183343, -0.9566476332310214),
+        (-0.9632354680275101, -0.962599273719363), (-0.5366953750254405, -0.7454553174245446),
+        (-0.2599247076535388, -0.35496082786535454), (-0.19632829035858734, 0.11942661336894603),
+        (-0.3604752959229468, 0.569030560479993), (-0.7147616235576862, 0.8908521674995832),
+    ],
+    [
+        [3, 0, 2], [13, 1, 0], [0, 12, 13], [0, 8, 9], [0, 11, 12], [6, 7, 0], [5, 0, 4],
+        [8, 0, 7], [4, 0, 3], [0, 10, 11], [1, 2, 0], [6, 0, 5], [0, 9, 10],
+    ],
+    EEGTParams(
+        a=0.454860247418588, eta=2.93842281, c=0.164482389197, inverted_weight=3.9530179041074325,
+        tol=0.0, max_untangle_iterations=26, max_smooth_iterations=116, distance_refresh=18,
+        untangle="global", stall_iterations=39, polish_iterations=201, lift_rounds=10,
+    ),
+)
+
+
+def test_bug_one_face_ngon_group_sums_pairwise(cpu_device):
+    pts, faces, params = ONE_FACE_OCTAGON
+    pts = np.array(pts)
+    fs = as_faceset(faces, len(pts))
+    assert [(g.n, g.size) for g in fs.groups if g.n >= 8] == [(8, 1)]
+    ra, rb = run_both(pts, faces, None, params)
+    assert_same_run(ra, rb)
+    step_exact(pts, fs, free_nodes(len(pts), fs), params, 30, 10)
+
+
+@pytest.mark.parametrize("n", [8, 9, 13, 16, 150])
+def test_one_face_ngon_of_any_size_bit_identical(cpu_device, n):
+    """A lone n-gon ringed by quads (n > 128: the pairwise split; n > 16: its own build)."""
+    t = 2 * np.pi * np.arange(n) / n
+    rng = np.random.default_rng(n)
+    inner = np.column_stack([np.cos(t), np.sin(t)]) * (1 + 0.2 * rng.uniform(-1, 1, (n, 1)))
+    pts = np.vstack([inner, 2.0 * np.column_stack([np.cos(t), np.sin(t)])])
+    faces = [list(range(n))] + [[i, n + i, n + (i + 1) % n, (i + 1) % n] for i in range(n)]
+    fs = as_faceset(faces, len(pts))
+    assert [(g.n, g.size) for g in fs.groups] == [(4, n), (n, 1)]
+    free = free_nodes(len(pts), fs)
+    for scaling in ("edge", "area"):
+        step_exact(pts, fs, free, EEGTParams(scaling=scaling, distance_refresh=2), 6, 4)
+
+
+def test_bug_stats_q_avg_in_numpy_pairwise_order(cpu_device):
+    pts, faces, params = WHEEL_TOL0
+    ra, rb = run_both(np.array(pts), faces, None, params)
+    assert_same_run(ra, rb)
+    assert ra.smooth_iterations == rb.smooth_iterations
 
 
 def big_ngon_mesh() -> tuple[np.ndarray, list[list[int]]]:
