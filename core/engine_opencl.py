@@ -7,8 +7,9 @@ come back. Kernels follow the NumPy reference's operation order with FP contract
 node's incident corners in NumPy's bincount order (no float atomics), and every sum is added
 in NumPy's order: a one-face group's corner sums pairwise like NumPy's reduction over a
 size-1 axis, q_avg from the blocks of NumPy's pairwise q.sum() (`_SumPlan`). Two runs on one
-device are bit-identical, and on a CPU device the results are NumPy's bits. The initial state (mean edge length, distance quadtree, first weights)
-is the NumPy engine's own, built on the host once and uploaded.
+device are bit-identical, and on a CPU device the results are NumPy's bits. The initial
+state (mean edge length, distance quadtree, first weights) is the NumPy engine's own, built
+on the host once and uploaded.
 
 Device choice: `select_device(spec)` (the extension's preferences) or the environment
 variable EEGT_OPENCL_DEVICE, as "platform:device" indices or a substring of the device or

@@ -439,6 +439,51 @@ def test_bug_stats_q_avg_in_numpy_pairwise_order(cpu_device):
     assert ra.smooth_iterations == rb.smooth_iterations
 
 
+def block_sum(v) -> float:
+    """pairwise_sum's base case as the kernels write it (np_block_sum, the quality blocks)."""
+    v = [float(x) for x in v]
+    if len(v) < 8:
+        r = -0.0
+        for x in v:
+            r += x
+        return r
+    r = v[:8]
+    i = 8
+    while i < len(v) - len(v) % 8:
+        r = [r[j] + v[i + j] for j in range(8)]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    return sum(v[i:], res)  # the rest in order
+
+
+def pairwise(v) -> float:
+    if len(v) <= 128:
+        return block_sum(v)
+    n2 = len(v) // 2 - (len(v) // 2) % 8
+    return pairwise(v[:n2]) + pairwise(v[n2:])
+
+
+def test_numpy_summation_orders_the_kernels_assume():
+    """The orders the kernels and _SumPlan reproduce are NumPy's: X.sum(axis=0) of an (n, F)
+    group in order for F > 1 and pairwise for F == 1; q.sum() pairwise per 8192-value buffer,
+    buffers in order. If NumPy changes them, this says so before the parity tests do."""
+    rng = np.random.default_rng(11)
+    for n in (3, 5, 7, 8, 9, 12, 16, 17, 40, 150, 300):
+        for F in (1, 2, 3):
+            X = rng.standard_normal((n, F))
+            seq = X[0].copy()
+            for k in range(1, n):
+                seq = seq + X[k]
+            want = [0.0 + pairwise(X[:, 0])] if F == 1 else seq
+            assert np.array_equal(X.sum(axis=0), want), (n, F)
+    for n in (1, 7, 8, 100, 128, 129, 1000, 8191, 8192, 8193, 20000):
+        q = rng.random(n) * (rng.random(n) < 0.8)
+        plan = eo._SumPlan(n)
+        blocks = [block_sum(q[a:b]) for a, b in zip(plan.bounds[:-1], plan.bounds[1:])]
+        assert plan.total(np.array(blocks)) == q.sum(), n
+        assert (np.diff(plan.bounds) <= 128).all() and plan.bounds[-1] == n
+
+
 def big_ngon_mesh() -> tuple[np.ndarray, list[list[int]]]:
     """A 20-gon ringed by 20 quads (beyond the 16-corner n-gon kernel: its own build)."""
     k = 20
