@@ -1,32 +1,91 @@
 """Planar meshes in 3D (SPEC section 5): fit the plane, map to 2D and back.
 
-The plane normal is the mesh's vector area (sum of face area vectors): interior tangling
-cannot change it, since it is fixed by the boundary. Projecting with that normal makes the
+The plane normal is the mesh's vector area. Summed face by face, the interior edges cancel
+(each is walked once in each direction), so it equals the Newell sum over the open (boundary
+and non-manifold) edges alone; it is computed that way, so interior nodes, tangled or not,
+do not enter it at all, not even through round-off. Projecting with that normal makes the
 domain's total signed area positive, i.e. the faces' stored order the valid orientation.
+
+Everything here is explicit elementwise arithmetic in a fixed order (no matrix product,
+dot or norm routine): BLAS/LAPACK pick kernels per CPU, and the frame must be bit-identical
+on every x86-64 machine.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .faces import as_faceset
+from .faces import FaceSet, as_faceset
+from .topology import EdgeInfo
 
 __all__ = ["PlaneFrame"]
 
 
+def _dot3(q: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Row-wise q . w for (N, 3) q and one (3,) vector, in a fixed order (no BLAS)."""
+    return q[:, 0] * w[0] + q[:, 1] * w[1] + q[:, 2] * w[2]
+
+
+def _norm3(w: np.ndarray) -> float:
+    """Euclidean length of one 3-vector, in a fixed order (no BLAS)."""
+    x, y, z = float(w[0]), float(w[1]), float(w[2])
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def _vector_area(q: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """Vector area 0.5 * sum of q_a x q_b over the faces' directed edges a -> b, summed per
+    undirected edge with its net direction count: interior edges (once each way) drop out
+    exactly, so only boundary and non-manifold nodes enter, in sorted-edge order."""
+    n = q.shape[0]
+    a = np.concatenate([g.nodes.ravel() for g in fs.groups])
+    b = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in fs.groups])
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    uniq, inverse = np.unique(lo * n + hi, return_inverse=True)
+    net = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=uniq.size)
+    keep = net != 0.0
+    e0, e1, w = uniq[keep] // n, uniq[keep] % n, net[keep]
+    c = np.cross(q[e0], q[e1])
+    return np.array([0.5 * float(np.sum(w * c[:, k])) for k in range(3)])
+
+
 @dataclass(frozen=True)
 class PlaneFrame:
+    """An orthonormal frame (origin, u, v, normal) of a planar mesh's plane."""
+
     origin: np.ndarray  # (3,)
     u: np.ndarray  # (3,) in-plane axis
     v: np.ndarray  # (3,) in-plane axis, u x v = normal
     normal: np.ndarray  # (3,) unit normal
     max_offset: float  # largest distance of a used node from the plane
+    fixed_offset: float = 0.0  # with project: largest distance of a fixed node from it
+    size: float = 0.0  # diagonal of the used nodes' bounding box (the tolerance's scale)
 
     @classmethod
-    def fit(cls, points3d, faces, used=None, tol: float = 1e-5, project: bool = False):
-        """Fit the plane; refuse (ValueError) nodes farther than tol * size unless `project`."""
+    def fit(cls, points3d, faces, used=None, tol: float = 1e-5, project: bool = False,
+            fixed=None) -> PlaneFrame:
+        """Fit the plane; without ``project``, refuse (ValueError) a node farther than
+        ``tol * size`` from it.
+
+        Without ``project`` the plane goes through the centroid of the used nodes and every
+        used node must lie within the tolerance (SPEC 5 and 7: a non-planar mesh is refused).
+
+        With ``project`` (the user asked to flatten the mesh) nothing is refused for being
+        off the plane, and the plane is the one the nodes that never move define: the fixed
+        nodes (boundary and non-manifold nodes, plus ``fixed``, the caller's extra pins, the
+        same meaning as in ``untangle_and_smooth``). Its origin is their centroid, its
+        normal the vector area, which depends on the boundary only. A mesh engineer who
+        projects a bulged or noisy interior expects it to land on the plane of its outline
+        (which does not move), not on a plane shifted by the bulge, as the all-node
+        centroid would be. A least-squares fit (smallest-variance direction) would need
+        LAPACK's eigensolver, whose bits depend on the CPU; for the nearly planar outlines
+        this option is meant for, the vector area gives the same plane to well within the
+        tolerance and is exactly reproducible. Fixed nodes off that plane stay where they
+        are (they never move, SPEC 4); ``fixed_offset`` says how far the farthest one is,
+        for the caller to report.
+        """
         p = np.array(points3d, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != 3:
             raise ValueError(f"points must be an (N, 3) array, got shape {p.shape}")
@@ -35,36 +94,65 @@ class PlaneFrame:
             raise ValueError(f"node {int(np.flatnonzero(bad)[0])} has a NaN or infinite coordinate")
         fs = as_faceset(faces, p.shape[0])
         used = fs.used_nodes(p.shape[0]) if used is None else np.asarray(used, dtype=bool)
-        origin = p[used].mean(axis=0)
+        anchor = used
+        if project:
+            anchor = used & _fixed_nodes(fs, p.shape[0], fixed)
+            if not anchor.any():  # a closed surface pinned nowhere: fall back to all nodes
+                anchor = used
+        origin = p[anchor].mean(axis=0)
         q = p - origin
-        area = np.zeros(3)
-        for g in fs.groups:
-            P = q[g.nodes]  # (n, F, 3)
-            area += 0.5 * np.cross(P, np.roll(P, -1, axis=0)).sum(axis=(0, 1))
-        norm = float(np.linalg.norm(area))
-        size = float(np.linalg.norm(np.ptp(p[used], axis=0)))
+        area = _vector_area(q, fs)
+        norm = _norm3(area)
+        span = np.ptp(p[used], axis=0)
+        size = _norm3(span)
         if size == 0 or norm <= 1e-12 * size * size:
             raise ValueError("mesh has zero total area: cannot tell its plane or orientation")
         normal = area / norm
         helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
         u = np.cross(helper, normal)
-        u /= np.linalg.norm(u)
+        u = u / _norm3(u)
         v = np.cross(normal, u)
-        offsets = np.abs(q[used] @ normal)
-        worst = int(np.argmax(offsets))
-        max_offset = float(offsets[worst])
-        if max_offset > tol * size and not project:
-            node = int(np.flatnonzero(used)[worst])
+        offsets = np.abs(_dot3(q, normal))
+        max_offset = float(offsets[used].max())
+        check = np.flatnonzero(anchor)
+        worst = int(check[np.argmax(offsets[check])])
+        if project:
+            return cls(origin, u, v, normal, max_offset, float(offsets[worst]), size)
+        if offsets[worst] > tol * size:
             raise ValueError(
-                f"mesh is not planar: node {node} is {max_offset:.3g} from the best plane "
+                f"mesh is not planar: node {worst} is {offsets[worst]:.3g} from the best plane "
                 f"(tolerance {tol * size:.3g}, {tol:g} of its size)"
             )
-        return cls(origin, u, v, normal, max_offset)
+        return cls(origin, u, v, normal, max_offset, 0.0, size)
 
     def to_2d(self, points3d) -> np.ndarray:
+        """(N, 2) in-plane coordinates: ((p - origin) . u, (p - origin) . v)."""
         q = np.asarray(points3d, dtype=np.float64) - self.origin
-        return np.column_stack([q @ self.u, q @ self.v])
+        return np.column_stack([_dot3(q, self.u), _dot3(q, self.v)])
 
     def to_3d(self, points2d) -> np.ndarray:
+        """(N, 3) points of the plane: origin + x u + y v."""
         p = np.asarray(points2d, dtype=np.float64)
         return self.origin + p[:, :1] * self.u + p[:, 1:2] * self.v
+
+    def foot(self, points3d) -> np.ndarray:
+        """(N, 3) orthogonal projections onto the plane: p - ((p - origin) . n) n.
+
+        Same in-plane position as ``to_3d(to_2d(p))``, but a node already on the plane
+        (offset exactly 0) comes back bit for bit.
+        """
+        p = np.asarray(points3d, dtype=np.float64)
+        off = _dot3(p - self.origin, self.normal)
+        return p - off[:, None] * self.normal
+
+
+def _fixed_nodes(fs: FaceSet, n_nodes: int, fixed) -> np.ndarray:
+    """(N,) bool: boundary and non-manifold nodes, plus the caller's pins (among the used
+    nodes, the complement of ``pipeline.free_nodes``: the same EdgeInfo rule)."""
+    out = EdgeInfo(fs, n_nodes).boundary_mask()
+    if fixed is not None:
+        pinned = np.asarray(fixed)
+        if pinned.shape != (n_nodes,):
+            raise ValueError(f"fixed must be an ({n_nodes},) bool array, got shape {pinned.shape}")
+        out = out | pinned.astype(bool)
+    return out
