@@ -16,13 +16,28 @@ from typing import Any
 import bpy
 import numpy as np
 
-from ..core import EEGTParams, faces_from_csr, quality, untangle_and_smooth
+from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
 from ..core.plane import PlaneFrame
 from . import mesh_io
 
 Progress = Callable[[int, str, Any], bool]
 
 PLANE_TOL = 1e-5
+QUALITY_EPS = 1e-6  # quality changes smaller than this are float32 round-off, not a gain
+
+
+def improves(after: Any, before: Any, eps: float = QUALITY_EPS) -> bool:
+    """Whether core Stats ``after`` are worth writing over ``before``: fewer inverted faces,
+    else (as ``Stats.better_than``) a higher q_min, then a higher q_avg, where differences
+    of at most ``eps`` count as ties. Positions are stored as float32: re-running on a
+    valid, already smooth mesh otherwise rewrites a few vertices by one float32 step for a
+    q gain of ~1e-13.
+    """
+    if after.n_inverted != before.n_inverted:
+        return after.n_inverted < before.n_inverted
+    if abs(after.q_min - before.q_min) > eps:
+        return after.q_min > before.q_min
+    return after.q_avg > before.q_avg + eps
 
 
 def stats_dict(stats: Any) -> dict[str, Any] | None:
@@ -122,6 +137,7 @@ class Job:
     fixed: np.ndarray | None = None  # (n,) extra pinned nodes (boundary is added by the core)
     frame: Any = None
     points2d: np.ndarray | None = None
+    project: bool = False  # put every free node on the fixed nodes' plane (PlaneFrame.fit)
     notes: list[str] = field(default_factory=list)
     error: str | None = None
     result: Any = None
@@ -198,7 +214,10 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         return _fail(job, f"{bad} vertices have NaN or infinite coordinates")
     fixed_all = np.zeros(n_all, dtype=bool)
     if use_pinned:
-        fixed_all |= mesh_io.read_pins(obj)
+        try:
+            fixed_all |= mesh_io.read_pins(obj)
+        except ValueError as exc:
+            return _fail(job, str(exc))
     if selected_only:
         fixed_all[topo.corner_verts[~corner_in]] = True
     loose = mesh_io.loose_edge_vertices(me)
@@ -209,10 +228,15 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         offsets = np.zeros(totals.size + 1, dtype=np.int64)
         np.cumsum(totals, out=offsets[1:])
         job.faces = faces_from_csr(offsets[:-1], totals, local.reshape(-1))
-        job.frame = PlaneFrame.fit(pts3d, job.faces, tol=PLANE_TOL, project=project)
+        job.frame = PlaneFrame.fit(pts3d, job.faces, tol=PLANE_TOL, project=project,
+                                   fixed=job.fixed)
         job.points2d = job.frame.to_2d(pts3d)
     except ValueError as exc:
         return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+    job.project = project
+    if project and job.frame.fixed_offset > PLANE_TOL * job.frame.size:
+        job.notes.append(f"boundary/pinned vertices up to {job.frame.fixed_offset:.3g} off the "
+                         f"plane were kept where they are (they never move)")
     return job
 
 
@@ -241,18 +265,66 @@ def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Prog
     job.result = res
     if res.status == "cancelled":
         return
-    new3d = job.frame.to_3d(res.points).astype(np.float32)
-    moved = np.asarray(res.moved, dtype=bool)
-    rows = job.nodes[moved]
-    changed = np.any(new3d[moved] != job.co[rows], axis=1)
-    if changed.any():
-        out = job.co.copy()
-        out[rows[changed]] = new3d[moved][changed]
-        job.new_co = out
-        written2d = job.frame.to_2d(out[job.nodes].astype(np.float64))
-        job.after = stats_from_quality(np.asarray(quality(written2d, job.faces)))
-    else:
+    new_co, written = _positions_to_write(job, res)
+    if new_co is None:
         job.after = stats_dict(res.before)
+        if res.status != "failed":
+            job.notes.append("no improvement over the input: mesh unchanged")
+        return
+    job.new_co = new_co
+    job.after = stats_dict(written)
+    if job.project:
+        job.notes.append(f"projected onto the plane of the fixed vertices (largest offset "
+                         f"{job.frame.max_offset:.3g})")
+
+
+def _positions_to_write(job: Job, res: Any) -> tuple[np.ndarray | None, Any]:
+    """(N, 3) float32 positions to write and their Stats, or (None, None) to write nothing.
+
+    A node changes only when its 2D result differs from its 2D input (the 3D round trip
+    differs from the float32 input by round-off, which is no change), and the result is
+    used only when the core's Stats are better than the input's (``Stats.better_than``)
+    and those of the float32 positions actually written are too, by more than round-off
+    (``improves``). With ``project``, the free nodes not moved go to their orthogonal
+    projection onto the plane (what the user asked for), so the mesh is written whenever
+    one of them was off the plane, even when the optimization gained nothing.
+    """
+    free = np.asarray(res.moved, dtype=bool)
+    moved = free & np.any(np.asarray(res.points) != job.points2d, axis=1)
+    if not res.after.better_than(res.before):
+        moved[:] = False
+    before = mesh_stats(job.points2d, job.faces)
+    if moved.any():
+        out = _placed(job, res.points, moved, free)
+        if out is not None:
+            written = mesh_stats(job.frame.to_2d(out[job.nodes].astype(np.float64)), job.faces)
+            if improves(written, before):
+                return out, written
+    if job.project:  # the projection alone
+        out = _placed(job, res.points, np.zeros_like(moved), free)
+        if out is not None:
+            return out, mesh_stats(job.frame.to_2d(out[job.nodes].astype(np.float64)),
+                                   job.faces)
+    return None, None
+
+
+def _placed(job: Job, points2d: np.ndarray, moved: np.ndarray,
+            free: np.ndarray) -> np.ndarray | None:
+    """A copy of ``job.co`` with the ``moved`` nodes at their 2D result on the plane (and,
+    with ``project``, the other free nodes projected onto it), or None if no float32
+    position changes."""
+    target = job.co[job.nodes].astype(np.float64)
+    target[moved] = job.frame.to_3d(np.asarray(points2d)[moved])
+    if job.project:
+        rest = free & ~moved
+        target[rest] = job.frame.foot(target[rest])
+    new3d = target.astype(np.float32)
+    changed = np.any(new3d != job.co[job.nodes], axis=1)
+    if not changed.any():
+        return None
+    out = job.co.copy()
+    out[job.nodes[changed]] = new3d[changed]
+    return out
 
 
 def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResult:

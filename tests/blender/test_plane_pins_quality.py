@@ -1,0 +1,126 @@
+"""Project to Plane, no-op runs, pin attributes of every type, and the quality attributes'
+names, through the installed extension (headless bpy)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from .conftest import positions, snapshot
+
+pytestmark = pytest.mark.blender
+
+N = 6  # grid cells per side
+
+
+def grid_object(bpy, name: str, jitter: float = 0.0, lift: float = 0.0, rot=None, seed: int = 0):
+    """An N x N quad grid of side 1.5 (float32-exact nodes at z = 0), interior nodes jittered
+    in the plane (folds above ~0.5 cell) and lifted by a bump; optionally rotated + shifted.
+    Returns (object, boundary mask)."""
+    xs, ys = np.meshgrid(np.arange(N + 1) * 0.25, np.arange(N + 1) * 0.25)
+    p = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    border = np.zeros((N + 1, N + 1), bool)
+    border[[0, -1], :] = border[:, [0, -1]] = True
+    border = border.ravel()
+    rng = np.random.default_rng(seed)
+    p[~border, :2] += rng.uniform(-jitter, jitter, ((~border).sum(), 2)) * 0.25
+    p[~border, 2] = lift * np.sin(np.pi * p[~border, 0] / 1.5) * np.sin(np.pi * p[~border, 1] / 1.5)
+    if rot is not None:
+        p = p @ rot.T + [3.0, -2.0, 5.0]
+    faces = [(j * (N + 1) + i, j * (N + 1) + i + 1, (j + 1) * (N + 1) + i + 1,
+              (j + 1) * (N + 1) + i) for j in range(N) for i in range(N)]
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(p.astype(np.float32).tolist(), [], faces)
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    for o in bpy.context.selected_objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    return obj, border
+
+
+def tilt() -> np.ndarray:
+    a, b = 0.7, -1.1
+    return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]) @ \
+        np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+
+
+def line(ext) -> str:
+    return ext.operators.ops_untangle.LAST_RESULTS[0].line()
+
+
+# -- Project to Plane ------------------------------------------------------------------------
+
+def test_project_puts_every_vertex_on_the_plane_of_the_fixed_ones(bpy, ext):
+    """Boundary exactly at z = 0, interior folded and lifted by up to 0.05: every vertex
+    ends at z == 0 (the all-vertex centroid plane was at z ~ 0.01), boundary bit-identical."""
+    obj, border = grid_object(bpy, "bump", jitter=0.7, lift=0.05)
+    before = positions(obj)
+    assert before[:, 2].astype(np.float64).mean() > 0.009
+    assert bpy.ops.mesh.eegt_untangle_smooth() == {"CANCELLED"}  # not planar: refused
+    assert "not planar" in obj.eegt_last_run.message
+    assert np.array_equal(positions(obj), before)
+    assert bpy.ops.mesh.eegt_untangle_smooth(project=True) == {"FINISHED"}
+    after = positions(obj)
+    assert np.all(after[:, 2] == 0.0)
+    assert after[border].tobytes() == before[border].tobytes()
+    lr = obj.eegt_last_run
+    assert (lr.inverted_after, lr.status) == (0, "untangled") and lr.inverted_before > 0
+    assert "projected onto the plane of the fixed vertices (largest offset 0.0" in lr.message
+
+
+def test_project_keeps_a_pinned_vertex_off_the_plane_and_says_so(bpy, ext):
+    """A pinned vertex 0.05 off a tilted plane stays (bit for bit); the others land on the
+    plane through the fixed vertices' centroid (1/25 of the lift away from the boundary's)."""
+    rot = tilt()
+    obj, border = grid_object(bpy, "tilted_bump", jitter=0.7, lift=0.05, rot=rot, seed=1)
+    centre = 3 * (N + 1) + 3
+    pins = obj.data.attributes.new("eegt_pinned", "BOOLEAN", "POINT")
+    mask = np.zeros(len(border), bool)
+    mask[centre] = True
+    pins.data.foreach_set("value", mask)
+    before = positions(obj)
+    lift = float((before[centre] - [3.0, -2.0, 5.0]) @ rot[:, 2])
+    assert lift > 0.04
+    assert bpy.ops.mesh.eegt_untangle_smooth(project=True) == {"FINISHED"}
+    after = positions(obj).astype(np.float64)
+    fixed = border | mask
+    assert after[fixed].tobytes() == before[fixed].astype(np.float64).tobytes()
+    off = (after - [3.0, -2.0, 5.0]) @ rot[:, 2]
+    eps = 4 * np.finfo(np.float32).eps * 6.0  # float32 storage of coordinates up to ~6
+    assert np.abs(off[~fixed] - lift / 25).max() < eps
+    assert (f"boundary/pinned vertices up to {lift * 24 / 25:.3g} off the plane were kept "
+            "where they are") in obj.eegt_last_run.message
+
+
+# -- a result no better than the input writes nothing ------------------------------------
+
+@pytest.mark.parametrize("tilted", [False, True])
+def test_optimal_mesh_is_not_rewritten(bpy, ext, tmp_path, tilted):
+    """A grid of squares (q = 1 everywhere; tilted: float32 nodes off every axis) is left bit
+    for bit by the operator, runner.run_object and the command line."""
+    obj, _ = grid_object(bpy, "squares", rot=tilt() if tilted else None)
+    before = snapshot(obj, skip=())
+    assert bpy.ops.mesh.eegt_untangle_smooth() == {"CANCELLED"}
+    assert snapshot(obj, skip=()) == before
+    res = ext.operators.ops_untangle.LAST_RESULTS[0]
+    assert (res.status, res.written) == ("valid", False)
+    assert (res.before["n_inverted"], res.after["n_inverted"]) == (0, 0)
+    assert res.before["q_min"] == pytest.approx(1.0, abs=1e-6)
+    assert "nothing written" in line(ext) and "mesh unchanged" in line(ext)
+    runner = ext.operators.runner
+    r = runner.run_object(obj, ext.core.EEGTParams())
+    assert (r.status, r.written) == ("valid", False)
+    assert snapshot(obj, skip=()) == before
+    # the command line, .blend in and out
+    src, out, rep = tmp_path / "in.blend", tmp_path / "out.blend", tmp_path / "r.json"
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    code = ext.operators.cli.execute([str(src), "-o", str(out), "--report", str(rep), "--quiet"])
+    assert code == 0
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert (o["status"], o["written"]) == ("valid", False)
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    assert snapshot(bpy.data.objects["squares"], skip=()) == before
