@@ -131,12 +131,46 @@ def vertex_group_pins(obj: bpy.types.Object, n_verts: int) -> np.ndarray | None:
     return pinned
 
 
+PIN_BUFFERS = {"BOOLEAN": bool, "FLOAT": np.float32, "INT": np.int32, "INT8": np.int8}
+
+
+def pin_attribute_values(me: bpy.types.Mesh) -> np.ndarray | None:
+    """Raw values of the ``eegt_pinned`` point attribute in its own buffer type (bool,
+    float32, int32 or int8; a float 0.5 read as an int would be 0, unpinned), or None when
+    there is no such attribute.
+
+    Any other domain or type raises ValueError with a one-line message: ignoring it would
+    silently move vertices the user meant to pin.
+    """
+    attr = me.attributes.get(PIN_NAME)
+    if attr is None:
+        return None
+    dtype = PIN_BUFFERS.get(attr.data_type)
+    if attr.domain != "POINT" or dtype is None:
+        raise ValueError(
+            f"attribute '{PIN_NAME}' is {attr.data_type} on {attr.domain}: pins must be a "
+            f"point attribute (boolean, float, integer or 8-bit integer, nonzero = pinned); "
+            f"fix it or turn off Use Pinned")
+    buf = np.zeros(len(attr.data), dtype=dtype)
+    if buf.size:
+        attr.data.foreach_get("value", buf)
+    return buf
+
+
+def read_pin_attribute(me: bpy.types.Mesh) -> np.ndarray | None:
+    """Pins from the ``eegt_pinned`` point attribute, nonzero = pinned (bool (N,)), or None
+    without one; BOOLEAN (what the Pin operator writes), FLOAT, INT and INT8 are read."""
+    values = pin_attribute_values(me)
+    return None if values is None else values != 0
+
+
 def read_pins(obj: bpy.types.Object) -> np.ndarray:
-    """User-pinned vertices: the ``eegt_pinned`` boolean attribute or vertex group (bool (N,))."""
+    """User-pinned vertices (bool (N,)): the ``eegt_pinned`` point attribute (nonzero) or
+    vertex group (weight > 0); ValueError for an attribute of an unusable domain or type."""
     me = obj.data
     n = len(me.vertices)
     pinned = np.zeros(n, dtype=bool)
-    attr = read_bool_attribute(me, PIN_NAME)
+    attr = read_pin_attribute(me)
     if attr is not None:
         pinned |= attr
     vg = vertex_group_pins(obj, n)

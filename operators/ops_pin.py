@@ -1,9 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """``mesh.eegt_pin`` / ``mesh.eegt_unpin``: mark vertices that the EEGT operator never moves.
 
-Pins live in the boolean point attribute ``eegt_pinned``. A vertex group of that name also
-pins; Blender refuses an attribute whose name equals a vertex group's, so when the group
-exists the pins are written to the group instead.
+Pins live in the boolean point attribute ``eegt_pinned`` (an existing float or integer one
+is edited in place). A vertex group of that name also pins; Blender refuses an attribute
+whose name equals a vertex group's, so when the group exists the pins are written to the
+group instead.
 """
 
 from __future__ import annotations
@@ -16,14 +17,20 @@ from . import mesh_io, modes, runner
 
 
 def set_pins(obj: bpy.types.Object, mask: np.ndarray, value: bool) -> str | None:
-    """Pin (value=True) or unpin the vertices in ``mask``; returns an error line or None."""
+    """Pin (value=True) or unpin the vertices in ``mask``; returns an error line or None.
+
+    A new attribute is boolean; an existing FLOAT / INT / INT8 point attribute (which the
+    untangle operator also reads, nonzero = pinned) is edited in its own type (1 / 0).
+    """
     me = obj.data
     idx = np.flatnonzero(mask)
     vg = obj.vertex_groups.get(mesh_io.PIN_NAME)
     attr = me.attributes.get(mesh_io.PIN_NAME)
-    if attr is not None and (attr.data_type != "BOOLEAN" or attr.domain != "POINT"):
-        return (f"attribute '{mesh_io.PIN_NAME}' exists as {attr.data_type} on "
-                f"{attr.domain}, expected a boolean point attribute")
+    if attr is not None:
+        try:
+            cur = mesh_io.pin_attribute_values(me)
+        except ValueError as exc:
+            return str(exc)
     if vg is not None:
         if value:
             vg.add(idx.tolist(), 1.0, "REPLACE")
@@ -33,9 +40,9 @@ def set_pins(obj: bpy.types.Object, mask: np.ndarray, value: bool) -> str | None
         attr = me.attributes.new(mesh_io.PIN_NAME, "BOOLEAN", "POINT")
         if attr is None:
             return f"Blender refused to create the attribute '{mesh_io.PIN_NAME}'"
+        cur = np.zeros(len(me.vertices), dtype=bool)
     if attr is not None:
-        cur = mesh_io.read_bool_attribute(me, mesh_io.PIN_NAME)
-        cur[idx] = value
+        cur[idx] = value  # 1 / 0 in a float or integer attribute; other values stay as they are
         attr.data.foreach_set("value", cur)
     me.update()
     return None

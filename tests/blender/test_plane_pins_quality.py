@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from .conftest import positions, snapshot
+from .conftest import import_obj, positions, snapshot
 
 pytestmark = pytest.mark.blender
 
@@ -124,3 +124,75 @@ def test_optimal_mesh_is_not_rewritten(bpy, ext, tmp_path, tilted):
     assert (o["status"], o["written"]) == ("valid", False)
     bpy.ops.wm.open_mainfile(filepath=str(out))
     assert snapshot(bpy.data.objects["squares"], skip=()) == before
+
+
+# -- pins of every attribute type ------------------------------------------------------------
+
+def _boundary(ext, obj) -> np.ndarray:
+    me = obj.data
+    ls, lt = np.empty(len(me.polygons), np.int32), np.empty(len(me.polygons), np.int32)
+    cv = np.empty(len(me.loops), np.int32)
+    me.polygons.foreach_get("loop_start", ls)
+    me.polygons.foreach_get("loop_total", lt)
+    me.loops.foreach_get("vertex_index", cv)
+    return np.asarray(ext.core.boundary_nodes(len(me.vertices),
+                                              ext.core.faces_from_csr(ls, lt, cv)))
+
+
+@pytest.mark.parametrize("data_type, on, dtype", [("BOOLEAN", True, bool),
+                                                  ("FLOAT", 0.5, np.float32),
+                                                  ("FLOAT", -2.0, np.float32),
+                                                  ("INT", 7, np.int32),
+                                                  ("INT8", -3, np.int8)])
+def test_pin_attribute_of_any_number_type_pins_where_nonzero(bpy, ext, data_type, on, dtype):
+    obj = import_obj(bpy, "quad_hole")
+    before = positions(obj)
+    interior = np.flatnonzero(~_boundary(ext, obj))
+    pins = np.zeros(len(before), bool)
+    pins[interior[::6]] = True
+    attr = obj.data.attributes.new("eegt_pinned", data_type, "POINT")
+    attr.data.foreach_set("value", np.where(pins, on, 0).astype(dtype))
+    raw = np.zeros(len(before), dtype)
+    attr.data.foreach_get("value", raw)
+    assert np.array_equal(raw != 0, pins)
+    assert bpy.ops.mesh.eegt_untangle_smooth() == {"FINISHED"}
+    after = positions(obj)
+    assert after[pins].tobytes() == before[pins].tobytes()
+    free = np.zeros(len(before), bool)
+    free[interior] = True
+    free &= ~pins
+    assert np.any(after[free] != before[free], axis=1).sum() > 0.9 * free.sum()
+    assert obj.eegt_last_run.inverted_after == 0
+    # the Pin operator edits the attribute in its own type: 1 for new pins, others kept
+    extra = np.zeros(len(before), bool)
+    extra[interior[1]] = True
+    obj.data.vertices.foreach_set("select", extra)
+    assert bpy.ops.mesh.eegt_pin() == {"FINISHED"}
+    attr = obj.data.attributes["eegt_pinned"]
+    assert attr.data_type == data_type
+    attr.data.foreach_get("value", raw)
+    assert np.array_equal(raw[pins], np.full(pins.sum(), on, dtype))
+    assert raw[interior[1]] == 1 and np.count_nonzero(raw) == pins.sum() + 1
+
+
+@pytest.mark.parametrize("data_type, domain", [("FLOAT", "FACE"), ("BOOLEAN", "EDGE"),
+                                               ("FLOAT_VECTOR", "POINT"),
+                                               ("FLOAT_COLOR", "POINT")])
+def test_pin_attribute_of_unusable_domain_or_type_is_a_one_line_error(bpy, ext, data_type,
+                                                                      domain):
+    obj = import_obj(bpy, "quad_hole")
+    obj.data.attributes.new("eegt_pinned", data_type, domain)
+    obj.data.vertices.foreach_set("select", np.ones(len(obj.data.vertices), bool))
+    before = snapshot(obj, skip=())
+    assert bpy.ops.mesh.eegt_untangle_smooth() == {"CANCELLED"}
+    assert snapshot(obj, skip=()) == before
+    lr = obj.eegt_last_run
+    assert lr.status == "error" and "\n" not in lr.message
+    assert lr.message == (
+        f"quad_hole: not changed: attribute 'eegt_pinned' is {data_type} on {domain}: pins "
+        "must be a point attribute (boolean, float, integer or 8-bit integer, nonzero = "
+        "pinned); fix it or turn off Use Pinned")
+    assert bpy.ops.mesh.eegt_pin() == {"CANCELLED"}  # the Pin operator refuses it too
+    assert snapshot(obj, skip=()) == before
+    assert bpy.ops.mesh.eegt_untangle_smooth(use_pinned=False) == {"FINISHED"}
+    assert obj.eegt_last_run.inverted_after == 0
