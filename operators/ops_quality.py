@@ -42,28 +42,59 @@ def heat_colors(q: np.ndarray) -> np.ndarray:
     return rgba
 
 
-def _fresh_attribute(me: bpy.types.Mesh, name: str, data_type: str, domain: str):
+QUALITY_LAYOUT = {mesh_io.QUALITY_NAME: ("FLOAT", "FACE"),
+                  mesh_io.QUALITY_COLOR_NAME: ("FLOAT_COLOR", "CORNER")}
+
+
+def quality_name_clash(obj: bpy.types.Object) -> str | None:
+    """Why the quality attributes cannot be stored on ``obj``'s mesh, or None.
+
+    An existing ``eegt_quality`` / ``eegt_quality_color`` of the add-on's own type and domain
+    is ours from an earlier run and is overwritten. One of another type or domain is the
+    user's data (named so by hand, or by a script or geometry nodes): replacing it would
+    delete it, and "attributes stay identical" (SPEC 7) is the promise, so storing is
+    refused, with the attribute and the mesh left exactly as they were. A vertex group of
+    either name blocks it too (Blender refuses the attribute); both are checked before
+    anything is written, so a refusal never leaves half the pair.
+    """
+    me = obj.data
+    for name, (data_type, domain) in QUALITY_LAYOUT.items():
+        if obj.vertex_groups.get(name) is not None:
+            return (f"a vertex group is named '{name}': rename it to store quality "
+                    f"(nothing written)")
+        attr = me.attributes.get(name)
+        if attr is not None and (attr.data_type, attr.domain) != (data_type, domain):
+            return (f"attribute '{name}' exists as {attr.data_type} on {attr.domain} (not the "
+                    f"quality's {data_type} on {domain}): rename or remove it to store "
+                    f"quality; it was left untouched")
+    return None
+
+
+def _attribute(me: bpy.types.Mesh, name: str):
+    """The quality attribute ``name`` (ours: reused, else created), or None if refused."""
     attr = me.attributes.get(name)
-    if attr is not None and (attr.data_type != data_type or attr.domain != domain):
-        me.attributes.remove(attr)
-        attr = None
     if attr is None:
-        attr = me.attributes.new(name, data_type, domain)
+        attr = me.attributes.new(name, *QUALITY_LAYOUT[name])
     return attr
 
 
 def write_quality_attributes(obj: bpy.types.Object, q: np.ndarray) -> str | None:
     """Store ``eegt_quality`` (face float) and ``eegt_quality_color`` (corner color).
 
-    Returns an error line when Blender refuses a name (a vertex group of the same name).
+    Returns an error line, with nothing written, when a user attribute of another type or
+    domain has one of these names (see ``quality_name_clash``); an error line also when
+    Blender refuses a name (a vertex group of the same name).
     """
     me = obj.data
+    clash = quality_name_clash(obj)
+    if clash:
+        return clash
     had_colors = len(me.color_attributes) > 0
-    attr = _fresh_attribute(me, mesh_io.QUALITY_NAME, "FLOAT", "FACE")
+    attr = _attribute(me, mesh_io.QUALITY_NAME)
     if attr is None:
         return f"cannot create attribute '{mesh_io.QUALITY_NAME}' (name in use)"
     attr.data.foreach_set("value", q.astype(np.float32))
-    col = _fresh_attribute(me, mesh_io.QUALITY_COLOR_NAME, "FLOAT_COLOR", "CORNER")
+    col = _attribute(me, mesh_io.QUALITY_COLOR_NAME)
     if col is None:
         return f"cannot create attribute '{mesh_io.QUALITY_COLOR_NAME}' (name in use)"
     corner_face = mesh_io.corner_faces(mesh_io.read_topology(me))
@@ -115,7 +146,7 @@ class MESH_OT_eegt_analyze(modes.TargetObjectsMixin, bpy.types.Operator):
                     continue
                 err = write_quality_attributes(obj, q)
                 if err:
-                    self.report({"WARNING"}, f"{obj.name}: {err}")
+                    self.report({"ERROR"}, f"{obj.name}: {err}")
                 else:
                     written = True
         return {"FINISHED"} if written else {"CANCELLED"}

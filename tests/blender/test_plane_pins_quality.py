@@ -196,3 +196,41 @@ def test_pin_attribute_of_unusable_domain_or_type_is_a_one_line_error(bpy, ext, 
     assert snapshot(obj, skip=()) == before
     assert bpy.ops.mesh.eegt_untangle_smooth(use_pinned=False) == {"FINISHED"}
     assert obj.eegt_last_run.inverted_after == 0
+
+
+# -- Analyze Quality never deletes a user's attribute ---------------------------------------
+
+@pytest.mark.parametrize("name, data_type, domain", [
+    ("eegt_quality", "INT", "FACE"), ("eegt_quality", "FLOAT", "POINT"),
+    ("eegt_quality_color", "BYTE_COLOR", "CORNER"), ("eegt_quality_color", "FLOAT_COLOR",
+                                                     "POINT")])
+def test_analyze_refuses_to_replace_a_user_attribute(bpy, ext, name, data_type, domain):
+    obj = import_obj(bpy, "quad_hole")
+    me = obj.data
+    attr = me.attributes.new(name, data_type, domain)
+    width = {"INT": 1, "FLOAT": 1, "BYTE_COLOR": 4, "FLOAT_COLOR": 4}[data_type]
+    prop = "value" if width == 1 else "color"
+    vals = (np.arange(len(attr.data) * width) % 5 / 4).astype(np.float32)
+    attr.data.foreach_set(prop, vals.astype(np.int32) if data_type == "INT" else vals)
+    before = snapshot(obj, skip=())
+    with pytest.raises(RuntimeError, match=f"quad_hole: attribute '{name}' exists as "
+                                           f"{data_type} on {domain}"):
+        bpy.ops.mesh.eegt_analyze()
+    assert snapshot(obj, skip=()) == before  # the user's attribute, and nothing new
+    assert {a.name for a in me.attributes} & {"eegt_quality", "eegt_quality_color"} == {name}
+    # measuring without storing still works, and so does storing once the name is free
+    assert bpy.ops.mesh.eegt_analyze(store=False) == {"CANCELLED"}
+    me.attributes.remove(me.attributes[name])
+    assert bpy.ops.mesh.eegt_analyze() == {"FINISHED"}
+    assert me.attributes["eegt_quality"].data_type == "FLOAT"
+    assert bpy.ops.mesh.eegt_analyze() == {"FINISHED"}  # our own attributes are reused
+
+
+def test_analyze_refuses_a_vertex_group_named_like_the_quality(bpy, ext):
+    obj = import_obj(bpy, "quad_hole")
+    obj.vertex_groups.new(name="eegt_quality_color")
+    before = snapshot(obj, skip=())
+    with pytest.raises(RuntimeError, match="a vertex group is named 'eegt_quality_color'"):
+        bpy.ops.mesh.eegt_analyze()
+    assert snapshot(obj, skip=()) == before
+    assert "eegt_quality" not in obj.data.attributes
