@@ -1,9 +1,11 @@
 // EEGT iteration kernels (float64). Every formula is written in the same operation order as
 // the NumPy reference (core/quality.py, core/transform.py, core/engine_numpy.py) and FP
 // contraction is off, so results match NumPy to the last bit (no math library calls: powers
-// are core.fpmath's algorithm, below). Faces come in arity groups laid out like NumPy's (n, F) arrays:
-// corner k of face j of a group is nodes[k * F + j]. Host-side defines:
+// are core.fpmath's algorithm, sums are added in NumPy's order, both below). Faces come in
+// arity groups laid out like NumPy's (n, F) arrays: corner k of face j of a group is
+// nodes[k * F + j]. Host-side defines:
 //   MAXN  largest arity of a generic n-gon group (private array size)
+//   NCACHE, FP_*  the distance cache size and core.fpmath's constants (see below)
 // Parameters are kernel arguments (one build per device serves every parameter set); the
 // pow modes say how core.fpmath.power evaluates x ** c and x ** eta (0 exp(e log x), 1 square,
 // 2 identity, 3 ones, 4 sqrt, 5 reciprocal: NumPy's exact fast paths for those exponents).
