@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .faces import as_faceset
 from .params import EEGTParams
-from .pipeline import EEGTResult, Progress, untangle_and_smooth
+from .pipeline import EEGTResult, Progress, _normalisation, free_nodes, untangle_and_smooth
 from .plane import PlaneFrame
 
 __all__ = ["untangle_and_smooth_3d"]
@@ -28,11 +29,23 @@ def untangle_and_smooth_3d(
     better than the input (``Stats.better_than``) no node moves. Moved nodes are placed on
     the fitted plane. With ``project`` the plane is the fixed nodes' (see
     ``PlaneFrame.fit``) and every free node ends on it: the optimised ones at their result,
-    the others at their orthogonal projection.
+    the others at their orthogonal projection. Like the 2D core, it works in centred
+    coordinates scaled by a power of two, so units from 1e-300 to 1e300 give the same result.
     """
     original = np.array(points3d, dtype=np.float64)
-    frame = PlaneFrame.fit(original, faces, tol=tol, project=project, fixed=fixed)
-    flat = frame.to_2d(original)
+    if original.ndim != 2 or original.shape[1] != 3:
+        raise ValueError(f"points must be an (N, 3) array, got shape {original.shape}")
+    bad = ~np.isfinite(original).all(axis=1)
+    if bad.any():
+        raise ValueError(f"node {int(np.flatnonzero(bad)[0])} has a NaN or infinite coordinate")
+    fs = as_faceset(faces, original.shape[0])
+    _, scale = _normalisation(original, fs)
+    # centre on the fixed nodes, which define the plane: a plane z = 0 stays exactly z = 0
+    rim = fs.used_nodes(original.shape[0]) & ~free_nodes(original.shape[0], fs, fixed)
+    center = 0.5 * original[rim].min(axis=0) + 0.5 * original[rim].max(axis=0)
+    work = (original - center) / scale
+    frame = PlaneFrame.fit(work, faces, tol=tol, project=project, fixed=fixed)
+    flat = frame.to_2d(work)
     res = untangle_and_smooth(flat, faces, fixed, params, backend, progress)
     out = original.copy()
     if res.status != "cancelled":
@@ -40,9 +53,11 @@ def untangle_and_smooth_3d(
         if not res.after.better_than(res.before):
             moved[:] = False
             res.after = res.before
-        out[moved] = frame.to_3d(res.points[moved])
+        out[moved] = frame.to_3d(res.points[moved]) * scale + center
         if project:
             rest = res.moved & ~moved
-            out[rest] = frame.foot(original[rest])
+            # the foot in the caller's units: in-plane coordinates stay bit for bit
+            off = frame.foot(work[rest]) - work[rest]
+            out[rest] = original[rest] + off * scale
     res.points = out
     return res

@@ -339,6 +339,9 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
     out.n_free = int(np.count_nonzero(np.asarray(res.moved)))
     out.status = res.status
     out.message = str(res.message)
+    if getattr(res, "n_frozen", 0):
+        out.notes.append(f"{res.n_frozen} faces have a straight or inverted corner made of "
+                         "fixed vertices only: they cannot change")
     out.before = stats_dict(res.before)
     out.after = job.after if job.after is not None else stats_dict(res.after)
     out.untangle_iterations = int(res.untangle_iterations)

@@ -193,3 +193,21 @@ def test_big_meshes_tick_every_iteration(monkeypatch):
     its = []
     untangle_and_smooth(p, f, progress=lambda it, ph, s: its.append(it) if ph == "global" else None)
     assert len(its) > 50 and np.diff(its).max() <= 1
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e-160, 1e154, 1e300])
+def test_planar_3d_mesh_does_not_depend_on_units(scale):
+    """Regression: untangle_and_smooth_3d refused a tilted mesh at 1e-300, 1e-160 and 1e154
+    ('zero total area') and at 1e300 (overflow to NaN)."""
+    from meshdata import load
+
+    from core import untangle_and_smooth_3d
+
+    p, f = load("tilted_plane")
+    ref = untangle_and_smooth_3d(p, f)
+    res = untangle_and_smooth_3d(p * scale, f)
+    assert res.status == "untangled" and np.all(np.isfinite(res.points))
+    assert abs(res.after.q_avg - ref.after.q_avg) < 0.01 and res.after.q_min > 0.7
+    k = 900 if scale > 1 else -900
+    exact = untangle_and_smooth_3d(p * 2.0**k, f)
+    assert np.array_equal(exact.points, ref.points * 2.0**k)
