@@ -2,8 +2,18 @@
 """``blender -b -c eegt INPUT ...``: the batch command for pipelines.
 
 Exit codes: 0 every mesh valid at the end, 3 some mesh could not be untangled or was
-refused (the others are still processed and written), 2 bad arguments or unreadable input /
-unwritable output, 1 internal error. ``--report`` writes a JSON report either way.
+refused (the others are still processed and written), 2 bad arguments, unreadable input,
+input with no faces to work on, or output that could not be saved, 1 internal error.
+``--report`` writes a JSON report either way.
+
+Everything that can be checked before computing is (output type and folder, report
+folder, input path). Mesh objects without faces are skipped with a line; an input where no
+chosen object has a face is exit 2. Output is written to a temporary file in the target
+folder, checked (size, disk not full, the format's own completeness: a .blend ends with its
+ENDB block or, compressed, its zstd seek table; a binary STL's size matches its triangle
+count; a PLY's body matches its header; an OBJ holds every face) and renamed onto the
+target: a failed save leaves no file there (an existing one stays intact) and the report
+says ``"written": false``.
 """
 
 from __future__ import annotations
@@ -12,6 +22,7 @@ import argparse
 import dataclasses
 import json
 import os
+import struct
 import sys
 import traceback
 from typing import Any
@@ -24,6 +35,10 @@ from .ops_untangle import _printer
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_FAILED = 0, 1, 2, 3
 MESH_EXTENSIONS = (".obj", ".ply", ".stl")
+OUTPUT_EXTENSIONS = (".blend", *MESH_EXTENSIONS)
+# A compressed .blend is zstd frames closed by a seek table (a skippable frame whose last
+# four bytes are this magic), written last: a cut file lacks it.
+ZSTD_MAGIC, ZSTD_SEEKABLE_END = b"\x28\xb5\x2f\xfd", b"\xb1\xea\x92\x8f"
 
 
 class UsageError(Exception):
@@ -102,9 +117,38 @@ def _params(ns: argparse.Namespace) -> EEGTParams:
         raise UsageError(f"eegt: {exc}") from None
 
 
-def _load(path: str) -> None:
-    if not os.path.isfile(path):
+def _check_paths(ns: argparse.Namespace) -> None:
+    """Fail fast, before loading or computing: input readable, output type supported and
+    its folder writable, report folder writable."""
+    path = ns.input
+    if os.path.isdir(path):
+        raise UsageError(f"eegt: cannot read input '{path}': is a directory")
+    if not os.path.exists(path):
         raise UsageError(f"eegt: cannot read input '{path}': no such file")
+    if not os.access(path, os.R_OK):
+        raise UsageError(f"eegt: cannot read input '{path}': permission denied")
+    if ns.output:
+        ext = os.path.splitext(ns.output)[1].lower()
+        if ext not in OUTPUT_EXTENSIONS:
+            raise UsageError(f"eegt: unsupported output type '{ext or ns.output}' (use .blend, "
+                             ".obj, .ply or .stl)")
+        _check_writable(ns.output, "output")
+    if ns.report:
+        _check_writable(ns.report, "report")
+
+
+def _check_writable(path: str, what: str) -> None:
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise UsageError(f"eegt: cannot write {what} '{path}': is a directory")
+    if not os.path.isdir(folder):
+        raise UsageError(f"eegt: cannot write {what} '{path}': no folder {folder}")
+    if not os.access(folder, os.W_OK | os.X_OK) or (
+            os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise UsageError(f"eegt: cannot write {what} '{path}': permission denied")
+
+
+def _load(path: str) -> None:
     ext = os.path.splitext(path)[1].lower()
     try:
         if ext == ".blend":
@@ -127,29 +171,133 @@ def _load(path: str) -> None:
 
 
 def _save(path: str) -> None:
+    """Write to a temporary file beside `path`, check it, rename it onto `path`; on any
+    failure remove it and raise (UsageError, exit 2): `path` is then untouched."""
     ext = os.path.splitext(path)[1].lower()
     folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise UsageError(f"eegt: cannot write output '{path}': no folder {folder}")
+    tmp = os.path.join(folder, f".{os.path.basename(path)}.eegt-tmp-{os.getpid()}{ext}")
     try:
-        if ext == ".blend":
-            bpy.ops.wm.save_as_mainfile(filepath=path, check_existing=False)
-        elif ext == ".obj":
-            bpy.ops.wm.obj_export(filepath=path, forward_axis="Y", up_axis="Z",
-                                  export_materials=False)
-        elif ext == ".ply":
-            bpy.ops.wm.ply_export(filepath=path, forward_axis="Y", up_axis="Z")
-        elif ext == ".stl":
-            bpy.ops.wm.stl_export(filepath=path, forward_axis="Y", up_axis="Z")
-        else:
-            raise UsageError(f"eegt: unsupported output type '{ext}'")
+        _export(tmp, ext)
+        problem = _incomplete(tmp, ext)
+        if problem:
+            raise UsageError(f"eegt: cannot write output '{path}': {problem}")
+        os.replace(tmp, path)
     except RuntimeError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else "write error"
         first = first.removeprefix("Error: ")
         raise UsageError(f"eegt: cannot write output '{path}': {first}") from None
+    except OSError as exc:
+        raise UsageError(f"eegt: cannot write output '{path}': {exc.strerror or exc}") from None
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
-def _objects(names: list[str]) -> list[bpy.types.Object]:
+def _export(path: str, ext: str) -> None:
+    if ext == ".blend":  # copy: the session keeps its file path; a new file has no backup
+        bpy.ops.wm.save_as_mainfile(filepath=path, check_existing=False, copy=True)
+    elif ext == ".obj":
+        bpy.ops.wm.obj_export(filepath=path, forward_axis="Y", up_axis="Z",
+                              export_materials=False)
+    elif ext == ".ply":
+        bpy.ops.wm.ply_export(filepath=path, forward_axis="Y", up_axis="Z")
+    else:
+        bpy.ops.wm.stl_export(filepath=path, forward_axis="Y", up_axis="Z")
+
+
+def _incomplete(path: str, ext: str) -> str | None:
+    """Why the freshly written file is not whole (Blender's exporters report success when
+    the disk fills), or None."""
+    if not os.path.isfile(path) or os.path.getsize(path) == 0:
+        return "nothing was written"
+    stat = os.statvfs(path)
+    if stat.f_bavail == 0 and stat.f_blocks > 0:
+        return "the disk is full"
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+        fh.seek(max(0, size - 64))
+        tail = fh.read()
+    if ext == ".blend":
+        if head.startswith(b"BLENDER") and b"ENDB" not in tail:
+            return "the .blend file is truncated (no end block)"
+        if head.startswith(ZSTD_MAGIC) and not tail.endswith(ZSTD_SEEKABLE_END):
+            return "the compressed .blend file is truncated (no seek table)"
+    elif ext == ".stl":
+        if not head.startswith(b"solid") and len(head) >= 84:
+            n = struct.unpack_from("<I", head, 80)[0]
+            if size != 84 + 50 * n:
+                return f"the STL file is truncated ({size} bytes for {n} triangles)"
+        elif head.startswith(b"solid") and b"endsolid" not in tail:
+            return "the STL file is truncated"
+    elif ext == ".ply":
+        return _ply_incomplete(path, head, size)
+    elif ext == ".obj":
+        return _obj_incomplete(path, tail)
+    return None
+
+
+def _ply_incomplete(path: str, head: bytes, size: int) -> str | None:
+    """Binary little-endian PLY: walk the header's elements and compare with the size."""
+    end = head.find(b"end_header\n")
+    if end < 0:
+        return "the PLY header is truncated"
+    lines = head[:end].decode("ascii", "replace").splitlines()
+    if "format binary_little_endian 1.0" not in lines:
+        return None  # ASCII PLY (not what the exporter writes by default): no cheap check
+    sizes = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2,
+             "int16": 2, "uint16": 2, "int": 4, "uint": 4, "int32": 4, "uint32": 4,
+             "float": 4, "float32": 4, "double": 8, "float64": 8}
+    elements: list[list[Any]] = []  # [name, count, fixed bytes, list props (count, item)]
+    for ln in lines:
+        t = ln.split()
+        if t[:1] == ["element"]:
+            elements.append([t[1], int(t[2]), 0, []])
+        elif t[:2] == ["property", "list"] and elements:
+            elements[-1][3].append((sizes[t[2]], sizes[t[3]]))
+        elif t[:1] == ["property"] and elements:
+            elements[-1][2] += sizes[t[1]]
+    pos = end + len(b"end_header\n")
+    with open(path, "rb") as fh:
+        for _name, count, fixed, lists in elements:
+            if not lists:
+                pos += count * fixed
+                continue
+            fh.seek(pos)
+            body = fh.read()
+            at = 0
+            for _ in range(count):
+                at += fixed
+                for csize, isize in lists:
+                    if at + csize > len(body):
+                        return "the PLY file is truncated"
+                    n = int.from_bytes(body[at:at + csize], "little")
+                    at += csize + n * isize
+            pos += at
+    return None if pos == size else f"the PLY file is truncated ({size} of {pos} bytes)"
+
+
+def _obj_incomplete(path: str, tail: bytes) -> str | None:
+    """OBJ: ends with a whole line and holds a face line for every exported face."""
+    if not tail.endswith(b"\n"):
+        return "the OBJ file is truncated"
+    expected = 0
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    for obj in bpy.context.view_layer.objects:
+        if obj.type == "MESH" and obj.visible_get():
+            expected += len(obj.evaluated_get(depsgraph).data.polygons)
+    faces = 0
+    with open(path, "rb") as fh:
+        for line in fh:
+            faces += line.startswith(b"f ")
+    if faces < expected:
+        return f"the OBJ file is truncated ({faces} of {expected} faces)"
+    return None
+
+
+def _objects(names: list[str], path: str) -> list[bpy.types.Object]:
+    """The mesh objects to process (one per mesh data); objects without faces are skipped
+    with a line, and none with a face is a usage error (exit 2)."""
     meshes = [o for o in bpy.data.objects if o.type == "MESH"]
     if names:
         chosen = []
@@ -161,7 +309,15 @@ def _objects(names: list[str]) -> list[bpy.types.Object]:
             chosen.append(obj)
         meshes = chosen
     if not meshes:
-        raise UsageError("eegt: the input has no mesh objects")
+        raise UsageError(f"eegt: input '{path}' has no mesh objects (nothing to work on)")
+    faceless = [o for o in meshes if len(o.data.polygons) == 0]
+    if len(faceless) == len(meshes):
+        raise UsageError(f"eegt: input '{path}' has no faces to work on "
+                         f"({len(meshes)} mesh object{'s' if len(meshes) > 1 else ''}, "
+                         "edges or points only)")
+    for obj in faceless:
+        print(f"EEGT {obj.name}: skipped: no faces", flush=True)
+    meshes = [o for o in meshes if o not in faceless]
     seen: set[int] = set()
     unique = []
     for obj in meshes:
@@ -189,8 +345,9 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             dataclasses.asdict(params)
         backend, device = _backend(ns.backend, ns.device)
         rep["backend_requested"] = backend
+        _check_paths(ns)
         _load(ns.input)
-        objs = _objects(ns.object)
+        objs = _objects(ns.object, ns.input)
         if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
             bpy.ops.object.mode_set(mode="OBJECT")
         results = []

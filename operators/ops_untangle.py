@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import bpy
@@ -17,6 +18,8 @@ from bpy.props import BoolProperty, EnumProperty
 
 from . import modes, props, runner
 from .prefs import resolve_backend
+
+PRINT_EVERY = 1.0  # seconds: the longest a background run stays silent between progress lines
 
 # The results of the last run, newest last (read by the tests and the CLI).
 LAST_RESULTS: list[runner.ObjectResult] = []
@@ -206,13 +209,15 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
             return self._finish(self._objs, self._jobs)
 
 
-def _printer(name: str) -> runner.Progress:
-    """Background progress: one line when a phase starts and every 100 iterations."""
-    state = {"phase": None}
+def _printer(name: str, clock: Callable[[], float] = time.monotonic) -> runner.Progress:
+    """Background progress: one line when a phase starts, every 100 iterations and at least
+    every PRINT_EVERY seconds (the core calls back every few tenths of a second of work)."""
+    state: dict[str, Any] = {"phase": None, "at": clock()}
 
     def progress(iteration: int, phase: str, stats: Any) -> bool:
-        if phase != state["phase"] or iteration % 100 == 0:
-            state["phase"] = phase
+        now = clock()
+        if phase != state["phase"] or iteration % 100 == 0 or now - state["at"] >= PRINT_EVERY:
+            state["phase"], state["at"] = phase, now
             print(f"EEGT {name}: {phase} iteration {iteration}: "
                   f"inverted {getattr(stats, 'n_inverted', '?')}, "
                   f"q_min {getattr(stats, 'q_min', float('nan')):.3f}, "
