@@ -6,14 +6,25 @@ refused (the others are still processed and written), 2 bad arguments, unreadabl
 input with no faces to work on, or output that could not be saved, 1 internal error.
 ``--report`` writes a JSON report either way.
 
-Everything that can be checked before computing is (output type and folder, report
-folder, input path). Mesh objects without faces are skipped with a line; an input where no
-chosen object has a face is exit 2. Output is written to a temporary file in the target
-folder, checked (size, disk not full, the format's own completeness: a .blend ends with its
-ENDB block or, compressed, its zstd seek table; a binary STL's size matches its triangle
-count; a PLY's body matches its header; an OBJ holds every face) and renamed onto the
-target: a failed save leaves no file there (an existing one stays intact) and the report
-says ``"written": false``.
+Everything that can be checked before computing is: the input path (a directory says so),
+the output type, and that the output and the report can be created (``-o x.fbx`` fails at
+once, and a long run never ends in a result it cannot save).
+
+Faceless input, per object: a mesh object without faces (edges or points only) is skipped
+with a line and listed in the report's ``"skipped"``, and the others are processed as usual
+(exit 0 if they all end valid); when no chosen mesh object has a face (an empty file, an
+OBJ of lines or of garbage the importer skips) it is exit 2 and nothing is written.
+
+Output is never lost or silently corrupt: it is exported to a hidden temporary file in the
+target folder (``.NAME.eegt-tmp-PID.EXT``, so relative paths and the file system are the
+target's), checked for the format's own end (Blender's writers report success on a full
+disk: a .blend ends with its ENDB block or, compressed, a zstd seek table whose frames add
+up to the size; a binary STL is 84 + 50 bytes per triangle; a binary PLY's body matches its
+header; an OBJ ends a line and holds every face), then the report is written to a temporary
+file and both are renamed into place. Any failure exits 2 with one line on stderr, removes
+the temporary files and leaves no file at the target (an existing one stays byte-identical);
+``"written"`` is true only once the output is in place. A .blend is saved as a copy to a new
+name, so Blender makes no ``.blend1`` backup.
 """
 
 from __future__ import annotations
@@ -118,8 +129,8 @@ def _params(ns: argparse.Namespace) -> EEGTParams:
 
 
 def _check_paths(ns: argparse.Namespace) -> None:
-    """Fail fast, before loading or computing: input readable, output type supported and
-    its folder writable, report folder writable."""
+    """Fail fast, before loading or computing: input readable, output type supported, output
+    and report creatable (so a long run never ends in an unsavable result)."""
     path = ns.input
     if os.path.isdir(path):
         raise UsageError(f"eegt: cannot read input '{path}': is a directory")
@@ -138,14 +149,40 @@ def _check_paths(ns: argparse.Namespace) -> None:
 
 
 def _check_writable(path: str, what: str) -> None:
+    """`path` can be created or overwritten: open it for appending (which changes nothing
+    in an existing file) and remove it again if it is new."""
     folder = os.path.dirname(os.path.abspath(path))
     if os.path.isdir(path):
         raise UsageError(f"eegt: cannot write {what} '{path}': is a directory")
     if not os.path.isdir(folder):
         raise UsageError(f"eegt: cannot write {what} '{path}': no folder {folder}")
-    if not os.access(folder, os.W_OK | os.X_OK) or (
-            os.path.exists(path) and not os.access(path, os.W_OK)):
-        raise UsageError(f"eegt: cannot write {what} '{path}': permission denied")
+    existed = os.path.exists(path)
+    try:  # non-blocking: a FIFO without a reader fails here instead of hanging
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK, 0o666))
+        if not existed:
+            os.remove(path)
+    except OSError as exc:
+        raise UsageError(f"eegt: cannot write {what} '{path}': {_why(exc)}") from None
+
+
+def _why(exc: OSError) -> str:
+    """An OSError as a short lower-case reason ("permission denied")."""
+    return (exc.strerror or str(exc)).lower()
+
+
+def _tmp_path(path: str) -> str:
+    """A hidden temporary name beside `path` (beside its target if it is a symbolic link,
+    which then keeps pointing at the new file), same extension (exporters insist on it)."""
+    real = os.path.realpath(path)
+    name = os.path.basename(real)
+    return os.path.join(os.path.dirname(real),
+                        f".{name}.eegt-tmp-{os.getpid()}{os.path.splitext(name)[1]}")
+
+
+def _discard(path: str | None) -> None:
+    """Remove a temporary file if it is there."""
+    if path and os.path.lexists(path):
+        os.remove(path)
 
 
 def _load(path: str) -> None:
@@ -170,27 +207,26 @@ def _load(path: str) -> None:
         raise UsageError(f"eegt: cannot read input '{path}': {first}") from None
 
 
-def _save(path: str) -> None:
-    """Write to a temporary file beside `path`, check it, rename it onto `path`; on any
-    failure remove it and raise (UsageError, exit 2): `path` is then untouched."""
+def _stage(path: str) -> str:
+    """Export to a temporary file beside `path` and check it is whole; its name. On any
+    failure it is removed and UsageError (exit 2) raised: `path` is never touched here."""
     ext = os.path.splitext(path)[1].lower()
-    folder = os.path.dirname(os.path.abspath(path))
-    tmp = os.path.join(folder, f".{os.path.basename(path)}.eegt-tmp-{os.getpid()}{ext}")
+    tmp = _tmp_path(path)
     try:
         _export(tmp, ext)
         problem = _incomplete(tmp, ext)
-        if problem:
-            raise UsageError(f"eegt: cannot write output '{path}': {problem}")
-        os.replace(tmp, path)
     except RuntimeError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else "write error"
-        first = first.removeprefix("Error: ")
-        raise UsageError(f"eegt: cannot write output '{path}': {first}") from None
+        problem = first.removeprefix("Error: ")
     except OSError as exc:
-        raise UsageError(f"eegt: cannot write output '{path}': {exc.strerror or exc}") from None
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        problem = _why(exc)
+    except BaseException:
+        _discard(tmp)
+        raise
+    if problem:
+        _discard(tmp)
+        raise UsageError(f"eegt: cannot write output '{path}': {problem}")
+    return tmp
 
 
 def _export(path: str, ext: str) -> None:
@@ -199,41 +235,58 @@ def _export(path: str, ext: str) -> None:
     elif ext == ".obj":
         bpy.ops.wm.obj_export(filepath=path, forward_axis="Y", up_axis="Z",
                               export_materials=False)
-    elif ext == ".ply":
-        bpy.ops.wm.ply_export(filepath=path, forward_axis="Y", up_axis="Z")
-    else:
-        bpy.ops.wm.stl_export(filepath=path, forward_axis="Y", up_axis="Z")
+    elif ext == ".ply":  # binary: its size can be checked against the header
+        bpy.ops.wm.ply_export(filepath=path, forward_axis="Y", up_axis="Z", ascii_format=False)
+    else:  # binary: its size is 84 + 50 * triangles
+        bpy.ops.wm.stl_export(filepath=path, forward_axis="Y", up_axis="Z", ascii_format=False)
 
 
 def _incomplete(path: str, ext: str) -> str | None:
-    """Why the freshly written file is not whole (Blender's exporters report success when
-    the disk fills), or None."""
+    """Why the freshly written file is not whole, or None. Blender's writers report success
+    when the disk fills, so each format is checked for its own end."""
     if not os.path.isfile(path) or os.path.getsize(path) == 0:
         return "nothing was written"
-    stat = os.statvfs(path)
-    if stat.f_bavail == 0 and stat.f_blocks > 0:
-        return "the disk is full"
     size = os.path.getsize(path)
     with open(path, "rb") as fh:
-        head = fh.read(4096)
+        head = fh.read(65536)
         fh.seek(max(0, size - 64))
         tail = fh.read()
     if ext == ".blend":
-        if head.startswith(b"BLENDER") and b"ENDB" not in tail:
-            return "the .blend file is truncated (no end block)"
-        if head.startswith(ZSTD_MAGIC) and not tail.endswith(ZSTD_SEEKABLE_END):
-            return "the compressed .blend file is truncated (no seek table)"
-    elif ext == ".stl":
-        if not head.startswith(b"solid") and len(head) >= 84:
-            n = struct.unpack_from("<I", head, 80)[0]
-            if size != 84 + 50 * n:
-                return f"the STL file is truncated ({size} bytes for {n} triangles)"
-        elif head.startswith(b"solid") and b"endsolid" not in tail:
-            return "the STL file is truncated"
-    elif ext == ".ply":
+        return _blend_incomplete(path, head, tail, size)
+    if ext == ".stl":
+        n = struct.unpack_from("<I", head, 80)[0] if size >= 84 else -1
+        return None if size == 84 + 50 * n else \
+            f"the STL file is truncated ({size} bytes for {max(n, 0)} triangles)"
+    if ext == ".ply":
         return _ply_incomplete(path, head, size)
-    elif ext == ".obj":
-        return _obj_incomplete(path, tail)
+    return _obj_incomplete(path, tail)
+
+
+def _blend_incomplete(path: str, head: bytes, tail: bytes, size: int) -> str | None:
+    """A .blend ends with its ENDB block header (the code, then zeros: 32 bytes in the
+    "BLENDER17-01" format of 5.0, else 24 or 20 for 8- or 4-byte pointers); a compressed one
+    is zstd frames closed by a seek table whose frame sizes add up to the file size."""
+    if head.startswith(b"BLENDER"):
+        bhead = 32 if head[7:9] == b"17" else 24 if head[7:8] == b"-" else 20
+        if tail.endswith(b"ENDB" + bytes(bhead - 4)):
+            return None
+        return "the .blend file is truncated (no end block)"
+    if not head.startswith(ZSTD_MAGIC):
+        return "not a .blend file"
+    if len(tail) < 17 or not tail.endswith(ZSTD_SEEKABLE_END):
+        return "the compressed .blend file is truncated (no seek table)"
+    frames, flags = struct.unpack_from("<IB", tail, len(tail) - 9)
+    entry = 12 if flags & 0x80 else 8
+    table = 8 + frames * entry + 9  # skippable frame header + entries + footer
+    if table > size:
+        return "the compressed .blend file is truncated (bad seek table)"
+    with open(path, "rb") as fh:
+        fh.seek(size - table)
+        raw = fh.read(table)
+    magic, length = struct.unpack_from("<II", raw)
+    total = sum(struct.unpack_from("<I", raw, 8 + i * entry)[0] for i in range(frames))
+    if magic != 0x184D2A5E or length != table - 8 or total != size - table:
+        return "the compressed .blend file is truncated (its frames do not add up)"
     return None
 
 
@@ -295,9 +348,9 @@ def _obj_incomplete(path: str, tail: bytes) -> str | None:
     return None
 
 
-def _objects(names: list[str], path: str) -> list[bpy.types.Object]:
-    """The mesh objects to process (one per mesh data); objects without faces are skipped
-    with a line, and none with a face is a usage error (exit 2)."""
+def _objects(names: list[str], path: str) -> tuple[list[bpy.types.Object], list[str]]:
+    """The mesh objects to process (one per mesh data) and the names of those skipped for
+    having no faces (each with a line); none with a face is a usage error (exit 2)."""
     meshes = [o for o in bpy.data.objects if o.type == "MESH"]
     if names:
         chosen = []
@@ -317,14 +370,13 @@ def _objects(names: list[str], path: str) -> list[bpy.types.Object]:
                          "edges or points only)")
     for obj in faceless:
         print(f"EEGT {obj.name}: skipped: no faces", flush=True)
-    meshes = [o for o in meshes if o not in faceless]
     seen: set[int] = set()
     unique = []
     for obj in meshes:
-        if obj.data.as_pointer() not in seen:
+        if obj not in faceless and obj.data.as_pointer() not in seen:
             seen.add(obj.data.as_pointer())
             unique.append(obj)
-    return unique
+    return unique, [o.name for o in faceless]
 
 
 def _backend(choice: str | None, device: str | None) -> tuple[str, str | None]:
@@ -334,20 +386,23 @@ def _backend(choice: str | None, device: str | None) -> tuple[str, str | None]:
 
 
 def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
-    """Parse, load, process, save; returns (exit code, report dict). Never raises."""
+    """Parse, check, load, process, stage the output, then commit; returns (exit code,
+    report dict). Never raises."""
     rep = report.new_report(argv)
     ns = None
+    staged: str | None = None
     try:
         ns = build_parser().parse_args(argv)
         rep["input"], rep["output"] = ns.input, ns.output
+        _check_paths(ns)
         params = _params(ns)
         rep["params"] = params.as_dict() if hasattr(params, "as_dict") else \
             dataclasses.asdict(params)
         backend, device = _backend(ns.backend, ns.device)
         rep["backend_requested"] = backend
-        _check_paths(ns)
         _load(ns.input)
-        objs = _objects(ns.object, ns.input)
+        objs, skipped = _objects(ns.object, ns.input)
+        rep["skipped"] = [{"object": name, "reason": "no faces"} for name in skipped]
         if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
             bpy.ops.object.mode_set(mode="OBJECT")
         results = []
@@ -363,8 +418,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             print("EEGT " + res.line(), flush=True)
         rep["objects"] = [r.as_dict() for r in results]
         if ns.output:
-            _save(ns.output)
-            rep["written"] = True
+            staged = _stage(ns.output)
         else:
             print("EEGT: no --output given, nothing written", flush=True)
         code = EXIT_OK if all(r.ok for r in results) else EXIT_FAILED
@@ -378,16 +432,51 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         print(f"eegt: internal error: {exc!r}", file=sys.stderr, flush=True)
         rep["error"] = f"internal error: {exc!r}"
         code = EXIT_INTERNAL
-    rep["exit_code"] = code
-    if ns is not None and ns.report:
-        try:
-            with open(ns.report, "w", encoding="utf-8") as fh:
+    return _commit(ns, rep, code, staged), rep
+
+
+def _fail(rep: dict[str, Any], message: str) -> int:
+    """Print one line on stderr and mark the report: nothing written, exit 2."""
+    print(message, file=sys.stderr, flush=True)
+    rep.update(written=False, error=message, exit_code=EXIT_USAGE)
+    return EXIT_USAGE
+
+
+def _commit(ns: argparse.Namespace | None, rep: dict[str, Any], code: int,
+            staged: str | None) -> int:
+    """Put the staged output and the report in place; the exit code. The report is
+    written to a temporary file first: when it cannot be, the output is dropped too (exit 2
+    means nothing written), and "written" is true only once the output has been renamed."""
+    out = ns.output if ns is not None else None
+    path = ns.report if ns is not None else None
+    rep["written"], rep["exit_code"] = staged is not None, code
+    # /dev/null, /dev/stdout and the like are written as they are, never replaced
+    special = bool(path) and os.path.exists(path) and not os.path.isfile(path)
+    tmp = _tmp_path(path) if path and not special else None
+    try:
+        if path:
+            with open(tmp or path, "w", encoding="utf-8") as fh:
                 json.dump(rep, fh, indent=2)
-        except OSError as exc:
-            print(f"eegt: cannot write report '{ns.report}': {exc.strerror}", file=sys.stderr)
-            if code == EXIT_OK:
-                code = EXIT_USAGE
-    return code, rep
+    except OSError as exc:
+        _discard(tmp)
+        _discard(staged)
+        failed = _fail(rep, f"eegt: cannot write report '{path}': {_why(exc)}")
+        return code if code == EXIT_INTERNAL else failed
+    try:
+        if staged:
+            os.replace(staged, os.path.realpath(out))
+    except OSError as exc:
+        _discard(staged)
+        _discard(tmp)
+        code = _fail(rep, f"eegt: cannot write output '{out}': {_why(exc)}")
+        return _commit(ns, rep, code, None)
+    try:
+        if tmp:
+            os.replace(tmp, os.path.realpath(path))
+    except OSError as exc:
+        _discard(tmp)
+        return _fail(rep, f"eegt: cannot write report '{path}': {_why(exc)}")
+    return code
 
 
 def execute(argv: list[str]) -> int:

@@ -35,6 +35,7 @@ def new_report(argv: list[str]) -> dict[str, Any]:
         "params": None,
         "backend_requested": None,
         "objects": [],
+        "skipped": [],  # mesh objects left alone: {"object": name, "reason": "no faces"}
         "error": None,
         "exit_code": None,
     }
