@@ -148,7 +148,8 @@ class NumpyEngine:
         for g, q, f in zip(self.groups, self.q, self.inv_d_pow):
             X, Y = self._gather(g)
             DX, DY = group_transform_delta(X, Y, p.a * (1.0 - q), p.scaling)
-            gq = np.where(q > 0, power(1.0 - q, p.eta), p.inverted_weight)
+            # q may round to 1 + 1 ulp on a regular face: 1 - q < 0 gives NaN for eta not integer
+            gq = np.where(q > 0, power(np.maximum(1.0 - q, 0.0), p.eta), p.inverted_weight)
             w = f * gq
             wx.append((DX * w).ravel())
             wy.append((DY * w).ravel())

@@ -556,7 +556,7 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
     }                                                                                        \
     const double qj = q[fo + j];                                                             \
     const double lam = a * (1.0 - qj);                                                       \
-    const double g = qj > 0.0 ? np_pow(1.0 - qj, eta, pow_eta) : inv_weight;                 \
+    const double g = qj > 0.0 ? np_pow(FMAX(1.0 - qj, 0.0), eta, pow_eta) : inv_weight;      \
     const double w = fj * g;                                                                 \
     wf[fo + j] = w;
 

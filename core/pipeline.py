@@ -14,7 +14,7 @@ from .engine_numpy import NumpyEngine
 from .faces import FaceSet, as_faceset
 from .global_untangle import stops
 from .params import EEGTParams
-from .quality import Stats, _check_points, group_quality, stats_of
+from .quality import Stats, _check_points, mesh_stats
 from .topology import EdgeInfo
 
 __all__ = ["Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
@@ -111,7 +111,9 @@ def untangle_and_smooth(
     center, scale = _normalisation(p, fs)
     work = (p - center) / scale
     _check_orientation(work, fs)
-    frozen = frozen_faces(work, fs, free)
+    # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
+    # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
+    frozen = frozen_faces(_as_given(p, fs, center, scale), fs, free)
     run = _Run(work, fs, free, params, backend, progress, frozen)
     try:
         status, message = run.execute()
@@ -124,6 +126,11 @@ def untangle_and_smooth(
         changed = np.any(best != work, axis=1) & free  # fixed rows stay the input's, always
         out[changed] = best[changed] * scale + center
         after = _stats_as_given(out, fs, center, scale) if changed.any() else before
+        if not (after == before or after.better_than(before)):  # judged in the caller's units
+            out, after = p.copy(), before
+            status = "failed" if before.n_inverted > run.n_frozen else "valid"
+            message += "; the result was not better than the input in its own coordinates: "
+            message += "input returned"
     return EEGTResult(
         out,
         status,
@@ -152,12 +159,19 @@ def _normalisation(p: np.ndarray, fs: FaceSet) -> tuple[np.ndarray, float]:
     return center, math.ldexp(1.0, math.frexp(half)[1])
 
 
+def _as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> np.ndarray:
+    """The caller's points divided by the power-of-two scale (exact: every sign and mean
+    ratio is the caller's bit for bit, and the same for any 2^k multiple of the input); the
+    normalised points where the mesh sits more than 1e100 sizes from the origin."""
+    q = p / scale
+    if float(np.max(np.abs(q[fs.used_nodes(p.shape[0])]))) < 1e100:
+        return q
+    return (p - center) / scale
+
+
 def _stats_as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> Stats:
-    """Stats of the points as the caller has them (what `mesh_stats` of the result says);
-    in normalised coordinates where squares of the caller's would overflow or underflow."""
-    span = float(np.max(np.abs(p[fs.used_nodes(p.shape[0])])))
-    q = p if 1e-100 < scale and span < 1e100 else (p - center) / scale
-    return stats_of([group_quality(q[g.nodes, 0], q[g.nodes, 1]) for g in fs.groups])
+    """Stats of the points as the caller has them (what `mesh_stats` of the result says)."""
+    return mesh_stats(_as_given(p, fs, center, scale), fs)
 
 
 def _check_orientation(p: np.ndarray, fs: FaceSet) -> None:
