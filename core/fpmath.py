@@ -11,10 +11,11 @@ The OpenCL kernels implement `power` with the same operations in the same order.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["exp", "log", "power", "regular_corner", "sin_cos", "tan_pi_over"]
+__all__ = ["exp", "log", "log_scalar", "power", "regular_corner", "sin_cos", "tan_pi_over"]
 
 _SQRT_HALF = 0.7071067811865476  # the double nearest sqrt(1/2)
 _LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2^20
@@ -25,6 +26,21 @@ LOG_COEFFS = tuple(1.0 / (2 * k + 1) for k in range(12))
 # exp(r) = sum_j r^j / j!, |r| <= ln(2) / 2
 EXP_COEFFS = tuple(1.0 / math.factorial(j) for j in range(14))
 _EXP_MAX, _EXP_MIN = 709.782712893384, -745.1332191019412
+
+
+def log_scalar(x: float) -> float:
+    """`log` of one positive finite float, on Python floats: the same operations, the same
+    bits, without NumPy's per-call cost."""
+    m, e = math.frexp(float(x))
+    if m < _SQRT_HALF:
+        m, e = m * 2.0, e - 1
+    k = float(e)
+    f = (m - 1.0) / (m + 1.0)
+    s = f * f
+    p = LOG_COEFFS[-1]
+    for c in LOG_COEFFS[-2::-1]:
+        p = p * s + c
+    return k * _LN2_HI + (k * _LN2_LO + 2.0 * f * p)
 
 
 def log(x: np.ndarray) -> np.ndarray:
@@ -41,6 +57,8 @@ def log(x: np.ndarray) -> np.ndarray:
         for c in LOG_COEFFS[-2::-1]:
             p = p * s + c
         out = k * _LN2_HI + (k * _LN2_LO + 2.0 * f * p)
+    if x.size and float(x.min()) > 0.0 and float(x.max()) < np.inf:
+        return out  # the usual case: no special values to patch
     out = np.where(x > 0.0, out, np.where(x == 0.0, -np.inf, np.nan))
     return np.where(np.isposinf(x), np.inf, out)
 
@@ -55,6 +73,8 @@ def exp(x: np.ndarray) -> np.ndarray:
     for c in EXP_COEFFS[-2::-1]:
         p = p * r + c
     out = np.ldexp(p, np.nan_to_num(k).astype(np.intc))
+    if x.size and float(x.min()) >= _EXP_MIN and float(x.max()) <= _EXP_MAX:
+        return out  # the usual case (NaN fails both tests)
     out = np.where(x > _EXP_MAX, np.inf, np.where(x < _EXP_MIN, 0.0, out))
     return np.where(np.isnan(x), np.nan, out)
 
@@ -93,6 +113,7 @@ def sin_cos(t: float) -> tuple[float, float]:
     return 2.0 * s * c, (c - s) * (c + s)
 
 
+@lru_cache(maxsize=256)
 def tan_pi_over(n: int) -> float:
     """tan(pi / n) for n >= 3, exact where the value is a square root."""
     special = {3: math.sqrt(3.0), 4: 1.0, 6: 1.0 / math.sqrt(3.0)}
@@ -102,6 +123,7 @@ def tan_pi_over(n: int) -> float:
     return s / c
 
 
+@lru_cache(maxsize=256)
 def regular_corner(n: int) -> tuple[float, float]:
     """(cos a, sin a) of the regular n-gon's interior angle a = (n - 2) pi / n."""
     half3 = 0.5 * math.sqrt(3.0)

@@ -123,6 +123,10 @@ def stops(answer: Any) -> bool:
 
 def _per_arity(arity: np.ndarray, fn: Callable[[int], float]) -> np.ndarray:
     """fn(n) for each entry of an integer arity array, evaluated once per distinct n."""
+    top = int(arity.max()) if arity.size else 0
+    if top <= 64:  # the usual case: a lookup table (no sort)
+        table = np.array([fn(n) if n >= 3 else 0.0 for n in range(top + 1)], dtype=np.float64)
+        return table[arity]
     values, inverse = np.unique(arity, return_inverse=True)
     return np.array([fn(int(n)) for n in values], dtype=np.float64)[inverse]
 
@@ -151,11 +155,12 @@ def _reference_sizes(
     hn = hn + np.bincount(edges[1], weights=elen, minlength=n_nodes)
     hn = np.maximum(hn / np.maximum(2.0 * cnt, 1.0), floor)
     lh = fpmath.log(hn)
+    log_floor = fpmath.log_scalar(floor)
     deg = arity.astype(np.float64)
     le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     for _ in range(SIZE_SMOOTHING):
         lh = np.bincount(edges[0], weights=le[edge_elem], minlength=n_nodes)
-        lh = np.where(cnt > 0, lh / np.maximum(cnt, 1.0), fpmath.log(np.array(floor)))
+        lh = np.where(cnt > 0, lh / np.maximum(cnt, 1.0), log_floor)
         le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     size = fpmath.exp(le)
     ref_area = arity * size**2 / (4.0 * _per_arity(arity, fpmath.tan_pi_over))

@@ -343,7 +343,7 @@ class _Run:
                 self.free,
                 max_iter=self.params.max_untangle_iterations + polish,
                 polish_iter=polish,
-                progress=relay,
+                progress=relay if self.progress is not None else None,  # no pauses unasked
                 lbfgs=self.lbfgs,
             )
             self.n_global = int(info["iterations"])
@@ -386,7 +386,8 @@ class _Run:
             self.report(base + iterations, "global", Stats(self.n_frozen, q_min, q_avg))
 
         out, info = lift_min_quality(
-            pts, groups, self.free, rounds=self.params.lift_rounds, progress=relay, lbfgs=self.lbfgs
+            pts, groups, self.free, rounds=self.params.lift_rounds,
+            progress=relay if self.progress is not None else None, lbfgs=self.lbfgs
         )
         self.n_global += int(info["iterations"])
         return out
