@@ -7,7 +7,7 @@ import numpy as np
 from .faces import as_faceset
 from .params import EEGTParams
 from .pipeline import EEGTResult, Progress, _normalisation, free_nodes, untangle_and_smooth
-from .plane import PlaneFrame
+from .plane import PlaneFrame, checked_points3d
 
 __all__ = ["untangle_and_smooth_3d"]
 
@@ -32,12 +32,7 @@ def untangle_and_smooth_3d(
     the others at their orthogonal projection. Like the 2D core, it works in centred
     coordinates scaled by a power of two, so units from 1e-300 to 1e300 give the same result.
     """
-    original = np.array(points3d, dtype=np.float64)
-    if original.ndim != 2 or original.shape[1] != 3:
-        raise ValueError(f"points must be an (N, 3) array, got shape {original.shape}")
-    bad = ~np.isfinite(original).all(axis=1)
-    if bad.any():
-        raise ValueError(f"node {int(np.flatnonzero(bad)[0])} has a NaN or infinite coordinate")
+    original = checked_points3d(points3d)
     fs = as_faceset(faces, original.shape[0])
     _, scale = _normalisation(original, fs)
     # centre on the fixed nodes, which define the plane: a plane z = 0 stays exactly z = 0

@@ -19,9 +19,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from .faces import FaceSet, as_faceset
+from .quality import _check_points
 from .topology import EdgeInfo
 
 __all__ = ["PlaneFrame"]
+
+
+def checked_points3d(points3d) -> np.ndarray:
+    """A float64 (N, 3) copy of the points; ValueError naming the problem."""
+    return _check_points(points3d, 3)
 
 
 def _dot3(q: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -86,12 +92,7 @@ class PlaneFrame:
         are (they never move, SPEC 4); ``fixed_offset`` says how far the farthest one is,
         for the caller to report.
         """
-        p = np.array(points3d, dtype=np.float64)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise ValueError(f"points must be an (N, 3) array, got shape {p.shape}")
-        bad = ~np.isfinite(p).all(axis=1)
-        if bad.any():
-            raise ValueError(f"node {int(np.flatnonzero(bad)[0])} has a NaN or infinite coordinate")
+        p = checked_points3d(points3d)
         fs = as_faceset(faces, p.shape[0])
         used = fs.used_nodes(p.shape[0]) if used is None else np.asarray(used, dtype=bool)
         anchor = used

@@ -86,13 +86,15 @@ def stats_of(qs: list[np.ndarray]) -> Stats:
     return Stats(n_inv, q_min, q_avg)
 
 
-def _check_points(points) -> np.ndarray:
+def _check_points(points, dim: int = 2) -> np.ndarray:
+    """A float64 (N, dim) copy of the points; ValueError naming the problem (non-numbers,
+    wrong shape, the first non-finite node)."""
     try:  # always a copy: callers' arrays stay untouched
         p = np.array(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"points must be an (N, 2) array of numbers ({exc})") from None
-    if p.ndim != 2 or p.shape[1] != 2:
-        raise ValueError(f"points must be an (N, 2) array, got shape {p.shape}")
+        raise ValueError(f"points must be an (N, {dim}) array of numbers ({exc})") from None
+    if p.ndim != 2 or p.shape[1] != dim:
+        raise ValueError(f"points must be an (N, {dim}) array, got shape {p.shape}")
     bad = ~np.isfinite(p).all(axis=1)
     if bad.any():
         raise ValueError(f"node {int(np.flatnonzero(bad)[0])} has a NaN or infinite coordinate")
