@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["exp", "log", "log_scalar", "power", "regular_corner", "sin_cos", "tan_pi_over"]
+__all__ = ["exp", "log", "power", "regular_corner", "sin_cos", "tan_pi_over"]
 
 _SQRT_HALF = 0.7071067811865476  # the double nearest sqrt(1/2)
 _LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2^20
@@ -26,21 +26,6 @@ LOG_COEFFS = tuple(1.0 / (2 * k + 1) for k in range(12))
 # exp(r) = sum_j r^j / j!, |r| <= ln(2) / 2
 EXP_COEFFS = tuple(1.0 / math.factorial(j) for j in range(14))
 _EXP_MAX, _EXP_MIN = 709.782712893384, -745.1332191019412
-
-
-def log_scalar(x: float) -> float:
-    """`log` of one positive finite float, on Python floats: the same operations, the same
-    bits, without NumPy's per-call cost."""
-    m, e = math.frexp(float(x))
-    if m < _SQRT_HALF:
-        m, e = m * 2.0, e - 1
-    k = float(e)
-    f = (m - 1.0) / (m + 1.0)
-    s = f * f
-    p = LOG_COEFFS[-1]
-    for c in LOG_COEFFS[-2::-1]:
-        p = p * s + c
-    return k * _LN2_HI + (k * _LN2_LO + 2.0 * f * p)
 
 
 def log(x: np.ndarray) -> np.ndarray:

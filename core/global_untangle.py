@@ -121,11 +121,12 @@ def stops(answer: Any) -> bool:
     return answer is not None and not answer
 
 
-def _per_arity(arity: np.ndarray, fn: Callable[[int], float]) -> np.ndarray:
-    """fn(n) for each entry of an integer arity array, evaluated once per distinct n."""
+def _per_arity(arity: np.ndarray, fn: Callable[[int], Any]) -> np.ndarray:
+    """fn(n) (a float or a tuple of floats) for each entry of an integer arity array,
+    evaluated once per distinct n; tuples give one column each."""
     top = int(arity.max()) if arity.size else 0
-    if top <= 64:  # the usual case: a lookup table (no sort)
-        table = np.array([fn(n) if n >= 3 else 0.0 for n in range(top + 1)], dtype=np.float64)
+    if top <= 64:  # the usual case: a lookup table (no sort); rows below 3 are never read
+        table = np.array([fn(max(n, 3)) for n in range(top + 1)], dtype=np.float64)
         return table[arity]
     values, inverse = np.unique(arity, return_inverse=True)
     return np.array([fn(int(n)) for n in values], dtype=np.float64)[inverse]
@@ -154,8 +155,8 @@ def _reference_sizes(
     hn = np.bincount(edges[0], weights=elen, minlength=n_nodes)
     hn = hn + np.bincount(edges[1], weights=elen, minlength=n_nodes)
     hn = np.maximum(hn / np.maximum(2.0 * cnt, 1.0), floor)
-    lh = fpmath.log(hn)
-    log_floor = fpmath.log_scalar(floor)
+    lh = fpmath.log(np.append(hn, floor))  # the floor's log in the same call
+    lh, log_floor = lh[:-1], float(lh[-1])
     deg = arity.astype(np.float64)
     le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     for _ in range(SIZE_SMOOTHING):
@@ -278,8 +279,7 @@ class _Energy:
         """Energy corners (k, k+1, k-1) with their element's arity and reference size."""
         self.i0, self.i1, self.i2 = i0, i1, i2
         n = arity.astype(np.float64)
-        cos_a = _per_arity(arity, lambda k: fpmath.regular_corner(k)[0])
-        sin_a = _per_arity(arity, lambda k: fpmath.regular_corner(k)[1])
+        cos_a, sin_a = _per_arity(arity, fpmath.regular_corner).T
         # W = s [[1, cos a], [0, sin a]]  ->  W^-1 = [[1, -cot a], [0, 1 / sin a]] / s
         self.w00 = 1.0 / s
         self.w01 = -cos_a / (sin_a * s)

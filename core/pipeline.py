@@ -15,7 +15,7 @@ from .faces import FaceSet, as_faceset
 from .global_untangle import stops
 from .params import EEGTParams
 from .quality import Stats, _check_points, mesh_stats
-from .topology import EdgeInfo
+from .topology import free_nodes
 
 __all__ = ["Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
 
@@ -54,28 +54,6 @@ class EEGTResult:
             "message": self.message,
             "frozen_faces": self.n_frozen,
         }
-
-
-def free_nodes(n_nodes: int, faces, fixed=None) -> np.ndarray:
-    """(N,) bool: nodes the method may move (not boundary, non-manifold, pinned or loose)."""
-    fs = as_faceset(faces, n_nodes)
-    edges = EdgeInfo(fs, n_nodes)
-    if edges.conflict.any():
-        k = int(np.flatnonzero(edges.conflict)[0])
-        raise ValueError(
-            f"faces are not consistently oriented: edge ({int(edges.lo[k])}, {int(edges.hi[k])}) "
-            f"is used twice in the same direction ({int(edges.conflict.sum())} such edges; "
-            "recalculate normals)"
-        )
-    free = fs.used_nodes(n_nodes) & ~edges.boundary_mask()
-    if fixed is not None:
-        pinned = np.asarray(fixed)
-        if pinned.shape != (n_nodes,):
-            raise ValueError(f"fixed must be an ({n_nodes},) bool array, got shape {pinned.shape}")
-        if pinned.dtype.kind not in "biuf":
-            raise ValueError(f"fixed must be an ({n_nodes},) bool array, got {pinned.dtype} values")
-        free &= ~pinned.astype(bool)
-    return free
 
 
 def untangle_and_smooth(
@@ -147,13 +125,18 @@ def untangle_and_smooth(
     )
 
 
-def _normalisation(p: np.ndarray, fs: FaceSet) -> tuple[np.ndarray, float]:
-    """(centre, scale) that map the used nodes into [-1, 1]^2: the bounding-box centre and a
-    power of two (so that scaling is exact), computed without overflow up to 1e308."""
+def _normalisation(
+    p: np.ndarray, fs: FaceSet, centre_on: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
+    """(centre, scale) that map the used nodes into [-1, 1]^2: the bounding-box centre (of
+    the `centre_on` nodes if given) and a power of two (so that scaling is exact), computed
+    without overflow up to 1e308."""
     used = p[fs.used_nodes(p.shape[0])]
     lo, hi = used.min(axis=0), used.max(axis=0)
-    center = 0.5 * lo + 0.5 * hi
     half = float(np.max(0.5 * hi - 0.5 * lo))
+    if centre_on is not None:
+        lo, hi = p[centre_on].min(axis=0), p[centre_on].max(axis=0)
+    center = 0.5 * lo + 0.5 * hi
     if not half > 0.0:
         return center, 1.0
     return center, math.ldexp(1.0, math.frexp(half)[1])
@@ -188,6 +171,12 @@ def _check_orientation(p: np.ndarray, fs: FaceSet) -> None:
         )
     if not total > 0.0:
         raise ValueError("mesh has zero total area: cannot tell its orientation")
+
+
+def frozen_note(n_frozen: int) -> str:
+    """The sentence that reports frozen faces (the run's message, Blender's report line)."""
+    return (f"{n_frozen} faces have a straight or inverted corner made of fixed vertices "
+            "only: they cannot change")
 
 
 def frozen_faces(p: np.ndarray, faces, free: np.ndarray) -> np.ndarray:
@@ -270,12 +259,7 @@ class _Run:
         prm, before = self.params, self.before
         tangled = self.tangled(before)
         self.report(0, "untangle" if tangled else "smooth", before)
-        frozen = (
-            f"; {self.n_frozen} faces have a straight or inverted corner made of fixed "
-            "vertices only: they cannot change"
-            if self.n_frozen
-            else ""
-        )
+        frozen = f"; {frozen_note(self.n_frozen)}" if self.n_frozen else ""
         current = before
         if tangled:
             if prm.untangle != "global":

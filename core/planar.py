@@ -6,8 +6,10 @@ import numpy as np
 
 from .faces import as_faceset
 from .params import EEGTParams
-from .pipeline import EEGTResult, Progress, _normalisation, free_nodes, untangle_and_smooth
-from .plane import PlaneFrame, checked_points3d
+from .pipeline import EEGTResult, Progress, _normalisation, untangle_and_smooth
+from .plane import PlaneFrame
+from .quality import _check_points
+from .topology import free_nodes
 
 __all__ = ["untangle_and_smooth_3d"]
 
@@ -32,12 +34,11 @@ def untangle_and_smooth_3d(
     the others at their orthogonal projection. Like the 2D core, it works in centred
     coordinates scaled by a power of two, so units from 1e-300 to 1e300 give the same result.
     """
-    original = checked_points3d(points3d)
+    original = _check_points(points3d, 3)
     fs = as_faceset(faces, original.shape[0])
-    _, scale = _normalisation(original, fs)
-    # centre on the fixed nodes, which define the plane: a plane z = 0 stays exactly z = 0
+    # centred on the fixed nodes, which define the plane: a plane z = 0 stays exactly z = 0
     rim = fs.used_nodes(original.shape[0]) & ~free_nodes(original.shape[0], fs, fixed)
-    center = 0.5 * original[rim].min(axis=0) + 0.5 * original[rim].max(axis=0)
+    center, scale = _normalisation(original, fs, centre_on=rim)
     work = (original - center) / scale
     frame = PlaneFrame.fit(work, faces, tol=tol, project=project, fixed=fixed)
     flat = frame.to_2d(work)

@@ -20,14 +20,9 @@ import numpy as np
 
 from .faces import FaceSet, as_faceset
 from .quality import _check_points
-from .topology import EdgeInfo
+from .topology import free_nodes
 
 __all__ = ["PlaneFrame"]
-
-
-def checked_points3d(points3d) -> np.ndarray:
-    """A float64 (N, 3) copy of the points; ValueError naming the problem."""
-    return _check_points(points3d, 3)
 
 
 def _dot3(q: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -92,12 +87,12 @@ class PlaneFrame:
         are (they never move, SPEC 4); ``fixed_offset`` says how far the farthest one is,
         for the caller to report.
         """
-        p = checked_points3d(points3d)
+        p = _check_points(points3d, 3)
         fs = as_faceset(faces, p.shape[0])
         used = fs.used_nodes(p.shape[0]) if used is None else np.asarray(used, dtype=bool)
         anchor = used
         if project:
-            anchor = used & _fixed_nodes(fs, p.shape[0], fixed)
+            anchor = used & ~free_nodes(p.shape[0], fs, fixed)  # fixed: boundary, pins
             if not anchor.any():  # a closed surface pinned nowhere: fall back to all nodes
                 anchor = used
         origin = p[anchor].mean(axis=0)
@@ -145,15 +140,3 @@ class PlaneFrame:
         p = np.asarray(points3d, dtype=np.float64)
         off = _dot3(p - self.origin, self.normal)
         return p - off[:, None] * self.normal
-
-
-def _fixed_nodes(fs: FaceSet, n_nodes: int, fixed) -> np.ndarray:
-    """(N,) bool: boundary and non-manifold nodes, plus the caller's pins (among the used
-    nodes, the complement of ``pipeline.free_nodes``: the same EdgeInfo rule)."""
-    out = EdgeInfo(fs, n_nodes).boundary_mask()
-    if fixed is not None:
-        pinned = np.asarray(fixed)
-        if pinned.shape != (n_nodes,):
-            raise ValueError(f"fixed must be an ({n_nodes},) bool array, got shape {pinned.shape}")
-        out = out | pinned.astype(bool)
-    return out

@@ -6,7 +6,7 @@ import numpy as np
 
 from .faces import FaceSet, as_faceset
 
-__all__ = ["EdgeInfo", "boundary_nodes", "edge_info"]
+__all__ = ["EdgeInfo", "boundary_nodes", "edge_info", "free_nodes"]
 
 
 class EdgeInfo:
@@ -43,3 +43,25 @@ def edge_info(faces, n_nodes: int) -> EdgeInfo:
 def boundary_nodes(n_nodes: int, faces) -> np.ndarray:
     """(n_nodes,) bool: topological boundary and non-manifold nodes (never moved)."""
     return edge_info(faces, n_nodes).boundary_mask()
+
+
+def free_nodes(n_nodes: int, faces, fixed=None) -> np.ndarray:
+    """(N,) bool: nodes the method may move (not boundary, non-manifold, pinned or loose)."""
+    fs = as_faceset(faces, n_nodes)
+    edges = EdgeInfo(fs, n_nodes)
+    if edges.conflict.any():
+        k = int(np.flatnonzero(edges.conflict)[0])
+        raise ValueError(
+            f"faces are not consistently oriented: edge ({int(edges.lo[k])}, {int(edges.hi[k])}) "
+            f"is used twice in the same direction ({int(edges.conflict.sum())} such edges; "
+            "recalculate normals)"
+        )
+    free = fs.used_nodes(n_nodes) & ~edges.boundary_mask()
+    if fixed is not None:
+        pinned = np.asarray(fixed)
+        if pinned.shape != (n_nodes,):
+            raise ValueError(f"fixed must be an ({n_nodes},) bool array, got shape {pinned.shape}")
+        if pinned.dtype.kind not in "biuf":
+            raise ValueError(f"fixed must be an ({n_nodes},) bool array, got {pinned.dtype} values")
+        free &= ~pinned.astype(bool)
+    return free

@@ -170,6 +170,12 @@ def _why(exc: OSError) -> str:
     return (exc.strerror or str(exc)).lower()
 
 
+def _first_line(exc: RuntimeError, default: str) -> str:
+    """A Blender operator's error as one line, without its "Error: " prefix."""
+    text = str(exc).strip()
+    return text.splitlines()[0].removeprefix("Error: ") if text else default
+
+
 def _tmp_path(path: str) -> str:
     """A hidden temporary name beside `path` (beside its target if it is a symbolic link,
     which then keeps pointing at the new file), same extension (exporters insist on it)."""
@@ -202,9 +208,8 @@ def _load(path: str) -> None:
         else:
             bpy.ops.wm.stl_import(filepath=path, forward_axis="Y", up_axis="Z")
     except RuntimeError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "read error"
-        first = first.removeprefix("Error: ")
-        raise UsageError(f"eegt: cannot read input '{path}': {first}") from None
+        raise UsageError(f"eegt: cannot read input '{path}': {_first_line(exc, 'read error')}"
+                         ) from None
 
 
 def _stage(path: str) -> str:
@@ -216,8 +221,7 @@ def _stage(path: str) -> str:
         _export(tmp, ext)
         problem = _incomplete(tmp, ext)
     except RuntimeError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "write error"
-        problem = first.removeprefix("Error: ")
+        problem = _first_line(exc, "write error")
     except OSError as exc:
         problem = _why(exc)
     except BaseException:

@@ -79,17 +79,6 @@ def write_key_positions(key_block: bpy.types.ShapeKey, co: np.ndarray) -> None:
     key_block.data.foreach_set("co", np.ascontiguousarray(co, dtype=np.float32).ravel())
 
 
-def read_bool_attribute(me: bpy.types.Mesh, name: str, domain: str = "POINT") -> np.ndarray | None:
-    """A boolean attribute as a bool array, or None when absent / of another type."""
-    attr = me.attributes.get(name)
-    if attr is None or attr.domain != domain or attr.data_type != "BOOLEAN":
-        return None
-    out = np.zeros(len(attr.data), dtype=bool)
-    if out.size:
-        attr.data.foreach_get("value", out)
-    return out
-
-
 def _read_flags(collection, prop: str) -> np.ndarray:
     """A boolean property of every item of a mesh collection, in one bulk read."""
     out = np.zeros(len(collection), dtype=bool)

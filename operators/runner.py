@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 
 from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
+from ..core.pipeline import frozen_note
 from ..core.plane import PlaneFrame
 from . import mesh_io
 
@@ -293,7 +294,7 @@ def _positions_to_write(job: Job, res: Any) -> tuple[np.ndarray | None, Any]:
     moved = free & np.any(np.asarray(res.points) != job.points2d, axis=1)
     if not res.after.better_than(res.before):
         moved[:] = False
-    before = mesh_stats(job.points2d, job.faces)
+    before = res.before  # the core's stats of job.points2d as given (= mesh_stats of them)
     if moved.any():
         out = _placed(job, res.points, moved, free)
         if out is not None:
@@ -339,9 +340,8 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
     out.n_free = int(np.count_nonzero(np.asarray(res.moved)))
     out.status = res.status
     out.message = str(res.message)
-    if getattr(res, "n_frozen", 0):
-        out.notes.append(f"{res.n_frozen} faces have a straight or inverted corner made of "
-                         "fixed vertices only: they cannot change")
+    if res.n_frozen:
+        out.notes.append(frozen_note(res.n_frozen))
     out.before = stats_dict(res.before)
     out.after = job.after if job.after is not None else stats_dict(res.after)
     out.untangle_iterations = int(res.untangle_iterations)
