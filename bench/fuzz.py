@@ -152,7 +152,7 @@ def _honeycomb(rng) -> tuple[np.ndarray, list[list[int]]]:
     return np.array(pts, dtype=np.float64), faces
 
 
-def _merge(rng, faces: list[list[int]], max_n: int, tries: int) -> list[list[int]]:
+def merge_faces(rng, faces: list[list[int]], max_n: int, tries: int) -> list[list[int]]:
     """Merge random pairs of faces sharing exactly one edge into polygons of <= max_n
     corners (Voronoi-like irregular n-gons)."""
     faces = [list(f) for f in faces]
@@ -189,7 +189,7 @@ def _topology(rng) -> tuple[str, np.ndarray, list[list[int]]]:
         pts, faces = _honeycomb(rng)
     else:
         pts, faces = (_grid if rng.random() < 0.7 else _polar)(rng)
-        faces = _merge(rng, faces, int(rng.integers(5, 9)), int(rng.integers(1, len(faces) + 1)))
+        faces = merge_faces(rng, faces, int(rng.integers(5, 9)), int(rng.integers(1, len(faces) + 1)))
     return kind, pts, faces
 
 

@@ -16,6 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from bench.fuzz import merge_faces
 from core import backends
 from core.engine_numpy import NumpyEngine
 from core.faces import FaceSet, as_faceset
@@ -249,25 +250,6 @@ def test_general_powers_bit_identical_on_random_meshes(cpu_device, mesh, c, eta)
     if not free.any():
         return
     step_exact(pts, fs, free, EEGTParams(c=c, eta=eta, distance_refresh=2), 10, 6)
-
-
-def merge_faces(rng, faces: list[list[int]], max_n: int, tries: int) -> list[list[int]]:
-    """Merge random pairs of faces that share exactly one edge into polygons of <= max_n
-    corners (as bench/fuzz.py does): irregular n-gons, often one face of its arity."""
-    faces = [list(f) for f in faces]
-    for _ in range(tries):
-        owner = {(f[k], f[(k + 1) % len(f)]): i for i, f in enumerate(faces) for k in range(len(f))}
-        pairs = sorted((i, owner[(v, u)], u, v) for (u, v), i in owner.items() if (v, u) in owner)
-        if not pairs:
-            break
-        ia, ib, u, v = pairs[int(rng.integers(len(pairs)))]
-        A, B = faces[ia], faces[ib]
-        if len(A) + len(B) - 2 > max_n or len(set(A) & set(B)) != 2:
-            continue
-        a, b = A.index(v), B.index(u)  # A = .. u v .., B = .. v u ..
-        faces[ia] = A[a:] + A[:a] + (B[b:] + B[:b])[1:-1]
-        del faces[ib]
-    return faces
 
 
 @st.composite
