@@ -26,3 +26,49 @@ def jittered_square(
     b, c, d = a + 1, a + m + 2, a + m + 1
     tris = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
     return pts, FaceSet(np.arange(tris.shape[0] + 1) * 3, tris.ravel())
+
+
+HOLES = ((0.3, 0.3, 0.12), (0.7, 0.35, 0.1), (0.45, 0.72, 0.11))  # (x, y, radius)
+
+
+def holed_square(
+    n_triangles: int, jitter: float = 0.47, seed: int = 0
+) -> tuple[np.ndarray, FaceSet]:
+    """Unit square with three round holes, an unstructured Delaunay mesh of about
+    `n_triangles` triangles (nodes: the sides and hole circles sampled at the edge length h,
+    inside a triangular lattice moved by up to 0.35 h, triangulated by matplotlib's qhull); then
+    interior nodes moved by uniform noise of `jitter` h (0.47 inverts about 5 % of the
+    triangles)."""
+    from matplotlib.tri import Triangulation
+
+    rng = np.random.default_rng(seed)
+    area = 1.0 - sum(np.pi * r * r for _, _, r in HOLES)
+    h = float(np.sqrt(4.0 * area / (np.sqrt(3.0) * max(n_triangles, 8))))
+    k = max(4, round(1.0 / h))
+    t = np.arange(k) / k
+    sides = [np.column_stack([t, 0 * t]), np.column_stack([1 + 0 * t, t]),
+             np.column_stack([1 - t, 1 + 0 * t]), np.column_stack([0 * t, 1 - t])]
+    circles = []
+    for hx, hy, r in HOLES:
+        a = np.arange(max(8, round(2 * np.pi * r / h))) * (2 * np.pi / max(8, round(2 * np.pi * r / h)))
+        circles.append(np.column_stack([hx + r * np.cos(a), hy + r * np.sin(a)]))
+    rows = round(1.0 / (h * np.sqrt(3.0) / 2.0))
+    i, j = np.mgrid[1:rows, 0 : k + 1]
+    lat = np.column_stack([((j + 0.5 * (i % 2)) / k).ravel(), (i / rows).ravel()])
+    lat += rng.uniform(-0.35 * h, 0.35 * h, lat.shape)
+    inside = np.all((lat > 0.5 * h) & (lat < 1 - 0.5 * h), axis=1)
+    for hx, hy, r in HOLES:
+        inside &= np.hypot(lat[:, 0] - hx, lat[:, 1] - hy) > r + 0.5 * h
+    n_fixed = sum(len(b) for b in sides + circles)
+    pts = np.concatenate([*sides, *circles, lat[inside]])
+    tris = Triangulation(pts[:, 0], pts[:, 1]).triangles.astype(np.int64)
+    cen = pts[tris].mean(axis=1)
+    keep = np.ones(tris.shape[0], dtype=bool)
+    for hx, hy, r in HOLES:
+        keep &= np.hypot(cen[:, 0] - hx, cen[:, 1] - hy) > r
+    tris = tris[keep]
+    x, y = pts[tris, 0], pts[tris, 1]  # counterclockwise
+    cw = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (y[:, 1] - y[:, 0]) * (x[:, 2] - x[:, 0]) < 0
+    tris[cw] = tris[cw][:, ::-1]
+    pts[n_fixed:] += rng.uniform(-jitter * h, jitter * h, (pts.shape[0] - n_fixed, 2))
+    return pts, FaceSet(np.arange(tris.shape[0] + 1) * 3, tris.ravel())
