@@ -1,4 +1,4 @@
-"""Benchmark of core.global_untangle on the shared meshes (stage alone, no EEGT smoothing).
+"""Benchmark of core.optimize.untangle_global on the shared meshes (stage alone, no EEGT smoothing).
 
 Usage: python -m bench.global_untangle_bench [mesh ...] [--perturb K] [--repeat R]
 Self-contained: own OBJ loader, boundary detection and mean-ratio quality (SPEC section 3).
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from core.global_untangle import untangle_global
+from core.optimize import GlobalOptions, untangle_global
 
 MESH_DIR = Path("/work/shared/meshes")
 DEFAULT = ["two_holes_twist", "naca_deform", "tri_two_holes", "quad_hole", "mixed_quad_tri",
@@ -109,8 +109,7 @@ def main() -> None:
         times = []
         for _ in range(args.repeat):
             t = time.perf_counter()
-            out, info = untangle_global(pts, groups, free, max_iter=args.max_iter,
-                                        polish_iter=args.polish, polish_power=args.power)
+            out, info = untangle_global(pts, groups, free, GlobalOptions(max_iter=args.max_iter, polish_iter=args.polish, polish_power=args.power))
             times.append(time.perf_counter() - t)
         dt = float(np.median(times))
         q1 = quality(out, groups)
@@ -128,8 +127,7 @@ def main() -> None:
                 p2 = pts.copy()
                 p2[free] += 1e-9 * span * rng.standard_normal((int(free.sum()), 2))
                 t = time.perf_counter()
-                o2, inf2 = untangle_global(p2, groups, free, max_iter=args.max_iter,
-                                       polish_iter=args.polish, polish_power=args.power)
+                o2, inf2 = untangle_global(p2, groups, free, GlobalOptions(max_iter=args.max_iter, polish_iter=args.polish, polish_power=args.power))
                 times.append(time.perf_counter() - t)
                 qq = quality(o2, groups)
                 ok += qq[2] == 0

@@ -12,7 +12,8 @@ import numpy as np
 from .backends import make_engine
 from .engine_numpy import NumpyEngine
 from .faces import FaceSet, as_faceset
-from .global_untangle import stops
+from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
+from .optimize.device import solver_for
 from .params import EEGTParams
 from .quality import Stats, _check_points, mesh_stats
 from .topology import free_nodes
@@ -200,23 +201,6 @@ class _CancelRun(Exception):
     pass
 
 
-def _device_lbfgs(backend_name: str):
-    """The global stage's L-BFGS on the OpenCL device when the run uses OpenCL and the device
-    is a CPU (`device_solver` gives none elsewhere); None = the host's NumPy solver."""
-    if not backend_name.startswith("opencl"):
-        return None
-    from .lbfgs_opencl import device_solver
-
-    try:
-        solver = device_solver()
-    except RuntimeError as exc:  # kernel build failed: the host solver gives the same result
-        import warnings
-
-        warnings.warn(f"{exc}; global stage on NumPy", RuntimeWarning, stacklevel=4)
-        return None
-    return solver
-
-
 class _Run:
     """One run of the pipeline: EEGT phases on an engine, the global stage on the host."""
 
@@ -309,8 +293,6 @@ class _Run:
 
     def global_stage(self, polish: int) -> Stats:
         """Foldover-free optimization from the best iterate; EEGT continues from its result."""
-        from .global_untangle import untangle_global
-
         start = self.best_points()
         groups = self._global_groups()
         base = self.n_untangle
@@ -319,22 +301,26 @@ class _Run:
             self.n_global = iterations
             self.report(base + iterations, "global", Stats(n_inv, self.best.q_min, self.best.q_avg))
 
-        self.lbfgs = _device_lbfgs(self.backend_name)  # built here: not for runs without one
+        self.lbfgs = solver_for(self.backend_name)  # built here: not for runs without one
+        options = GlobalOptions(
+            max_iter=self.params.max_untangle_iterations + polish,
+            polish_iter=polish,
+            lift_rounds=self.params.lift_rounds,
+            solver=self.lbfgs,
+        )
         try:
             pts, info = untangle_global(
                 start,
                 groups,
                 self.free,
-                max_iter=self.params.max_untangle_iterations + polish,
-                polish_iter=polish,
+                options,
                 progress=relay if self.progress is not None else None,  # no pauses unasked
-                lbfgs=self.lbfgs,
             )
             self.n_global = int(info["iterations"])
             if info.get("status") == "cancelled":
                 raise _CancelRun
             if info.get("status") == "untangled" and self.params.lift_rounds > 0:
-                pts = self.lift(pts, groups)
+                pts = self.lift(pts, groups, options)
         finally:
             if self.lbfgs is not None:  # the device solver outlives the run: not its tables
                 self.lbfgs.release()
@@ -360,18 +346,15 @@ class _Run:
             groups[g.n] = np.ascontiguousarray(g.nodes[:, ~inert].T)
         return groups
 
-    def lift(self, pts: np.ndarray, groups: dict) -> np.ndarray:
+    def lift(self, pts: np.ndarray, groups: dict, options: GlobalOptions) -> np.ndarray:
         """Raise q_min of the valid optimization result without lowering its q_avg."""
-        from .global_untangle import lift_min_quality
-
         base = self.n_untangle + self.n_global
 
         def relay(iterations: int, _rounds: int, q_min: float, q_avg: float) -> None:
             self.report(base + iterations, "global", Stats(self.n_frozen, q_min, q_avg))
 
         out, info = lift_min_quality(
-            pts, groups, self.free, rounds=self.params.lift_rounds,
-            progress=relay if self.progress is not None else None, lbfgs=self.lbfgs
+            pts, groups, self.free, options, progress=relay if self.progress is not None else None
         )
         self.n_global += int(info["iterations"])
         return out

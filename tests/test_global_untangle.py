@@ -1,4 +1,4 @@
-"""Tests of core.global_untangle (foldover-free energy + L-BFGS), self-contained helpers."""
+"""Tests of core.optimize (foldover-free energy + L-BFGS, the lift), self-contained helpers."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core.global_untangle import lift_min_quality, untangle_global
+from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 
 DATA = Path(__file__).parent / "data"
 
@@ -91,7 +91,7 @@ def test_naca_perturbed_untangled() -> None:
         rng = np.random.default_rng(seed)
         p2 = pts.copy()
         p2[free] += 1e-9 * span * rng.standard_normal((int(free.sum()), 2))
-        out, info = untangle_global(p2, groups, free, polish_iter=0)  # untangling only
+        out, info = untangle_global(p2, groups, free, GlobalOptions(polish_iter=0))  # untangle only
         assert check_result(p2, groups, free, out, info)[2] == 0 and info["status"] == "untangled"
 
 
@@ -202,13 +202,13 @@ def test_bit_identical_across_blas_threads() -> None:
     import sys
 
     pts, groups, free = load_case("naca_deform")
-    out, _ = untangle_global(pts, groups, free, polish_iter=0)
+    out, _ = untangle_global(pts, groups, free, GlobalOptions(polish_iter=0))
     here = hashlib.sha256(out.tobytes()).hexdigest()
     code = (
         "import hashlib\n"
-        "from tests.test_global_untangle import load_case, untangle_global\n"
+        "from tests.test_global_untangle import GlobalOptions, load_case, untangle_global\n"
         "p, g, f = load_case('naca_deform')\n"
-        "o, _ = untangle_global(p, g, f, polish_iter=0)\n"
+        "o, _ = untangle_global(p, g, f, GlobalOptions(polish_iter=0))\n"
         "print(hashlib.sha256(o.tobytes()).hexdigest())\n"
     )
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
@@ -223,11 +223,11 @@ def test_bit_identical_across_blas_threads() -> None:
 def test_polish_power_raises_min_quality() -> None:
     pts, groups, free = load_case("quad_hole")
     q1 = quality(untangle_global(pts, groups, free)[0], groups)
-    q4 = quality(untangle_global(pts, groups, free, polish_power=4.0)[0], groups)
+    q4 = quality(untangle_global(pts, groups, free, GlobalOptions(polish_power=4.0))[0], groups)
     assert q1[2] == q4[2] == 0
     assert q4[0] > q1[0] + 0.02  # measured 0.776 vs 0.737
     with pytest.raises(ValueError):
-        untangle_global(pts, groups, free, polish_power=0.0)
+        untangle_global(pts, groups, free, GlobalOptions(polish_power=0.0))
 
 
 @pytest.mark.parametrize("turns", [1, 2])
@@ -250,12 +250,12 @@ def test_full_turn_twist_not_left_degenerate(turns: int) -> None:
 
 def test_max_iter_bounds_the_work() -> None:
     pts, groups, free = load_case("naca_deform")
-    out, info = untangle_global(pts, groups, free, max_iter=20)
+    out, info = untangle_global(pts, groups, free, GlobalOptions(max_iter=20))
     assert info["iterations"] <= 20 and info["status"] == "failed"
     assert 0 < info["n_inverted_out"] < info["n_inverted_in"]  # best iterate, fewer folds
     check_result(pts, groups, free, out, info)
     # a much larger cap untangles (the exact count is trajectory-dependent: no knife edge)
-    out, info = untangle_global(pts, groups, free, max_iter=3000, polish_iter=10_000)
+    out, info = untangle_global(pts, groups, free, GlobalOptions(max_iter=3000, polish_iter=10_000))
     assert info["iterations"] <= 3000 and info["status"] == "untangled"
 
 
@@ -325,7 +325,7 @@ def test_spun_hole_untangles_regression_inner_runs_too_short(degrees, triangles)
     pts, groups = spun_hole(12, 64, degrees, triangles)
     free = ~boundary_mask(len(pts), groups)
     assert quality(pts, groups)[2] == 64  # the whole inner ring is inverted
-    out, info = untangle_global(pts, groups, free, max_iter=5300)
+    out, info = untangle_global(pts, groups, free, GlobalOptions(max_iter=5300))
     assert np.array_equal(out[~free], pts[~free])
     q_min, _q_avg, n_inv = quality(out, groups)
     assert info["status"] == "untangled" and n_inv == 0 and q_min > 0.0

@@ -12,14 +12,17 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 
-from core import global_untangle as gu
 from core.faces import as_faceset
 from core.obj_io import read_obj
+from core.optimize import GlobalOptions, lift_min_quality, untangle_global
+from core.optimize.energy import LiftEnergy
+from core.optimize.solver import TICK_EVERY, State, lbfgs
+from core.optimize.stages import EPS_MIN
 from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 
 eo = pytest.importorskip("core.engine_opencl")
-lo = pytest.importorskip("core.lbfgs_opencl")
+lo = pytest.importorskip("core.optimize.solver_opencl")
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -61,11 +64,11 @@ def test_untangle_and_lift_bit_identical_to_host_call_by_call(solver, name):
     """Both energies (foldover-free with eps continuation, and the lift's with its sub-meshes),
     triangles (one corner each: corner counts not a multiple of 4), quads and n-gons."""
     p, _fs, groups, free = mesh(name)
-    host, dev = Recorder(gu._lbfgs), Recorder(solver)
+    host, dev = Recorder(lbfgs), Recorder(solver)
     outs = []
     for rec in (host, dev):
-        u, info = gu.untangle_global(p, groups, free, polish_iter=300, lbfgs=rec)
-        lifted, linfo = gu.lift_min_quality(u, groups, free, rounds=10, lbfgs=rec)
+        u, info = untangle_global(p, groups, free, GlobalOptions(polish_iter=300, solver=rec))
+        lifted, linfo = lift_min_quality(u, groups, free, GlobalOptions(lift_rounds=10, solver=rec))
         outs.append((u, lifted, info["iterations"], linfo["iterations"]))
     assert info["status"] == "untangled" and linfo["iterations"] > 0
     assert len(host.results) == len(dev.results) >= 3
@@ -79,29 +82,30 @@ def test_untangle_and_lift_bit_identical_to_host_call_by_call(solver, name):
 def test_ticks_pause_and_cancel_like_the_host(solver):
     """A tick every TICK_EVERY iterations; False stops at that iteration with its point."""
     p, _fs, groups, free = mesh("quad_hole")
-    u, _ = gu.untangle_global(p, groups, free, polish_iter=0)
-    en, st = gu._LiftEnergy(u, groups, free), gu._State(u, free)
+    u, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
+    en, st = LiftEnergy(u, groups, free), State(u, free)
     en.qc = 0.5
     v0 = st.pack(st.x, st.y)
     seen = {"host": [], "dev": []}
     res = {}
-    for key, run in (("host", gu._lbfgs), ("dev", solver)):
+    for key, run in (("host", lbfgs), ("dev", solver)):
 
         def tick(it, key=key):
             seen[key].append(it)
-            return it < 2 * gu.TICK_EVERY
+            return it < 2 * TICK_EVERY
 
-        res[key] = run(en, st, v0, gu.EPS_MIN, max_it=150, guard=True, rel_tol=0.0, tick=tick)
-    assert seen["host"] == seen["dev"] == [gu.TICK_EVERY, 2 * gu.TICK_EVERY]
-    assert res["host"][1] == res["dev"][1] == 2 * gu.TICK_EVERY
+        res[key] = run(en, st, v0, EPS_MIN, max_it=150, guard=True, rel_tol=0.0, tick=tick)
+    assert seen["host"] == seen["dev"] == [TICK_EVERY, 2 * TICK_EVERY]
+    assert res["host"][1] == res["dev"][1] == 2 * TICK_EVERY
     assert np.array_equal(res["host"][0], res["dev"][0])
 
 
 def test_powered_energy_falls_back_to_the_host_solver(solver):
     """polish_power != 1 is not in the kernel: the host solver runs, same result."""
     p, _fs, groups, free = mesh("quad_hole")
-    a, ia = gu.untangle_global(p, groups, free, polish_iter=40, polish_power=2.0)
-    b, ib = gu.untangle_global(p, groups, free, polish_iter=40, polish_power=2.0, lbfgs=solver)
+    a, ia = untangle_global(p, groups, free, GlobalOptions(polish_iter=40, polish_power=2.0))
+    options = GlobalOptions(polish_iter=40, polish_power=2.0, solver=solver)
+    b, ib = untangle_global(p, groups, free, options)
     assert np.array_equal(a, b) and ia["iterations"] == ib["iterations"] > 0
 
 
@@ -133,7 +137,7 @@ def test_pipeline_cancel_during_device_global_stage(solver):
 
 def test_device_solver_failure_falls_back_to_host(monkeypatch):
     """A kernel that does not build: one warning, the host solver, the same result."""
-    import core.pipeline as pl
+    from core.optimize.device import solver_for
 
     def broken():
         raise RuntimeError("L-BFGS kernel build failed on test device: line 1:1: boom")
@@ -141,10 +145,10 @@ def test_device_solver_failure_falls_back_to_host(monkeypatch):
     monkeypatch.setattr(lo, "device_solver", broken)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        solver = pl._device_lbfgs("opencl")
+        solver = solver_for("opencl")
     assert solver is None
     assert any("global stage on NumPy" in str(w.message) for w in caught)
-    assert pl._device_lbfgs("numpy") is None
+    assert solver_for("numpy") is None
 
 
 def test_auto_small_mesh_numpy_steps_device_global_stage_same_result(solver):
@@ -188,12 +192,12 @@ def test_random_polygon_meshes_with_pins_bit_identical(solver, case):
     if not free.any():
         return
     groups = fs.by_arity()
-    host = gu.untangle_global(pts, groups, free, polish_iter=100)
-    dev = gu.untangle_global(pts, groups, free, polish_iter=100, lbfgs=solver)
+    host = untangle_global(pts, groups, free, GlobalOptions(polish_iter=100))
+    dev = untangle_global(pts, groups, free, GlobalOptions(polish_iter=100, solver=solver))
     assert np.array_equal(host[0], dev[0]) and host[1]["iterations"] == dev[1]["iterations"]
     if host[1]["status"] == "untangled":
-        a = gu.lift_min_quality(host[0], groups, free, rounds=3)
-        b = gu.lift_min_quality(host[0], groups, free, rounds=3, lbfgs=solver)
+        a = lift_min_quality(host[0], groups, free, GlobalOptions(lift_rounds=3))
+        b = lift_min_quality(host[0], groups, free, GlobalOptions(lift_rounds=3, solver=solver))
         assert np.array_equal(a[0], b[0]) and a[1]["iterations"] == b[1]["iterations"]
 
 
@@ -212,11 +216,11 @@ def test_big_ngon_and_single_free_node(solver, what):
     fs = as_faceset(faces, len(pts))
     free = free_nodes(len(pts), fs)
     groups = fs.by_arity()
-    host = gu.untangle_global(pts, groups, free, polish_iter=50)
-    dev = gu.untangle_global(pts, groups, free, polish_iter=50, lbfgs=solver)
+    host = untangle_global(pts, groups, free, GlobalOptions(polish_iter=50))
+    dev = untangle_global(pts, groups, free, GlobalOptions(polish_iter=50, solver=solver))
     assert host[1]["iterations"] > 0 and np.array_equal(host[0], dev[0])
-    a = gu.lift_min_quality(host[0], groups, free, rounds=2)
-    b = gu.lift_min_quality(host[0], groups, free, rounds=2, lbfgs=solver)
+    a = lift_min_quality(host[0], groups, free, GlobalOptions(lift_rounds=2))
+    b = lift_min_quality(host[0], groups, free, GlobalOptions(lift_rounds=2, solver=solver))
     assert np.array_equal(a[0], b[0])
 
 

@@ -8,7 +8,8 @@ import pytest
 from meshdata import load2d
 
 from core import EEGTParams, mesh_stats, quality, untangle_and_smooth
-from core import global_untangle as gu
+from core.optimize import energy
+from core.optimize.solver import TICK_EVERY
 
 FAN_PTS = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]], float)
 FAN = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
@@ -182,13 +183,13 @@ def test_progress_comes_every_few_iterations_inside_the_global_stage():
     its = []
     untangle_and_smooth(p, f, progress=lambda it, ph, s: its.append(it) if ph == "global" else None)
     gaps = np.diff(its)
-    assert len(its) > 100 and gaps.max() <= gu.TICK_EVERY
+    assert len(its) > 100 and gaps.max() <= TICK_EVERY
 
 
 def test_big_meshes_tick_every_iteration(monkeypatch):
     """Ticks are spaced by mesh size (TICK_CORNERS / corners iterations), so that a 1M-face
     run calls back every iteration; shown here by lowering the threshold."""
-    monkeypatch.setattr(gu, "TICK_CORNERS", 100)
+    monkeypatch.setattr(energy, "TICK_CORNERS", 100)
     p, f = load2d("quad_hole")
     its = []
     untangle_and_smooth(p, f, progress=lambda it, ph, s: its.append(it) if ph == "global" else None)

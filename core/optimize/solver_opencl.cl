@@ -1,5 +1,5 @@
-// The global stage's L-BFGS (core/global_untangle.py: _lbfgs with _Energy.value_grad or
-// _LiftEnergy.value_grad) as one resumable single-work-item kernel, float64.
+// The global stage's L-BFGS (core/optimize/solver.py: lbfgs with energy.py's FoldoverEnergy or
+// LiftEnergy) as one resumable single-work-item kernel, float64.
 //
 // Every floating-point operation is the NumPy code's, on the same operands in the same order,
 // with FP contraction off: elementwise formulas as written there, scatters (np.bincount) as
@@ -25,7 +25,7 @@
 #ifndef M
 #define M 4  // LBFGS_MEMORY (the host passes it)
 #endif
-#define THETA 0.0625     // global_untangle.THETA
+#define THETA 0.0625     // energy.THETA
 #define PENALTY 1000.0   // LIFT_PENALTY
 #define BARRIER 0.01     // LIFT_BARRIER
 #define CHUNK 8192       // NumPy's reduction buffer size
@@ -214,7 +214,7 @@ static void gather(const Problem *P, __global double *G)
     }
 }
 
-// _Energy.value_grad (power 1): F_eps, its gradient into G (packed), min det into *dmin
+// FoldoverEnergy.value_grad (power 1): F_eps, its gradient into G (packed), min det into *dmin
 static double fold_value_grad(const Problem *P, __global double *G, double *dmin)
 {
     const double eps = P->eps;
@@ -241,7 +241,7 @@ static double fold_value_grad(const Problem *P, __global double *G, double *dmin
     return energy;
 }
 
-// _LiftEnergy.value_grad, value part: inf unless every corner det is positive
+// LiftEnergy.value_grad, value part: inf unless every corner det is positive
 static double lift_value(const Problem *P, double *dmin)
 {
     V m = (V)(INFINITY);

@@ -1,8 +1,8 @@
 """The global stage's L-BFGS on an OpenCL device, bit-identical to the host solver.
 
-`OpenCLLbfgs` is a drop-in for `global_untangle._lbfgs` (same arguments, same result to the
+`OpenCLLbfgs` is a drop-in for `solver.lbfgs` (same arguments, same result to the
 last bit): the energy tables are uploaded once per energy object, the whole solve runs in
-one single-work-item kernel (core/lbfgs_kernel.cl), and only the solution comes back. The
+one single-work-item kernel (solver_opencl.cl), and only the solution comes back. The
 kernel pauses every `en.tick_every` iterations when the caller passes a progress tick, so
 progress and cancelling work as on the host. Meant for CPU devices (`device_solver` gives
 none elsewhere), where one compiled loop beats NumPy's per-call overhead at every mesh size;
@@ -16,12 +16,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import global_untangle as gu
-from .engine_opencl import _runtime, bincount_csr
+from ..engine_opencl import _runtime, bincount_csr
+from .energy import FoldoverEnergy, LiftEnergy
+from .solver import LBFGS_MEMORY, State, lbfgs, stops
 
 __all__ = ["KERNEL_FILE", "OpenCLLbfgs", "device_solver"]
 
-KERNEL_FILE = Path(__file__).with_name("lbfgs_kernel.cl")
+KERNEL_FILE = Path(__file__).with_name("solver_opencl.cl")
 _ST_TICK = 1  # kernel status: paused for a progress tick
 _solvers: dict[str, OpenCLLbfgs] = {}
 
@@ -42,8 +43,8 @@ def device_solver() -> OpenCLLbfgs | None:
 class _Tables:
     """One energy's constant arrays on the device."""
 
-    def __init__(self, solver: OpenCLLbfgs, en: gu._Energy, st: gu._State):
-        lift = isinstance(en, gu._LiftEnergy)
+    def __init__(self, solver: OpenCLLbfgs, en: FoldoverEnergy, st: State):
+        lift = isinstance(en, LiftEnergy)
         nn, nc = en.n_nodes, en.i0.size
         ne = en.n_elem if lift else 0
         pad = np.minimum(np.arange(-(-nc // 4) * 4), nc - 1)  # corner arrays: 4-wide, padded
@@ -65,8 +66,8 @@ class _Tables:
         self.dbls = solver._buffer(np.concatenate([np.asarray(a, np.float64) for a in dbls]))
         n2 = 2 * st.nf
         self.sizes = (nn, st.nf, nc, ne, int(lift))
-        self.state_len = 11 + gu.LBFGS_MEMORY + 2 * n2 + 2 * gu.LBFGS_MEMORY * n2
-        self.v_at = 11 + gu.LBFGS_MEMORY  # where v starts in the state (see lbfgs_run)
+        self.state_len = 11 + LBFGS_MEMORY + 2 * n2 + 2 * LBFGS_MEMORY * n2
+        self.v_at = 11 + LBFGS_MEMORY  # where v starts in the state (see lbfgs_run)
         self.work = solver._empty(8 * (2 * nn + 5 * n2 + 6 * nc4 + 3 * ne))
         self.n2 = n2
 
@@ -79,13 +80,13 @@ class OpenCLLbfgs:
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
         prg = rt.build(
-            f"lbfgs M={gu.LBFGS_MEMORY}",
+            f"lbfgs M={LBFGS_MEMORY}",
             KERNEL_FILE.read_text(),
-            [f"-DM={gu.LBFGS_MEMORY}"],
+            [f"-DM={LBFGS_MEMORY}"],
             what="L-BFGS kernel",
         )
         self.kernel = self.cl.Kernel(prg, "lbfgs_run")
-        self._last: tuple[gu._Energy, gu._State, _Tables] | None = None  # reused per round
+        self._last: tuple[FoldoverEnergy, State, _Tables] | None = None  # reused per round
 
     def release(self) -> None:
         """Forget the uploaded tables (and the energy they came from): end of a run."""
@@ -98,7 +99,7 @@ class OpenCLLbfgs:
     def _empty(self, nbytes: int):
         return self.cl.Buffer(self.ctx, self.cl.mem_flags.READ_WRITE, max(int(nbytes), 8))
 
-    def _tables_for(self, en: gu._Energy, st: gu._State) -> _Tables:
+    def _tables_for(self, en: FoldoverEnergy, st: State) -> _Tables:
         """The device tables of (en, st): untangle_global solves one energy many times; each
         lift round makes a new one, solved once."""
         if self._last is None or self._last[0] is not en or self._last[1] is not st:
@@ -107,8 +108,8 @@ class OpenCLLbfgs:
 
     def __call__(
         self,
-        en: gu._Energy,
-        st: gu._State,
+        en: FoldoverEnergy,
+        st: State,
         v0: np.ndarray,
         eps: float,
         *,
@@ -119,11 +120,11 @@ class OpenCLLbfgs:
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
         if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernel: the host's
-            return gu._lbfgs(en, st, v0, eps, **kw)
+            return lbfgs(en, st, v0, eps, **kw)
         try:
             tb = self._tables_for(en, st)
         except ValueError:  # indices beyond 32 bits: the host solver, same result
-            return gu._lbfgs(en, st, v0, eps, **kw)
+            return lbfgs(en, st, v0, eps, **kw)
         cl, queue = self.cl, self.queue
         state = np.zeros(tb.state_len, dtype=np.float64)
         state[:4] = eps, getattr(en, "qc", 0.0), 0.1 * en.h_mean, rel_tol
@@ -137,7 +138,7 @@ class OpenCLLbfgs:
         while True:
             cl.enqueue_nd_range_kernel(queue, self.kernel, (1,), (1,))
             cl.enqueue_copy(queue, flags, T)
-            if flags[5] != _ST_TICK or gu.stops(tick(int(flags[0]))):
+            if flags[5] != _ST_TICK or stops(tick(int(flags[0]))):
                 break
         v = np.empty(tb.n2, dtype=np.float64)
         cl.enqueue_copy(queue, v, S, src_offset=8 * tb.v_at)

@@ -1,0 +1,27 @@
+"""The global stage: optimisation-based untangling and quality polishing (beyond the paper).
+
+Where things live (NumPy and OpenCL twins side by side):
+
+- mesh tables, corner triangles, reference sizes: `reference.py` (uploaded by the solvers).
+- foldover-free energy f, g, chi (Garanzha et al.): `energy.FoldoverEnergy`;
+  OpenCL: `solver_opencl.cl` `fold_value_grad`.
+- lift energy (mean ratio + floor + barrier): `energy.LiftEnergy`;
+  OpenCL: `solver_opencl.cl` `lift_value`, `lift_grad`.
+- L-BFGS (two-loop, Armijo backtracking, validity guard): `solver.lbfgs`;
+  OpenCL: `solver_opencl.OpenCLLbfgs` (kernel `lbfgs_run`).
+- active sub-mesh (rings around seed elements): `submesh.active_submesh`.
+- stage drivers (eps continuation and polish, the lift): `stages.untangle_global`,
+  `stages.lift_min_quality`; what they are handed: `options.GlobalOptions`.
+- which solver runs: `device.solver_for`.
+
+The EEGT iteration itself (transform, stitching with the weights f(d) g(q) of eq. 20-21) is
+in `core/transform.py` and `core/engine_numpy.py`, twinned by `core/engine_opencl.py` and
+`core/opencl_kernels.cl`.
+"""
+
+from .options import GlobalOptions
+from .solver import stops
+from .stages import lift_min_quality, untangle_global
+from .submesh import active_submesh
+
+__all__ = ["GlobalOptions", "active_submesh", "lift_min_quality", "stops", "untangle_global"]

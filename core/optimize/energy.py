@@ -1,0 +1,371 @@
+"""The global stage's energies: foldover-free (Garanzha et al. 2021) and the lift (mean ratio).
+
+Used when local EEGT moves stall on a fold (a rotated hole, a large one-step deformation).
+Pure NumPy (no SciPy, no bpy), vectorized over corners, deterministic.
+
+Energy (Garanzha, Kaporin, Kudryavtseva, Protais, Ray, Sokolov, "Foldover-free maps in 50 lines
+of code", ACM TOG 2021), written here from the paper's equations, for 2D:
+
+    chi(D, eps) = (D + sqrt(eps^2 + D^2)) / 2
+    f_eps(J)    = ||J||_F^2 / chi(det J, eps)          (shape, scale invariant)
+    g_eps(J)    = (det(J)^2 + 1) / chi(det J, eps)     (area)
+    F_eps(x)    = sum_t w_t [ (1 - theta) f_eps(J_t) + theta g_eps(J_t) ]
+
+J_t maps a regular reference corner onto the current corner t. Each n-gon (n >= 4) contributes
+its n corner triangles (p_{k-1}, p_k, p_{k+1}) with the regular n-gon corner as reference (so a
+positive det on every corner is exactly SPEC section 3's validity, and f = 2 / q_k for eps -> 0);
+a triangle contributes one corner (all three give the same J up to a rotation) with the
+equilateral triangle as reference. Reference edge lengths follow the local mean edge length,
+smoothed, and are scaled so the reference areas add up to the domain area.
+
+eps continuation (the paper's rule): after each inner L-BFGS run,
+sigma = max(1 - F_eps(x_new) / F_eps(x_old), 1/10), mu = (1 - sigma) chi(D_-, eps) with D_- the
+smallest det, and the new eps solves chi(D_-, eps_new) = mu, i.e. eps_new = 2 sqrt(mu (mu - D_-))
+(or the floor when D_- >= mu). Details and measurements: docs/global_untangle.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from .. import fpmath
+from .reference import corner_triangles, mesh_tables, per_arity, reference_sizes
+from .solver import TICK_CORNERS, TICK_EVERY, State
+
+__all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar"]
+
+THETA = 1.0 / 16.0  # weight of the area term g against the shape term f
+LIFT_PENALTY = 1000.0  # weight of the one-sided quadratic floor penalty
+LIFT_BARRIER = 0.01  # weight of sum 1/q_corner (keeps every corner away from det = 0)
+
+
+def chi_array(d: np.ndarray, eps: float, root: np.ndarray) -> np.ndarray:
+    """chi(D, eps) = (D + sqrt(eps^2 + D^2)) / 2, without cancellation for D < 0."""
+    return np.where(d >= 0.0, 0.5 * (d + root), (0.5 * eps * eps) / (root + np.abs(d)))
+
+
+def chi_scalar(d: float, eps: float) -> float:
+    root = float(np.sqrt(eps * eps + d * d))
+    return 0.5 * (d + root) if d >= 0.0 else 0.5 * eps * eps / (root - d)
+
+
+class _Blocks:
+    """Preallocated per-corner arrays of one energy, with views of their blocks made once.
+
+    `_eval` fills them and `_grad` reads what the last `_eval` left, so one evaluation is in
+    flight at a time (as in `lbfgs`: the gradient right after the accepted trial point).
+    Scratch that is dead by then shares memory: squares of J with dF/dJ, edges with dF/dE.
+    Constants are full-length arrays: NumPy multiplies two arrays faster than an array and a
+    Python float, with the same result.
+    """
+
+    def __init__(self, m: int, w00: np.ndarray, w01: np.ndarray, w11: np.ndarray):
+        def blocks(k: int) -> tuple[np.ndarray, ...]:
+            a = np.empty(k * m)
+            return a, *(a[i * m : (i + 1) * m] for i in range(k))
+
+        two = [np.concatenate([w, w]) for w in (w00, w01, w11)]
+        self.w00, self.w01, self.w11 = two  # W^-1 entries for [x, y] pairs of blocks
+        # z[gather] = [x1, y1, x2, y2, x0, y0]; e1 = [e1x, e1y], e2 = [e2x, e2y]
+        self.c, *_ = blocks(6)
+        self.c1, self.c2, self.c0 = self.c[: 2 * m], self.c[2 * m : 4 * m], self.c[4 * m :]
+        self.j, self.j00, self.j10, self.j01, self.j11 = blocks(4)
+        self.ja, self.jb = self.j[: 2 * m], self.j[2 * m :]  # [j00, j10], [j01, j11]
+        self.g, self.g00, self.g10, self.g01, self.g11 = blocks(4)  # dF/dJ
+        self.ga, self.gb = self.g[: 2 * m], self.g[2 * m :]
+        self.sq, self.s00, self.s10, self.s01, self.s11 = self.g, *self.g.reshape(4, m)  # j^2
+        # dF/dE per corner node: [ge1x, ge1y, ge2x, ge2y, -(ge1x + ge2x), -(ge1y + ge2y)]
+        self.ge, *_ = blocks(6)
+        self.ge1, self.ge2, self.ge0 = self.ge[: 2 * m], self.ge[2 * m : 4 * m], self.ge[4 * m :]
+        self.e1, self.e2 = self.ge1, self.ge2  # edge vectors (only while J is computed)
+        for name in ("d", "t", "dd", "root", "chi", "num", "inv_chi", "u", "a", "b", "tmp"):
+            setattr(self, name, np.empty(m))
+        for name, value in (("half", 0.5), ("one", 1.0), ("theta", THETA)):
+            setattr(self, name, np.full(m, value))
+        self.one_theta = np.full(m, 1.0 - THETA)
+        self.two_one_theta = np.full(m, 2.0 * (1.0 - THETA))
+        self.two_theta = np.full(m, 2.0 * THETA)
+
+
+class FoldoverEnergy:
+    """F_eps over the corner triangles that touch a free node, with its gradient.
+
+    The hot path works on one flat coordinate vector z and a layout (gather index, scatter
+    index, length of z): `value_grad(x, y)` uses z = [x, y]; `lbfgs` uses z = [v, fixed
+    coordinates], so it never unpacks or packs. `_eval` gives F and min det J (all a line
+    search needs), `_grad` the gradient of the point `_eval` saw last. Per-corner quantities
+    live in `_Blocks` (one NumPy call per block of M, no temporaries); every value is the same
+    float operation on the same operands as the per-entry formula beside it.
+    """
+
+    def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
+        tabs = self._prepare(points, groups, free)
+        if tabs is None:
+            return
+        arity, size = tabs
+        i0, i1, i2, eid = self.v0, self.v1, self.v2, self.veid
+        keep = free[i0] | free[i1] | free[i2]  # other corners have a constant energy
+        self._set_corners(i0[keep], i1[keep], i2[keep], arity[eid[keep]], size[eid[keep]])
+
+    def _prepare(
+        self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray
+    ):
+        """Tables, validity corners, reference sizes and preconditioner: (arity, size), or
+        None (and no energy corners) when there are no elements."""
+        self.n_nodes = points.shape[0]
+        faces, arity, edges, edge_elem = mesh_tables(groups)
+        self.n_elem = arity.shape[0]
+        # validity check: every corner of every element (triangles: one is enough), except
+        # frozen ones: made of fixed nodes only and not positive, so no move can change them
+        v0, v1, v2, veid = corner_triangles(faces, all_corners=False)
+        x, y = points[:, 0], points[:, 1]
+        det = (x[v1] - x[v0]) * (y[v2] - y[v0]) - (y[v1] - y[v0]) * (x[v2] - x[v0])
+        keep = free[v0] | free[v1] | free[v2] | (det > 0.0)
+        self.v0, self.v1, self.v2, self.veid = v0[keep], v1[keep], v2[keep], veid[keep]
+        self.power = 1.0
+        self._full = None  # the layout of z = [x, y], built on first use
+        self._pack = None  # (state, layout, fixed coordinates) of the last lbfgs call
+        if self.n_elem == 0:
+            self.i0 = self.i1 = self.i2 = np.zeros(0, dtype=np.int64)
+            return None
+        size, hnode = reference_sizes(points, arity, edges, edge_elem)
+        # Diagonal L-BFGS preconditioner: with uniform weights the Hessian at a node scales
+        # like 1 / size^2, so moves are scaled by size^2.
+        self.precond = (hnode / float(np.mean(hnode))) ** 2
+        self.h_mean = float(np.mean(size))
+        return arity, size
+
+    def _set_corners(
+        self, i0: np.ndarray, i1: np.ndarray, i2: np.ndarray, arity: np.ndarray, s: np.ndarray
+    ) -> None:
+        """Energy corners (k, k+1, k-1) with their element's arity and reference size."""
+        self.i0, self.i1, self.i2 = i0, i1, i2
+        n = arity.astype(np.float64)
+        cos_a, sin_a = per_arity(arity, fpmath.regular_corner).T
+        # W = s [[1, cos a], [0, sin a]]  ->  W^-1 = [[1, -cot a], [0, 1 / sin a]] / s
+        self.w00 = 1.0 / s
+        self.w01 = -cos_a / (sin_a * s)
+        self.w11 = 1.0 / (sin_a * s)
+        # One weight per element (spread over its corners): uniform, not the reference area;
+        # area weights let small elements absorb all distortion (see the docs).
+        self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
+        self.idx = np.concatenate([self.i1, self.i2, self.i0])
+        self.tick_every = max(1, min(TICK_EVERY, TICK_CORNERS // max(i0.size, 1)))
+        self._bk = _Blocks(i0.size, self.w00, self.w01, self.w11)
+
+    # -- flat layouts ----------------------------------------------------------------------
+    def _layout(self, pos: np.ndarray) -> tuple[np.ndarray, int]:
+        """(index, length) for a flat z holding coordinate c of node i at pos[c, i].
+
+        z[index] = [x1, y1, x2, y2, x0, y0] (blocks of M; corner nodes i1, i2, i0), and the
+        same index bins the corner gradients [e1x, e1y, e2x, e2y, e0x, e0y]: each bin adds
+        its terms in `idx` order (e1, e2, then -(e1 + e2)), as one bincount over idx per axis.
+        """
+        index = pos[:, np.stack([self.i1, self.i2, self.i0])]  # (axis, node, corner)
+        return np.ascontiguousarray(index.transpose(1, 0, 2)).ravel(), pos.size
+
+    def _full_layout(self) -> tuple[np.ndarray, int]:
+        if self._full is None:
+            self._full = self._layout(np.arange(2 * self.n_nodes).reshape(2, self.n_nodes))
+        return self._full
+
+    def _packed(self, st: State) -> tuple[tuple[np.ndarray, int], np.ndarray]:
+        """Layout of z = [v, x_fixed, y_fixed] for `st`, and the fixed part of z (cached)."""
+        if self._pack is None or self._pack[0] is not st:
+            fixed = np.ones(self.n_nodes, dtype=bool)
+            fixed[st.fidx] = False
+            fix = np.flatnonzero(fixed)
+            nf, nx = st.nf, fix.size
+            pos = np.empty((2, self.n_nodes), dtype=np.int64)
+            pos[0, st.fidx] = np.arange(nf)
+            pos[1, st.fidx] = np.arange(nf, 2 * nf)
+            pos[0, fix] = np.arange(2 * nf, 2 * nf + nx)
+            pos[1, fix] = np.arange(2 * nf + nx, 2 * nf + 2 * nx)
+            self._pack = (st, self._layout(pos), np.concatenate([st.x[fix], st.y[fix]]))
+        return self._pack[1], self._pack[2]
+
+    # -- corner Jacobians ------------------------------------------------------------------
+    def _jac(self, z: np.ndarray, index: np.ndarray) -> None:
+        """J = [j00, j10, j01, j11] and d = det J of every corner into the blocks."""
+        bk = self._bk
+        z.take(index, None, bk.c, "clip")  # = z[index]
+        np.subtract(bk.c1, bk.c0, bk.e1)  # e1x = x[i1] - x[i0], e1y = y[i1] - y[i0]
+        np.subtract(bk.c2, bk.c0, bk.e2)  # e2x = x[i2] - x[i0], e2y
+        np.multiply(bk.e1, bk.w00, bk.ja)  # j00 = e1x w00, j10 = e1y w00
+        np.multiply(bk.e1, bk.w01, bk.jb)
+        np.add(bk.jb, np.multiply(bk.e2, bk.w11, bk.e2), bk.jb)  # j01 = e1x w01 + e2x w11
+        np.multiply(bk.j00, bk.j11, bk.d)  # d = j00 j11 - j01 j10
+        np.subtract(bk.d, np.multiply(bk.j01, bk.j10, bk.tmp), bk.d)
+
+    def _frob(self) -> np.ndarray:
+        """t = j00^2 + j01^2 + j10^2 + j11^2 (in that order) of the blocks' J."""
+        bk = self._bk
+        np.multiply(bk.j, bk.j, bk.sq)
+        np.add(bk.s00, bk.s01, bk.t)
+        np.add(bk.t, bk.s10, bk.t)
+        return np.add(bk.t, bk.s11, bk.t)
+
+    def _scatter(self, a: np.ndarray, b: np.ndarray, n_bins: int, index: np.ndarray):
+        """Node gradient (flat, layout order) of dF/dJ = a J + b cof(J), cof(J) = [[j11, -j10],
+        [-j01, j00]], through dF/dE = dF/dJ W^-T with E = [e1, e2]."""
+        bk = self._bk
+        mul, tmp = np.multiply, bk.tmp
+        np.add(mul(a, bk.j00, bk.g00), mul(b, bk.j11, tmp), bk.g00)  # g00 = a j00 + b j11
+        np.subtract(mul(a, bk.j10, bk.g10), mul(b, bk.j01, tmp), bk.g10)  # g10 = a j10 - b j01
+        np.subtract(mul(a, bk.j01, bk.g01), mul(b, bk.j10, tmp), bk.g01)  # g01 = a j01 - b j10
+        np.add(mul(a, bk.j11, bk.g11), mul(b, bk.j00, tmp), bk.g11)  # g11 = a j11 + b j00
+        mul(bk.ga, bk.w00, bk.ge1)
+        np.add(bk.ge1, mul(bk.gb, bk.w01, bk.ga), bk.ge1)  # ge1x = g00 w00 + g01 w01, ge1y
+        mul(bk.gb, bk.w11, bk.ge2)  # ge2x = g01 w11, ge2y = g11 w11
+        np.negative(np.add(bk.ge1, bk.ge2, bk.ge0), bk.ge0)  # -(ge1 + ge2)
+        return np.bincount(index, bk.ge, n_bins)
+
+    def _xy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(J, d) at the node positions x, y (copies)."""
+        self._jac(np.concatenate([x, y]), self._full_layout()[0])
+        return self._bk.j.copy(), self._bk.d.copy()
+
+    def dets(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """det J of every energy corner."""
+        return self._xy(x, y)[1]
+
+    def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
+        """F_eps."""
+        self._jac(np.concatenate([x, y]), self._full_layout()[0])
+        d = self._bk.d.copy()
+        num = (1.0 - THETA) * self._frob()
+        num += THETA * (d * d + 1.0)
+        ch = chi_array(d, eps, np.sqrt(eps * eps + d * d))
+        u = num / ch
+        if self.power != 1.0:
+            u = fpmath.power(0.5 * u, self.power)
+        return float(np.add.reduce(self.weight * u))
+
+    def value_grad(
+        self, x: np.ndarray, y: np.ndarray, eps: float
+    ) -> tuple[float, np.ndarray, np.ndarray, float]:
+        """F_eps, dF/dx, dF/dy over all nodes (non-free rows included), and min det J."""
+        n = self.n_nodes
+        layout = self._full_layout()
+        e, dmin, ok = self._eval(np.concatenate([x, y]), layout, eps)
+        g = self._grad(layout) if ok else np.zeros(layout[1])
+        return e, g[:n], g[n:], dmin
+
+    def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
+        """(F_eps, min det J, whether `_grad` may follow) at the flat coordinates z."""
+        bk = self._bk
+        self._jac(z, layout[0])
+        d, dd, root, chi, num, inv_chi = bk.d, bk.dd, bk.root, bk.chi, bk.num, bk.inv_chi
+        dmin = float(np.minimum.reduce(d))
+        np.multiply(d, d, dd)
+        np.sqrt(np.add(dd, eps * eps, root), root)  # sqrt(eps^2 + d^2)
+        if dmin >= 0.0:  # no D < 0: chi's first branch, 0.5 (d + root), everywhere
+            np.multiply(bk.half, np.add(d, root, chi), chi)
+        else:
+            chi[:] = chi_array(d, eps, root)
+        np.multiply(bk.one_theta, self._frob(), num)  # (1 - theta) t + theta (d^2 + 1)
+        np.add(num, np.multiply(bk.theta, np.add(dd, bk.one, bk.tmp), bk.tmp), num)
+        np.divide(self.weight, chi, inv_chi)
+        if self.power != 1.0:  # F = sum w (u / 2)^p with u = num / chi
+            u = 0.5 * num / chi
+            up = fpmath.power(u, self.power)
+            energy = float(np.add.reduce(self.weight * up))
+            np.multiply(inv_chi, 0.5 * self.power, inv_chi)  # inv_chi (p / 2) (up / u)
+            np.multiply(inv_chi, up / u, inv_chi)
+        else:
+            energy = float(np.add.reduce(np.multiply(num, inv_chi, bk.tmp)))
+        return energy, dmin, True
+
+    def _grad(self, layout) -> np.ndarray:
+        """dF/dz at the point `_eval` saw last."""
+        bk = self._bk
+        # dF/dJ = a J + b cof(J); dchi/dD = chi / root
+        a = np.multiply(bk.two_one_theta, bk.inv_chi, bk.a)  # 2 (1 - theta) inv_chi
+        b = np.multiply(bk.two_theta, bk.d, bk.b)  # inv_chi (2 theta d - num / root)
+        np.multiply(bk.inv_chi, np.subtract(b, np.divide(bk.num, bk.root, bk.tmp), b), b)
+        return self._scatter(a, b, layout[1], layout[0])
+
+    def n_inverted(self, x: np.ndarray, y: np.ndarray) -> int:
+        """Elements with a corner det <= 0 (SPEC section 3)."""
+        x0 = x[self.v0]
+        y0 = y[self.v0]
+        det = (x[self.v1] - x0) * (y[self.v2] - y0) - (y[self.v1] - y0) * (x[self.v2] - x0)
+        bad = det <= 0.0
+        if not bad.any():
+            return 0
+        return int(np.count_nonzero(np.bincount(self.veid[bad], minlength=self.n_elem)))
+
+
+class LiftEnergy(FoldoverEnergy):
+    """F = sum_e [ -q_e + PENALTY ((qc - q_e)_+ / qc)^2 ] + BARRIER sum_corners w / q_k.
+
+    q_k = 2 det / |J|_F^2 is the corner's mean ratio (theta = 0, eps -> 0) and q_e the mean
+    over the element's corners (SPEC section 3). The first term maximises q_avg itself, the
+    second is a soft floor qc on every element's quality, the third a barrier per corner (the
+    mean alone lets one corner of a polygon collapse). Every corner of every element is kept,
+    so element means are complete; only valid (guarded) iterates are evaluated.
+    """
+
+    def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
+        tabs = self._prepare(points, groups, free)
+        self.qc = 0.0
+        if tabs is None:
+            return
+        arity, size = tabs
+        self.eid = self.veid
+        self._set_corners(self.v0, self.v1, self.v2, arity[self.eid], size[self.eid])
+        self.n_corners = np.bincount(self.eid, minlength=self.n_elem).astype(np.float64)
+        self._neg_inv_nc = -1.0 / self.n_corners[self.eid]  # dq_e / du_k = this / u_k^2
+        self._barrier_w = LIFT_BARRIER * self.weight
+        self._gap = np.empty(0)  # the last `_eval`'s (qc - q_e)_+ / qc
+        ne = self.n_elem  # per-element constants (array operands: faster than floats)
+        self._zero_e, self._pen_e, self._m1_e = (np.full(ne, c) for c in (0.0, LIFT_PENALTY, -1.0))
+        self._qc_e = np.empty(ne)  # filled with qc, then with 2 PENALTY / qc
+
+    def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """(E,) mean ratio of each element (0 where a corner is not positive)."""
+        self._jac(np.concatenate([x, y]), self._full_layout()[0])
+        d = self._bk.d
+        u = 0.5 * self._frob() / np.where(d > 0.0, d, np.inf)  # 1 / q_k; inf: q_k = 0
+        with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
+            q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
+        bad = np.bincount(self.eid, d <= 0.0, minlength=self.n_elem) > 0
+        return np.where(bad, 0.0, q)
+
+    def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
+        return self.value_grad(x, y, eps)[0]
+
+    def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
+        bk = self._bk
+        self._jac(z, layout[0])
+        d, u = bk.d, bk.u
+        dmin = float(np.minimum.reduce(d))
+        if not dmin > 0.0:  # only reached by rejected trial steps: infinite energy
+            return float("inf"), dmin, False
+        np.divide(np.multiply(bk.half, self._frob(), u), d, u)  # 1 / q_k = 0.5 t / d
+        q = np.bincount(self.eid, np.divide(bk.one, u, bk.tmp), self.n_elem) / self.n_corners
+        qc = self._qc_e
+        qc.fill(self.qc)
+        gap = np.subtract(qc, q)  # (qc - q)_+ / qc
+        np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
+        w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
+        energy = float(np.add.reduce(np.subtract(np.multiply(w, gap, w), q, w)))
+        energy += LIFT_BARRIER * float(np.add.reduce(np.multiply(self.weight, u, bk.tmp)))
+        self._gap = gap
+        return energy, dmin, True
+
+    def _grad(self, layout) -> np.ndarray:
+        bk = self._bk
+        d, u, tmp = bk.d, bk.u, bk.tmp
+        k = self._qc_e
+        k.fill(2.0 * LIFT_PENALTY / self.qc)
+        de_dq = np.subtract(self._m1_e, np.multiply(k, self._gap, k), k)  # -1 - k gap = dF/dq_e
+        # dq_e / du_k = -1 / (n_e u_k^2); u_k = t / (2 d): du/dJ = J / d - u cof(J) / d
+        de_du = np.multiply(de_dq[self.eid], self._neg_inv_nc, bk.a)
+        np.divide(de_du, np.multiply(u, u, tmp), de_du)
+        np.add(de_du, self._barrier_w, de_du)
+        b = np.divide(np.multiply(np.negative(de_du, bk.b), u, bk.b), d, bk.b)  # -de_du u / d
+        a = np.divide(de_du, d, bk.a)
+        return self._scatter(a, b, layout[1], layout[0])

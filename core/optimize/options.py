@@ -1,0 +1,43 @@
+"""The one options object the pipeline hands to the global stage."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["GlobalOptions", "Solver"]
+
+# An L-BFGS run: solver(energy, state, v0, eps, *, max_it, guard, rel_tol, tick) -> (v, its);
+# `solver.lbfgs` (NumPy) and the OpenCL twins in `solver_opencl` / `solver_parallel`.
+Solver = Callable[..., tuple[np.ndarray, int]]
+
+
+@dataclass(frozen=True)
+class GlobalOptions:
+    """Budgets and the solver of one global-stage call.
+
+    max_iter bounds all L-BFGS iterations of `untangle_global`; polish_iter those it spends
+    improving quality once no element is inverted (0: stop at the first valid iterate);
+    polish_power p > 0 polishes sum (f / 2)^p instead of the paper's sum f (p > 1 raises q_min
+    and lowers q_avg, p < 1 the opposite); time_limit (s) stops it early; lift_rounds bounds the
+    rising-floor rounds of `lift_min_quality`; solver runs each L-BFGS solve (None: NumPy).
+    """
+
+    max_iter: int = 3000
+    polish_iter: int = 300
+    polish_power: float = 1.0
+    time_limit: float | None = None
+    lift_rounds: int = 6
+    solver: Solver | None = None
+
+    def __post_init__(self) -> None:
+        if not self.polish_power > 0.0:
+            raise ValueError("polish_power must be > 0")
+
+    def run(self) -> Solver:
+        """The L-BFGS to call."""
+        from .solver import lbfgs
+
+        return self.solver if self.solver is not None else lbfgs

@@ -1,0 +1,119 @@
+"""Mesh tables of the global stage: polygons stacked by arity, their corner triangles, and
+the reference size of every element (what each corner's Jacobian is measured against)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from .. import fpmath
+
+__all__ = ["corner_triangles", "mesh_tables", "per_arity", "reference_sizes"]
+
+SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field
+
+
+def mesh_tables(
+    groups: Mapping[int, np.ndarray],
+) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
+    """Stack polygons by arity: per-arity arrays, element arity, directed edges, edge element."""
+    faces: list[np.ndarray] = []
+    arity: list[np.ndarray] = []
+    ea: list[np.ndarray] = []
+    eb: list[np.ndarray] = []
+    ee: list[np.ndarray] = []
+    base = 0
+    for n in sorted(groups):
+        f = np.asarray(groups[n], dtype=np.int64).reshape(-1, int(n))
+        if f.shape[0] == 0:
+            continue
+        if n < 3:
+            raise ValueError("polygons need at least 3 nodes")
+        m = f.shape[0]
+        faces.append(f)
+        arity.append(np.full(m, n, dtype=np.int64))
+        ea.append(f.ravel())
+        eb.append(np.roll(f, -1, axis=1).ravel())
+        ee.append(np.repeat(base + np.arange(m, dtype=np.int64), n))
+        base += m
+    if not faces:
+        z = np.zeros(0, dtype=np.int64)
+        return [], z, np.stack([z, z]), z
+    edges = np.stack([np.concatenate(ea), np.concatenate(eb)])
+    return faces, np.concatenate(arity), edges, np.concatenate(ee)
+
+
+def corner_triangles(
+    faces: list[np.ndarray], all_corners: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Corner triangles (k, k+1, k-1) and their element ids; triangles give one corner unless
+    all_corners (used for the validity count, where it does not matter either)."""
+    i0, i1, i2, eid = [], [], [], []
+    base = 0
+    for f in faces:
+        m, n = f.shape
+        for k in range(n) if (n > 3 or all_corners) else range(1):
+            i0.append(f[:, k])
+            i1.append(f[:, (k + 1) % n])
+            i2.append(f[:, (k - 1) % n])
+            eid.append(base + np.arange(m, dtype=np.int64))
+        base += m
+    if not i0:
+        z = np.zeros(0, dtype=np.int64)
+        return z, z, z, z
+    return np.concatenate(i0), np.concatenate(i1), np.concatenate(i2), np.concatenate(eid)
+
+
+def per_arity(arity: np.ndarray, fn: Callable[[int], Any]) -> np.ndarray:
+    """fn(n) (a float or a tuple of floats) for each entry of an integer arity array,
+    evaluated once per distinct n; tuples give one column each."""
+    top = int(arity.max()) if arity.size else 0
+    if top <= 64:  # the usual case: a lookup table (no sort); rows below 3 are never read
+        table = np.array([fn(max(n, 3)) for n in range(top + 1)], dtype=np.float64)
+        return table[arity]
+    values, inverse = np.unique(arity, return_inverse=True)
+    return np.array([fn(int(n)) for n in values], dtype=np.float64)[inverse]
+
+
+def reference_sizes(
+    points: np.ndarray, arity: np.ndarray, edges: np.ndarray, edge_elem: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Reference edge length per element and the smoothed node size.
+
+    Node size = mean length of its incident edges; element size = geometric mean of its
+    nodes' sizes, smoothed SIZE_SMOOTHING times through the nodes; then one global factor so
+    the regular reference polygons add up to the domain area (which folds cannot change).
+    """
+    n_nodes = points.shape[0]
+    n_elem = arity.shape[0]
+    p0 = points.take(edges[0], axis=0)  # = points[edges[0]]
+    p1 = points.take(edges[1], axis=0)
+    d = p1 - p0
+    dx, dy = d[:, 0], d[:, 1]
+    elen = np.sqrt(dx * dx + dy * dy)
+    positive = elen[elen > 0]
+    floor = 1e-3 * (float(np.mean(positive)) if positive.size else 1.0)
+    elen = np.maximum(elen, floor)
+    cnt = np.bincount(edges[0], minlength=n_nodes).astype(np.float64)
+    hn = np.bincount(edges[0], weights=elen, minlength=n_nodes)
+    hn = hn + np.bincount(edges[1], weights=elen, minlength=n_nodes)
+    hn = np.maximum(hn / np.maximum(2.0 * cnt, 1.0), floor)
+    lh = fpmath.log(np.append(hn, floor))  # the floor's log in the same call
+    lh, log_floor = lh[:-1], float(lh[-1])
+    deg = arity.astype(np.float64)
+    le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
+    for _ in range(SIZE_SMOOTHING):
+        lh = np.bincount(edges[0], weights=le[edge_elem], minlength=n_nodes)
+        lh = np.where(cnt > 0, lh / np.maximum(cnt, 1.0), log_floor)
+        le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
+    size = fpmath.exp(le)
+    ref_area = arity * size**2 / (4.0 * per_arity(arity, fpmath.tan_pi_over))
+    x0, y0 = p0.T
+    x1, y1 = p1.T
+    dom_area = 0.5 * float(np.sum(x0 * y1 - x1 * y0))
+    total = float(np.sum(ref_area))
+    if dom_area > 0.0 and total > 0.0:
+        size = size * np.sqrt(dom_area / total)
+    return size, fpmath.exp(lh)

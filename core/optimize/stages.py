@@ -1,0 +1,285 @@
+"""The global stage's two entry points: `untangle_global` (foldover-free energy with the eps
+continuation, then a guarded polish) and `lift_min_quality` (raise the worst element quality
+without lowering the mean). Details and measurements: docs/global_untangle.md."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
+from .options import GlobalOptions
+from .solver import State, stops
+from .submesh import active_submesh
+
+__all__ = ["lift_min_quality", "untangle_global"]
+
+INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on spun holes: docs)
+EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
+SIGMA_MIN = 0.1  # the paper's lower bound on sigma
+STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
+# lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
+LIFT_FIRST_ITER = 150  # L-BFGS iterations of the first run (floor = the input's q_min)
+LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_deform: docs)
+LIFT_GROW = 1.15  # floor of the next round: min(q_min * GROW, q_min + GAP * (q_avg - q_min))
+LIFT_GAP = 0.15
+LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE times as much
+LIFT_RINGS = 6  # rounds after the first move only the nodes within this many rings of ...
+LIFT_ACTIVE = 1.0  # ... the elements with q < LIFT_ACTIVE * floor (a small local problem)
+LIFT_REL_TOL = 1e-5  # a lift run stops when 5 iterations lower F by less than this (relative)
+LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
+LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
+
+
+def _checked_input(points, free) -> tuple[np.ndarray, np.ndarray]:
+    """A float64 copy of the (N, 2) points and the (N,) bool free mask; ValueError else."""
+    P = np.array(points, dtype=np.float64, copy=True)
+    free = np.asarray(free, dtype=bool).reshape(-1)
+    if P.ndim != 2 or P.shape[1] != 2 or free.shape[0] != P.shape[0]:
+        raise ValueError("points must be (N, 2) and free (N,)")
+    return P, free
+
+
+def untangle_global(
+    points: np.ndarray,
+    groups: Mapping[int, np.ndarray],
+    free: np.ndarray,
+    options: GlobalOptions | None = None,
+    progress: Callable[[int, int, int], Any] | None = None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Untangle a planar polygon mesh by minimising the foldover-free energy (eps continuation).
+
+    points: (N, 2) float64; groups: arity -> (F_n, n) int node arrays, counterclockwise = valid;
+    free: (N,) bool mask of the nodes that may move; options: budgets (max_iter, polish_iter,
+    polish_power, time_limit) and the solver (`GlobalOptions`; None: the defaults).
+    progress(iterations, max_iter, n_inverted) is called after each round and every
+    `tick_every` L-BFGS iterations inside it (a few tenths of a second of work on any mesh
+    size); a falsy answer other than None cancels (`stops`).
+
+    Returns (new points, info); non-free rows are bit-identical to the input. Once valid, steps
+    that would invert a corner are rejected, so a valid iterate stays valid; when no valid one
+    was reached, the iterate with the fewest inverted elements is returned.
+    info: iterations, rounds, n_inverted_in, n_inverted_out, min_det (smallest normalised corner
+    det), eps_history, seconds, seconds_per_iter, status ("untangled" / "failed" / "cancelled" /
+    "nothing to do").
+    """
+    t_start = time.perf_counter()
+    P, free = _checked_input(points, free)
+    if not np.all(np.isfinite(P)):
+        raise ValueError("points contain NaN or inf")
+    opt = options if options is not None else GlobalOptions()
+    max_iter, polish_iter = opt.max_iter, opt.polish_iter
+    run_lbfgs = opt.run()
+    en = FoldoverEnergy(P, groups, free)
+    st = State(P, free)
+    n_inv = en.n_inverted(st.x, st.y)
+    info: dict[str, Any] = {
+        "iterations": 0,
+        "rounds": 0,
+        "n_inverted_in": n_inv,
+        "n_inverted_out": n_inv,
+        "min_det": float(np.min(en.dets(st.x, st.y))) if en.i0.size else 0.0,
+        "eps_history": [],
+        "seconds": 0.0,
+        "seconds_per_iter": 0.0,
+        "status": "nothing to do",
+    }
+    if en.i0.size == 0 or st.nf == 0:
+        info["seconds"] = time.perf_counter() - t_start
+        return P, info
+
+    v = st.pack(st.x, st.y)
+    dmin = info["min_det"]
+    eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else EPS_MIN
+    best_v, best_inv = v, n_inv
+    valid = dmin > 0.0  # every corner that can move is positive (others are constant)
+    total = 0
+    polish_used = 0
+    status = ""
+    eps_hist: list[float] = []
+    rounds = 0
+    cancel = False
+    while total < max_iter:
+        rounds += 1
+        eps_hist.append(eps)
+        guard = valid  # valid: polish the quality, never invert a corner again
+        en.power = float(opt.polish_power) if guard else 1.0
+        e_start = en.value(*st.unpack(v), eps)
+        if guard:  # eps is at its floor: one long L-BFGS run, no memory restarts
+            cap = min(max_iter - total, polish_iter - polish_used)
+            if cap <= 0:
+                break
+        else:
+            cap = min(max_iter - total, INNER_ITER)
+        tick = None
+        if progress is not None:  # long runs report (and cancel) from inside
+
+            def tick(it: int, done: int = total, n_now: int = best_inv) -> bool:
+                nonlocal cancel
+                cancel = cancel or stops(progress(done + it, max_iter, n_now))
+                return not cancel
+
+        v, its = run_lbfgs(en, st, v, eps, max_it=cap, guard=guard, tick=tick)
+        total += its
+        if guard:
+            polish_used += its
+        x, y = st.unpack(v)
+        e_end = en.value(x, y, eps)
+        dmin = float(np.min(en.dets(x, y)))
+        valid = dmin > 0.0
+        n_inv = en.n_inverted(x, y)
+        if n_inv <= best_inv:
+            best_v, best_inv = v, n_inv
+        if cancel or (progress is not None and stops(progress(total, max_iter, n_inv))):
+            status = "cancelled"
+            break
+        decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
+        if guard and (decrease < STOP_REL_DECREASE or its == 0):
+            break
+        if valid and polish_iter <= 0:
+            break
+        if opt.time_limit is not None and time.perf_counter() - t_start > opt.time_limit:
+            break
+        sigma = max(decrease, SIGMA_MIN)
+        mu = (1.0 - sigma) * chi_scalar(dmin, eps)
+        eps = max(2.0 * float(np.sqrt(mu * (mu - dmin))) if dmin < mu else EPS_MIN, EPS_MIN)
+        if valid:  # the guard now keeps dets > 0: use the exact barrier (see the docs)
+            eps = EPS_MIN
+
+    x, y = st.unpack(best_v)
+    out = P.copy()
+    out[st.fidx, 0] = x[st.fidx]
+    out[st.fidx, 1] = y[st.fidx]
+    n_out = en.n_inverted(x, y)
+    if not status:
+        status = "untangled" if n_out == 0 else "failed"
+    secs = time.perf_counter() - t_start
+    info.update(
+        iterations=total,
+        rounds=rounds,
+        n_inverted_out=n_out,
+        min_det=float(np.min(en.dets(x, y))),
+        eps_history=eps_hist,
+        seconds=secs,
+        seconds_per_iter=secs / max(total, 1),
+        status=status,
+    )
+    return out, info
+
+
+def lift_min_quality(
+    points: np.ndarray,
+    groups: Mapping[int, np.ndarray],
+    free: np.ndarray,
+    options: GlobalOptions | None = None,
+    progress: Callable[[int, int, float, float], Any] | None = None,
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Raise the worst element quality of a valid mesh without lowering its mean quality.
+
+    Maximises the mean quality q_avg subject to a soft floor q_e >= qc on every element
+    (`LiftEnergy`, guarded L-BFGS: the mesh stays valid), first with qc = the input's q_min,
+    then for up to `options.lift_rounds` rounds with a rising floor, each over only the free
+    nodes within LIFT_RINGS rings of the elements under the new floor. A round is kept only
+    when q_min rises, q_avg stays within LIFT_AVG_DROP (relative) of the best q_avg seen and,
+    once q_min >= LIFT_POOR q_avg, at least the input's, and any q_avg it costs buys at least
+    LIFT_RATE times as much q_min.
+    Returns (points, info) with the kept iterate: the input itself (bit-identical) when
+    nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
+    q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
+    status ("lifted", "unchanged", "cancelled").
+    progress(iterations, rounds_done, q_min, q_avg) after each run and every few tenths of a
+    second inside one, with the kept iterate's qualities; a falsy answer other than None
+    cancels (`stops`) and the input is returned. options.solver runs the L-BFGS solves.
+    """
+    t_start = time.perf_counter()
+    P, free = _checked_input(points, free)
+    opt = options if options is not None else GlobalOptions()
+    rounds = opt.lift_rounds
+    run_lbfgs = opt.run()
+    en = LiftEnergy(P, groups, free)
+    st = State(P, free)
+    info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
+    q = en.element_quality(st.x, st.y) if en.n_elem else np.zeros(0)
+    m0 = float(q.min()) if q.size else 0.0
+    a0 = float(q.mean()) if q.size else 0.0
+    info.update(q_min_in=m0, q_avg_in=a0, q_min_out=m0, q_avg_out=a0)
+    if q.size == 0 or st.nf == 0 or not m0 > 0.0 or not np.all(np.isfinite(P)):
+        info["seconds"] = time.perf_counter() - t_start
+        return P, info
+
+    best_v, best_m, best_a = None, m0, a0
+    v = st.pack(st.x, st.y)
+    cur_m, cur_a = m0, a0
+    peak = a0  # the best q_avg seen: q_avg may fall at most LIFT_AVG_DROP below it
+    total = 0
+    trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run, kept or not
+    info["trail"] = trail
+    cancel = False
+    for r in range(rounds + 1):
+        en.qc = m0 if r == 0 else min(cur_m * LIFT_GROW, cur_m + LIFT_GAP * (cur_a - cur_m))
+        tick = None
+        if progress is not None:
+
+            def tick(
+                it: int, done: int = total, r: int = r, m: float = cur_m, a: float = cur_a
+            ) -> bool:
+                nonlocal cancel
+                cancel = cancel or stops(progress(done + it, r, m, a))
+                return not cancel
+
+        if r == 0:  # the whole mesh: maximise q_avg at the input's floor
+            vt, its = run_lbfgs(
+                en, st, v, EPS_MIN, max_it=LIFT_FIRST_ITER, guard=True, rel_tol=LIFT_REL_TOL,
+                tick=tick,
+            )
+            xt, yt = st.unpack(vt)
+        else:  # only near the elements under the new floor: the rest is at its optimum
+            x, y = st.unpack(v)
+            sub, nodes, sfree = active_submesh(groups, free, q < LIFT_ACTIVE * en.qc, LIFT_RINGS)
+            if not sfree.any():
+                break
+            sp = np.stack([x[nodes], y[nodes]], axis=1)
+            sen = LiftEnergy(sp, sub, sfree)
+            sen.qc = en.qc
+            sst = State(sp, sfree)
+            sv, its = run_lbfgs(
+                sen, sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER, guard=True,
+                rel_tol=LIFT_REL_TOL, tick=tick,
+            )
+            sx, sy = sst.unpack(sv)
+            xt, yt = x.copy(), y.copy()
+            xt[nodes], yt[nodes] = sx, sy
+            vt = st.pack(xt, yt)
+        total += its
+        qt = en.element_quality(xt, yt)
+        qm, qa = float(qt.min()), float(qt.mean())
+        trail.append((qm, qa))
+        if cancel or (progress is not None and stops(progress(total, r, cur_m, cur_a))):
+            info.update(iterations=total, status="cancelled", seconds=time.perf_counter() - t_start)
+            return P, info
+        if r == 0:  # the first run maximises q_avg at the input's floor: the start of the climb
+            v, q, cur_m, cur_a = vt, qt, qm, qa
+            peak = max(peak, qa)
+        else:
+            floor = (1.0 - LIFT_AVG_DROP) * peak
+            if cur_m >= LIFT_POOR * cur_a:
+                floor = max(floor, a0)
+            if qa < floor or qm <= cur_m or (qa < cur_a and qm - cur_m < LIFT_RATE * (cur_a - qa)):
+                break
+            v, q, cur_m, cur_a = vt, qt, qm, qa
+            peak = max(peak, qa)
+            info["rounds"] = r
+        if (cur_a >= a0 or info["rounds"]) and cur_m > best_m:
+            best_v, best_m, best_a = v, cur_m, cur_a
+
+    info.update(iterations=total, seconds=time.perf_counter() - t_start)
+    if best_v is None:
+        return P, info
+    x, y = st.unpack(best_v)
+    P[st.fidx, 0] = x[st.fidx]
+    P[st.fidx, 1] = y[st.fidx]
+    info.update(q_min_out=best_m, q_avg_out=best_a, status="lifted")
+    return P, info
