@@ -8,7 +8,7 @@ from numbers import Integral, Real
 
 __all__ = ["UNTANGLE_METHODS", "EEGTParams"]
 
-UNTANGLE_METHODS = ("global", "eegt+global", "eegt")
+UNTANGLE_METHODS = ("auto", "global", "eegt+local", "eegt+global", "eegt")
 
 
 @dataclass(frozen=True)
@@ -31,6 +31,13 @@ class EEGTParams:
         default=1e-3,
         metadata={"help": "Smoothing stops when the mean quality improves by less than this."},
     )
+    tol_min: float = field(
+        default=1e-3,
+        metadata={
+            "help": "Smoothing also goes on while the worst face quality improves by at least "
+            "this and the mean does not fall (0: the paper's rule, the mean only)"
+        },
+    )
     max_untangle_iterations: int = field(
         default=5000, metadata={"help": "Untangling gives up after this many iterations."}
     )
@@ -42,10 +49,12 @@ class EEGTParams:
         metadata={"help": "Refresh element-to-boundary distances every this many iterations."},
     )
     untangle: str = field(
-        default="global",
+        default="auto",
         metadata={
-            "help": "How inverted faces are removed: 'global' foldover-free optimization "
-            "(fastest, most robust), 'eegt+global' EEGT first and the optimization when it "
+            "help": "How inverted faces are removed: 'auto' ('global' under 20 000 faces, "
+            "else 'eegt+local'), 'global' foldover-free optimization of the whole mesh, "
+            "'eegt+local' EEGT while it makes progress, the optimization only around what it "
+            "leaves, 'eegt+global' EEGT first and the optimization of the whole mesh when it "
             "stalls, 'eegt' EEGT only (the paper)"
         },
     )
@@ -60,7 +69,8 @@ class EEGTParams:
         default=300,
         metadata={
             "help": "Optimization iterations that improve shape quality once valid, "
-            "before EEGT smoothing (0: none; beyond the paper)"
+            "before EEGT smoothing ('eegt+local': the whole-mesh run that maximises the mean "
+            "quality; 0: none; beyond the paper)"
         },
     )
     lift_rounds: int = field(
@@ -86,6 +96,7 @@ class EEGTParams:
             (self.c >= 0, "c must be >= 0"),
             (self.inverted_weight > 0, "inverted_weight must be > 0"),
             (self.tol >= 0, "tol must be >= 0"),
+            (self.tol_min >= 0, "tol_min must be >= 0"),
             (self.max_untangle_iterations >= 0, "max_untangle_iterations must be >= 0"),
             (self.max_smooth_iterations >= 0, "max_smooth_iterations must be >= 0"),
             (self.distance_refresh >= 1, "distance_refresh must be >= 1"),
@@ -132,6 +143,7 @@ class EEGTParams:
             c=2.0,
             inverted_weight=5.0,
             tol=1e-3,
+            tol_min=0.0,
             max_untangle_iterations=5000,
             max_smooth_iterations=1000,
             distance_refresh=1,

@@ -12,13 +12,20 @@ import numpy as np
 from .backends import make_engine
 from .engine_numpy import NumpyEngine
 from .faces import FaceSet, as_faceset
-from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
+from .optimize import GlobalOptions, active_submesh, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
 from .params import EEGTParams
-from .quality import Stats, _check_points, mesh_stats
+from .quality import Stats, _check_points, group_quality, mesh_stats
 from .topology import free_nodes
 
-__all__ = ["Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
+__all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
+
+LOCAL_MIN_FACES = 20_000  # untangle="auto": 'eegt+local' from this many faces on, else 'global'
+LOCAL_RINGS = (4, 8, 16)  # rings around EEGT's leftover folds tried by 'eegt+local', in turn
+LOCAL_MAX_ITER = 1000  # untangling iterations of one such try (then wider rings, or the whole)
+LOCAL_SHARE = 0.5  # a sub-mesh of more than this share of the faces: the whole mesh instead
+LOCAL_LEFT = 0.1  # ... and so when EEGT left more than this share of the inverted faces
+LOCAL_POLISH_TOL = 1e-4  # 'eegt+local' polish: stops when 5 iterations gain less (relative)
 
 Progress = Callable[[int, str, Stats], object]
 
@@ -209,11 +216,15 @@ class _Run:
         self.frozen = frozen
         self.n_frozen = int(frozen.sum())  # inverted faces no move can change
         self.backend, self.progress = backend, progress
+        self.mode = params.untangle
+        if self.mode == "auto":
+            self.mode = "eegt+local" if fs.n_faces >= LOCAL_MIN_FACES else "global"
         self.engine, self.backend_name = make_engine(backend, p, fs, free, params)
         self.before = self.best = self.engine.stats()
         self.best_pts: np.ndarray | None = None  # None: the engine's best buffer holds it
         self.engine.save_best()
         self.n_untangle = self.n_smooth = self.n_global = 0
+        self.polished = False  # the global stage's polish (or the lift stage) has run
         self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
 
     def report(self, it: int, phase: str, s: Stats) -> None:
@@ -240,16 +251,18 @@ class _Run:
         return s.n_inverted > self.n_frozen
 
     def execute(self) -> tuple[str, str]:
-        prm, before = self.params, self.before
+        prm, before, mode = self.params, self.before, self.mode
         tangled = self.tangled(before)
         self.report(0, "untangle" if tangled else "smooth", before)
         frozen = f"; {frozen_note(self.n_frozen)}" if self.n_frozen else ""
         current = before
         if tangled:
-            if prm.untangle != "global":
+            if mode != "global":
                 current = self.untangle_eegt()
-            if self.tangled(self.best) and prm.untangle != "eegt":
-                current = self.global_stage(polish=prm.polish_iterations)
+            if self.tangled(self.best) and mode == "eegt+local":
+                current = self.untangle_local()
+            if self.tangled(self.best) and mode != "eegt":
+                current = self.global_stage(polish=prm.polish_iterations, from_input=True)
             if self.tangled(self.best):
                 return "failed", (
                     f"failed: {self.best.n_inverted - self.n_frozen} inverted faces remain "
@@ -258,8 +271,11 @@ class _Run:
                     + f" (best iterate kept; input had {before.n_inverted - self.n_frozen})"
                     + frozen
                 )
-        if prm.polish_iterations > 0 and self.n_global == 0:  # the global stage polishes too
-            current = self.global_stage(polish=prm.polish_iterations)
+        if not self.polished:  # the whole-mesh global stage polishes and lifts as it goes
+            if mode == "eegt+local" and (prm.polish_iterations > 0 or prm.lift_rounds > 0):
+                current = self.lift_stage()
+            elif mode != "eegt+local" and prm.polish_iterations > 0:
+                current = self.global_stage(polish=prm.polish_iterations)
         self.smooth_eegt(current)
         status = "untangled" if tangled else "valid"
         verb = f"untangled in {self.n_untangle} iterations, " if tangled else ""
@@ -272,10 +288,13 @@ class _Run:
         )
 
     def untangle_eegt(self) -> Stats:
-        """EEGT until no face is inverted, the iteration cap, or (eegt+global) a stall."""
+        """EEGT until no face is inverted or the iteration cap; 'eegt+global' stops at a stall
+        (no new low of the inverted count for `stall_iterations`), 'eegt+local' as soon as
+        three iterations no longer halve the count (what is left goes to `untangle_local`)."""
         prm = self.params
         current = self.before
         low, since = current.n_inverted, 0
+        counts = [current.n_inverted]
         for _ in range(prm.max_untangle_iterations):
             current = self.engine.step("untangle")
             self.n_untangle += 1
@@ -283,23 +302,98 @@ class _Run:
             self.report(self.n_untangle, "untangle", current)
             if not self.tangled(current):
                 break
+            counts.append(current.n_inverted)
+            if self.mode == "eegt+local" and len(counts) > 3 and 2 * counts[-1] > counts[-4]:
+                break
             if current.n_inverted < low:
                 low, since = current.n_inverted, 0
             else:
                 since += 1
-                if prm.untangle == "eegt+global" and since >= prm.stall_iterations:
+                if self.mode == "eegt+global" and since >= prm.stall_iterations:
                     break
         return current
 
-    def global_stage(self, polish: int) -> Stats:
-        """Foldover-free optimization from the best iterate; EEGT continues from its result."""
+    def untangle_local(self) -> Stats:
+        """The foldover-free optimization on the sub-mesh within a few rings of the inverted
+        faces EEGT left (wider rings in turn while some remain): most of a large mesh is fine
+        by then, and the rest of it stays exactly where EEGT put it. More than LOCAL_LEFT of
+        the input's inverted faces left, or a sub-mesh of more than LOCAL_SHARE of the faces,
+        means EEGT did not do the bulk: the whole mesh is then optimized from the input
+        instead (`global_stage`)."""
+        groups = self._global_groups()
+        current = self.best
+        left = self.best.n_inverted - self.n_frozen
+        if left > LOCAL_LEFT * (self.before.n_inverted - self.n_frozen):
+            return current
+        for rings in LOCAL_RINGS:
+            start = self.best_points()
+            bad = self._inverted_movable(start)
+            sub, nodes, sfree = active_submesh(groups, self.free, bad, rings)
+            if not sfree.any() or sum(f.shape[0] for f in sub.values()) > LOCAL_SHARE * bad.size:
+                break
+            base = self.n_untangle + self.n_global
+
+            def relay(iterations: int, _max_iter: int, n_inv: int, base: int = base) -> None:
+                self.report(base + iterations, "global", Stats(n_inv, *self._best_q()))
+
+            polish = self.params.polish_iterations  # the sub-mesh leaves the stage well shaped
+            budget = min(self.params.max_untangle_iterations, LOCAL_MAX_ITER)
+            options = GlobalOptions(max_iter=budget + polish, polish_iter=polish)
+            sub_pts, info = untangle_global(
+                start[nodes], sub, sfree, options,
+                progress=relay if self.progress is not None else None,
+            )
+            self.n_global += int(info["iterations"])
+            if info.get("status") == "cancelled":
+                raise _CancelRun
+            pts = start.copy()
+            pts[nodes[sfree]] = sub_pts[sfree]
+            current = self._adopt(pts, start)
+            if not self.tangled(self.best):
+                break
+        return current
+
+    def _inverted_movable(self, pts: np.ndarray) -> np.ndarray:
+        """(E,) bool in `_global_groups` order: inverted faces that are not frozen."""
+        out = []
+        for g in self.fs.groups:
+            inert = self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0)
+            q = group_quality(pts[g.nodes, 0], pts[g.nodes, 1])
+            out.append(((q == 0.0) & ~self.frozen[g.ids])[~inert])
+        return np.concatenate(out)
+
+    def _best_q(self) -> tuple[float, float]:
+        return self.best.q_min, self.best.q_avg
+
+    def lift_stage(self) -> Stats:
+        """'eegt+local' on a valid mesh: the lift's whole-mesh run maximises the mean quality
+        (up to `polish_iterations`), its rounds raise the worst faces (`lift_rounds`)."""
         start = self.best_points()
         groups = self._global_groups()
-        base = self.n_untangle
+        self.lbfgs = solver_for(self.backend_name)
+        options = GlobalOptions(
+            lift_first_iter=self.params.polish_iterations,
+            lift_rounds=self.params.lift_rounds,
+            lift_rel_tol=LOCAL_POLISH_TOL,
+            solver=self.lbfgs,
+        )
+        try:
+            pts = self.lift(start, groups, options)
+        finally:
+            if self.lbfgs is not None:
+                self.lbfgs.release()
+        self.polished = True
+        return self._adopt(pts, start)
+
+    def global_stage(self, polish: int, from_input: bool = False) -> Stats:
+        """Foldover-free optimization of the whole mesh (from the input, or from the best
+        iterate), then the lift; EEGT continues from its result."""
+        start = self.p if from_input and self.mode == "eegt+local" else self.best_points()
+        groups = self._global_groups()
+        base = self.n_untangle + self.n_global
 
         def relay(iterations: int, _max_iter: int, n_inv: int) -> None:
-            self.n_global = iterations
-            self.report(base + iterations, "global", Stats(n_inv, self.best.q_min, self.best.q_avg))
+            self.report(base + iterations, "global", Stats(n_inv, *self._best_q()))
 
         self.lbfgs = solver_for(self.backend_name)  # built here: not for runs without one
         options = GlobalOptions(
@@ -316,7 +410,7 @@ class _Run:
                 options,
                 progress=relay if self.progress is not None else None,  # no pauses unasked
             )
-            self.n_global = int(info["iterations"])
+            self.n_global += int(info["iterations"])
             if info.get("status") == "cancelled":
                 raise _CancelRun
             if info.get("status") == "untangled" and self.params.lift_rounds > 0:
@@ -324,7 +418,15 @@ class _Run:
         finally:
             if self.lbfgs is not None:  # the device solver outlives the run: not its tables
                 self.lbfgs.release()
+        self.polished = True
+        return self._adopt(pts, start)
+
+    def _adopt(self, pts: np.ndarray, start: np.ndarray) -> Stats:
+        """Continue the EEGT engine from `pts` (fixed rows reset to the input's bits); the
+        best iterate stays the better of it and the earlier best."""
         pts[~self.free] = self.p[~self.free]  # fixed rows bit-identical, whatever happened
+        if self.best_pts is None:  # keep the earlier best as a host copy
+            self.best_pts = self.engine.best_points() if start is self.p else start
         if isinstance(self.engine, NumpyEngine):  # same mesh, same fixed nodes: reuse set-up
             self.engine = self.engine.restarted(pts)
         else:
@@ -333,8 +435,6 @@ class _Run:
         if current.better_than(self.best):
             self.best, self.best_pts = current, None
             self.engine.save_best()
-        else:  # keep the earlier best as a host copy; the new engine starts from pts
-            self.best_pts = start if self.best_pts is None else self.best_pts
         return current
 
     def _global_groups(self) -> dict[int, np.ndarray]:
@@ -357,6 +457,8 @@ class _Run:
             pts, groups, self.free, options, progress=relay if self.progress is not None else None
         )
         self.n_global += int(info["iterations"])
+        if info.get("status") == "cancelled":
+            raise _CancelRun
         return out
 
     def smooth_eegt(self, current: Stats) -> None:
@@ -367,5 +469,8 @@ class _Run:
             self.n_smooth += 1
             self.track(current)
             self.report(self.n_untangle + self.n_global + self.n_smooth, "smooth", current)
-            if current.q_avg - previous.q_avg < prm.tol:
+            # go on while the mean improves by tol, or holds while the worst face improves
+            d_avg, d_min = current.q_avg - previous.q_avg, current.q_min - previous.q_min
+            worst = prm.tol_min > 0.0 and d_avg >= 0.0 and d_min >= prm.tol_min
+            if d_avg < prm.tol and not worst:
                 break

@@ -18,8 +18,11 @@ from ..core import EEGTParams
 # Choices of string parameters (dataclass fields carry no choice list).
 STRING_CHOICES: dict[str, tuple[tuple[str, str, str], ...]] = {
     "untangle": (
-        ("global", "Global", "Foldover-free optimization removes inverted faces (fastest, "
-         "most robust)"),
+        ("auto", "Auto", "Global under 20 000 faces, else EEGT + Local"),
+        ("global", "Global", "Foldover-free optimization of the whole mesh removes inverted "
+         "faces (most robust)"),
+        ("eegt+local", "EEGT + Local", "EEGT while it makes progress, the optimization only "
+         "around the folds it leaves (large meshes: fastest)"),
         ("eegt+global", "EEGT + Global", "EEGT first, the optimization when EEGT stalls"),
         ("eegt", "EEGT Only", "The paper's EEGT untangling only"),
     ),
@@ -35,6 +38,7 @@ LABELS: dict[str, str] = {
     "c": "Distance Exponent",
     "inverted_weight": "Inverted Weight",
     "tol": "Tolerance",
+    "tol_min": "Worst-Face Tolerance",
     "max_untangle_iterations": "Max Untangle Iterations",
     "max_smooth_iterations": "Max Smooth Iterations",
     "distance_refresh": "Distance Refresh",
@@ -51,6 +55,7 @@ BOUNDS: dict[str, dict[str, float]] = {
     "c": {"min": 0.0, "soft_max": 8.0},
     "inverted_weight": {"min": 1e-6, "soft_max": 50.0},
     "tol": {"min": 0.0, "soft_max": 0.1},
+    "tol_min": {"min": 0.0, "soft_max": 0.1},
     "max_untangle_iterations": {"min": 0, "soft_max": 20000},
     "stall_iterations": {"min": 1, "soft_max": 1000},
     "polish_iterations": {"min": 0, "soft_max": 5000},

@@ -21,15 +21,19 @@ class GlobalOptions:
     max_iter bounds all L-BFGS iterations of `untangle_global`; polish_iter those it spends
     improving quality once no element is inverted (0: stop at the first valid iterate);
     polish_power p > 0 polishes sum (f / 2)^p instead of the paper's sum f (p > 1 raises q_min
-    and lowers q_avg, p < 1 the opposite); time_limit (s) stops it early; lift_rounds bounds the
-    rising-floor rounds of `lift_min_quality`; solver runs each L-BFGS solve (None: NumPy).
+    and lowers q_avg, p < 1 the opposite); time_limit (s) stops it early; lift_first_iter
+    bounds the first, whole-mesh run of `lift_min_quality` (it maximises the mean quality) and
+    lift_rounds its rising-floor rounds; a lift run stops when 5 iterations lower its energy by
+    less than lift_rel_tol (relative); solver runs each L-BFGS solve (None: NumPy).
     """
 
     max_iter: int = 3000
     polish_iter: int = 300
     polish_power: float = 1.0
     time_limit: float | None = None
+    lift_first_iter: int = 150
     lift_rounds: int = 6
+    lift_rel_tol: float = 1e-5
     solver: Solver | None = None
 
     def __post_init__(self) -> None:

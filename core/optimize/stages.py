@@ -22,14 +22,12 @@ EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
 # lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
-LIFT_FIRST_ITER = 150  # L-BFGS iterations of the first run (floor = the input's q_min)
 LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_deform: docs)
 LIFT_GROW = 1.15  # floor of the next round: min(q_min * GROW, q_min + GAP * (q_avg - q_min))
 LIFT_GAP = 0.15
 LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE times as much
 LIFT_RINGS = 6  # rounds after the first move only the nodes within this many rings of ...
 LIFT_ACTIVE = 1.0  # ... the elements with q < LIFT_ACTIVE * floor (a small local problem)
-LIFT_REL_TOL = 1e-5  # a lift run stops when 5 iterations lower F by less than this (relative)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
 
@@ -232,8 +230,8 @@ def lift_min_quality(
 
         if r == 0:  # the whole mesh: maximise q_avg at the input's floor
             vt, its = run_lbfgs(
-                en, st, v, EPS_MIN, max_it=LIFT_FIRST_ITER, guard=True, rel_tol=LIFT_REL_TOL,
-                tick=tick,
+                en, st, v, EPS_MIN, max_it=opt.lift_first_iter, guard=True,
+                rel_tol=opt.lift_rel_tol, tick=tick,
             )
             xt, yt = st.unpack(vt)
         else:  # only near the elements under the new floor: the rest is at its optimum
@@ -247,7 +245,7 @@ def lift_min_quality(
             sst = State(sp, sfree)
             sv, its = run_lbfgs(
                 sen, sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER, guard=True,
-                rel_tol=LIFT_REL_TOL, tick=tick,
+                rel_tol=opt.lift_rel_tol, tick=tick,
             )
             sx, sy = sst.unpack(sv)
             xt, yt = x.copy(), y.copy()
