@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .faces import FaceSet, as_faceset
-from .fpmath import regular_corner, tan_pi_over
+from .fpmath import atan2, regular_corner, tan_pi_over
 from .quality import _check_points, group_quality
 
 __all__ = [
@@ -70,12 +70,20 @@ def regular_width(n: int) -> float:
 # -- per-group geometry ------------------------------------------------------------------
 
 
+def _unit_scaled(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each face's coordinates times the power of two that brings its largest |coordinate|
+    into [0.5, 1): exact, and the measures are scale-invariant, so squares of edges neither
+    overflow nor lose small edges (and no CPU-dispatched hypot is needed)."""
+    _, e = np.frexp(np.maximum(np.abs(X).max(axis=0), np.abs(Y).max(axis=0)))
+    return np.ldexp(X, -e), np.ldexp(Y, -e)
+
+
 def _edges(X: np.ndarray, Y: np.ndarray):
-    """Edge k = p_{k+1} - p_k of each face: unit vectors (0 for a zero-length edge) and
-    lengths, all (n, F)."""
+    """Edge k = p_{k+1} - p_k of each face (coordinates from ``_unit_scaled``): unit vectors
+    (0 for a zero-length edge) and lengths, all (n, F)."""
     EX = np.roll(X, -1, axis=0) - X
     EY = np.roll(Y, -1, axis=0) - Y
-    L = np.hypot(EX, EY)
+    L = np.sqrt(EX * EX + EY * EY)
     pos = L > 0.0
     UX = np.divide(EX, L, out=np.zeros_like(EX), where=pos)
     UY = np.divide(EY, L, out=np.zeros_like(EY), where=pos)
@@ -85,7 +93,7 @@ def _edges(X: np.ndarray, Y: np.ndarray):
 def _corners(X: np.ndarray, Y: np.ndarray):
     """(sin, cos, defined) of every corner's angle from e1 = p_{k+1} - p_k to
     e2 = p_{k-1} - p_k, (n, F); ``defined`` is False next to a zero-length edge."""
-    UX, UY, _, pos = _edges(X, Y)
+    UX, UY, _, pos = _edges(*_unit_scaled(X, Y))
     PX = np.roll(UX, 1, axis=0)  # edge k-1, e2 = -edge k-1
     PY = np.roll(UY, 1, axis=0)
     sin = PX * UY - PY * UX  # det[e1, e2], the same sign as core.quality's corner det
@@ -96,8 +104,8 @@ def _corners(X: np.ndarray, Y: np.ndarray):
 def _signed_angles(X: np.ndarray, Y: np.ndarray):
     """Corner angles in degrees, (-180, 180], and whether each is defined."""
     sin, cos, ok = _corners(X, Y)
-    # + 0.0 turns a -0.0 sine into +0.0: a straight corner is +180, never -180
-    return np.degrees(np.arctan2(sin + 0.0, cos)), ok
+    # fpmath.atan2 reads a zero sine as positive: a straight corner is +180, never -180
+    return atan2(sin, cos) * (180.0 / np.pi), ok
 
 
 def min_angle(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -133,6 +141,7 @@ def aspect_ratio(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     """Longest edge over the smallest width perpendicular to an edge, over the regular
     polygon's ratio; ``ASPECT_MAX`` for a zero-width (collapsed) face."""
     n = X.shape[0]
+    X, Y = _unit_scaled(X, Y)
     UX, UY, L, pos = _edges(X, Y)
     width = np.full(X.shape[1], np.inf)
     for k in range(n):  # over the n edges of the arity: each step is vectorized over faces

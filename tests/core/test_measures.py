@@ -326,3 +326,59 @@ def test_goodness_of_the_mean_ratio_is_the_quality_itself_bit_for_bit():
     p, f = load2d("quad_hole")
     q = quality(p, f)
     assert np.array_equal(goodness("mean_ratio", q, f.counts), q)
+
+
+# -- portable arithmetic -------------------------------------------------------------------
+
+def test_fpmath_atan2_matches_numpy_within_a_few_ulp_in_every_quadrant():
+    from core import fpmath
+
+    rng = np.random.default_rng(11)
+    y = rng.normal(size=40000) * np.exp(rng.uniform(-300, 300, 40000))
+    x = rng.normal(size=40000) * np.exp(rng.uniform(-300, 300, 40000))
+    y[:8], x[:8] = [0, 1, 0, -1, 1, -1, 1, -1], [1, 0, -1, 0, 1, 1, -1, -1]
+    ref = np.arctan2(y, x)
+    got = fpmath.atan2(y, x)
+    assert (np.abs(got - ref) <= 4 * np.spacing(np.abs(ref) + 1e-300)).all()
+    assert fpmath.atan2(-0.0, -1.0) == np.pi and fpmath.atan2(0.0, 0.0) == 0.0
+    assert fpmath.atan2(-1.0, 0.0) == -np.pi / 2
+
+
+def test_measures_are_the_same_bits_without_avx512_and_on_baseline_simd():
+    """The measures use only correctly rounded operations: a run with NumPy's SIMD dispatch
+    restricted gives the same bits (as the untangler's own reproducibility test)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    try:
+        from numpy._core import _multiarray_umath as mu  # NumPy 2
+    except ImportError:
+        from numpy.core import _multiarray_umath as mu  # NumPy 1.26
+    have = [f for f in mu.__cpu_dispatch__ if mu.__cpu_features__.get(f)]
+    if not have:
+        pytest.skip("this NumPy dispatches no SIMD extension on this CPU: nothing to restrict")
+    root = Path(__file__).resolve().parents[2]
+    child = (
+        "import hashlib, sys\nsys.path.insert(0, sys.argv[1])\n"
+        "from core import MEASURE_NAMES, quality\nfrom core.obj_io import read_obj\n"
+        "h = hashlib.sha256()\n"
+        "for name in ('polygon_voronoi', 'mixed_quad_tri', 'tri_two_holes'):\n"
+        "    p, f = read_obj(f'{sys.argv[1]}/tests/data/{name}.obj')\n"
+        "    for m in MEASURE_NAMES:\n"
+        "        h.update(quality(p[:, :2], f, measure=m).tobytes())\n"
+        "print(h.hexdigest())\n")
+
+    def digest(disable: str | None) -> str:
+        env = {k: v for k, v in os.environ.items() if k != "NPY_DISABLE_CPU_FEATURES"}
+        if disable:
+            env["NPY_DISABLE_CPU_FEATURES"] = disable
+        done = subprocess.run([sys.executable, "-c", child, str(root)], env=env,
+                              capture_output=True, text=True, timeout=300, check=False)
+        assert done.returncode == 0, done.stderr[-2000:]
+        return done.stdout.split()[-1]
+
+    reference = digest(None)
+    assert len(reference) == 64
+    assert digest(" ".join(have)) == reference
