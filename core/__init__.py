@@ -2,9 +2,11 @@
 
 from core import untangle_and_smooth, quality, EEGTParams
 res = untangle_and_smooth(points, faces, fixed=None, params=None, backend="numpy")
+quality(points, faces, measure="min_angle"); summaries(points, faces)  # docs/measures.md
 """
 
 from .faces import FaceSet, as_faceset, faces_from_csr
+from .measures import MEASURE_NAMES, MEASURES, Measure, MeasureSummary, summaries, summarize
 from .params import EEGTParams
 from .pipeline import Cancelled, EEGTResult, free_nodes, untangle_and_smooth
 from .planar import untangle_and_smooth_3d
@@ -15,10 +17,14 @@ from .topology import boundary_nodes
 __version__ = "0.1.0"
 
 __all__ = [
+    "MEASURES",
+    "MEASURE_NAMES",
     "Cancelled",
     "EEGTParams",
     "EEGTResult",
     "FaceSet",
+    "Measure",
+    "MeasureSummary",
     "PlaneFrame",
     "Stats",
     "as_faceset",
@@ -27,6 +33,8 @@ __all__ = [
     "free_nodes",
     "mesh_stats",
     "quality",
+    "summaries",
+    "summarize",
     "untangle_and_smooth",
     "untangle_and_smooth_3d",
 ]

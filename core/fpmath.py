@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["exp", "log", "power", "regular_corner", "sin_cos", "tan_pi_over"]
+__all__ = ["atan2", "exp", "log", "power", "regular_corner", "sin_cos", "tan_pi_over"]
 
 _SQRT_HALF = 0.7071067811865476  # the double nearest sqrt(1/2)
 _LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2^20
@@ -117,3 +117,29 @@ def regular_corner(n: int) -> tuple[float, float]:
         return special[n]
     s, c = sin_cos(2.0 * math.pi / n)  # a = pi - 2 pi / n
     return -c, s
+
+
+_TAN_PI_8 = 0.41421356237309503  # sqrt(2) - 1
+# atan(u) = u sum_k (-1)^k s^k / (2k + 1), s = u^2 <= tan^2(pi/8) = 0.1716: 24 terms
+ATAN_COEFFS = tuple((1.0 if k % 2 == 0 else -1.0) / (2 * k + 1) for k in range(24))
+
+
+def atan2(y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Angle of the vector (x, y) in (-pi, pi], 0 for (0, 0). A zero y counts as positive
+    whatever its sign (y = -0.0 with x < 0 gives +pi). Finite inputs only."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    a, b = np.abs(x), np.abs(y)
+    big, small = np.maximum(a, b), np.minimum(a, b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.where(big > 0.0, small / big, 0.0)  # tan of the angle folded into [0, pi/4]
+    high = t > _TAN_PI_8  # atan t = pi/4 + atan((t - 1) / (t + 1)), |u| <= tan(pi/8)
+    u = np.where(high, (t - 1.0) / (t + 1.0), t)
+    s = u * u
+    p = np.full_like(s, ATAN_COEFFS[-1])
+    for c in ATAN_COEFFS[-2::-1]:
+        p = p * s + c
+    r = np.where(high, 0.25 * math.pi + u * p, u * p)
+    r = np.where(b > a, 0.5 * math.pi - r, r)
+    r = np.where(x < 0.0, math.pi - r, r)
+    return np.where(y < 0.0, -r, r)

@@ -101,8 +101,13 @@ def _check_points(points, dim: int = 2) -> np.ndarray:
     return p
 
 
-def quality(points, faces) -> np.ndarray:
-    """(F,) mean ratio per face in the given face order, 0 for inverted faces."""
+def quality(points, faces, measure: str = "mean_ratio") -> np.ndarray:
+    """(F,) mean ratio per face in the given face order, 0 for inverted faces; or another
+    measure of `core.measures` (ValueError for an unknown name)."""
+    if measure != "mean_ratio":
+        from .measures import face_values  # measures builds on this module
+
+        return face_values(points, faces, measure)
     p = _check_points(points)
     fs = as_faceset(faces, p.shape[0])
     out = np.empty(fs.n_faces)

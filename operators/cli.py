@@ -41,7 +41,7 @@ from typing import Any
 import bpy
 
 from ..core import EEGTParams
-from . import props, report, runner
+from . import metrics, props, report, runner
 from .ops_untangle import _printer
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_FAILED = 0, 1, 2, 3
@@ -112,6 +112,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--project", action="store_true",
                    help="project slightly non-planar meshes onto their plane")
     p.add_argument("--report", metavar="JSON", help="write a JSON report here")
+    p.add_argument("--metrics", type=metrics.parse_names, metavar="LIST", default=(),
+                   help="add the before/after min/mean/max and count beyond the threshold of "
+                        "these quality measures to each object's report entry: all, or a "
+                        "comma list of " + ", ".join(metrics.MEASURE_NAMES))
     p.add_argument("--no-write-on-fail", action="store_true",
                    help="leave a mesh unchanged when it could not be untangled")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -409,7 +413,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         rep["skipped"] = [{"object": name, "reason": "no faces"} for name in skipped]
         if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
             bpy.ops.object.mode_set(mode="OBJECT")
-        results = []
+        results, measured = [], []
         for obj in objs:
             progress = None if ns.quiet else _printer(obj.name)
             job = runner.prepare(obj, use_pinned=not ns.no_pinned, project=ns.project)
@@ -419,8 +423,12 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             res = runner.apply(obj, job, write=ok or not ns.no_write_on_fail)
             runner.store_last_run(obj, res)
             results.append(res)
+            measured.append(metrics.run_metrics(job, res, ns.metrics) if ns.metrics else None)
             print("EEGT " + res.line(), flush=True)
         rep["objects"] = [r.as_dict() for r in results]
+        if ns.metrics:
+            for entry, m in zip(rep["objects"], measured):
+                entry["metrics"] = m
         if ns.output:
             staged = _stage(ns.output)
         else:

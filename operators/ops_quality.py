@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""``mesh.eegt_analyze`` and ``mesh.eegt_select_inverted``: per-face mean ratio quality."""
+"""``mesh.eegt_analyze`` and ``mesh.eegt_select_inverted``: per-face quality measures (the mean
+ratio by default, or any measure of ``core.measures``) and their heat map."""
 
 from __future__ import annotations
 
@@ -7,13 +8,21 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, FloatProperty
 
-from ..core import faces_from_csr, quality
+from ..core import MEASURES, faces_from_csr, quality, summarize
+from ..core.measures import goodness
 from ..core.plane import PlaneFrame
-from . import mesh_io, modes, runner
+from . import mesh_io, modes, props, runner
 
 
-def face_quality(obj: bpy.types.Object) -> np.ndarray:
-    """Mean ratio of every face of ``obj`` (Blender face order); ValueError on bad input."""
+def attribute_name(measure: str) -> str:
+    """The face attribute a measure is stored in: ``eegt_quality`` for the mean ratio,
+    ``eegt_<measure>`` for the others."""
+    return mesh_io.QUALITY_NAME if measure == "mean_ratio" else f"eegt_{measure}"
+
+
+def face_quality(obj: bpy.types.Object, measure: str = "mean_ratio") -> np.ndarray:
+    """``measure`` (default: the mean ratio) of every face of ``obj`` (Blender face order);
+    ValueError on bad input."""
     me = obj.data
     topo = mesh_io.read_topology(me)
     if topo.loop_start.size == 0:
@@ -27,11 +36,13 @@ def face_quality(obj: bpy.types.Object) -> np.ndarray:
         raise ValueError("vertices with NaN or infinite coordinates")
     faces = faces_from_csr(topo.loop_start, topo.loop_total, topo.corner_verts)
     frame = PlaneFrame.fit(pts3d, faces, used=used, tol=runner.PLANE_TOL)
-    return np.asarray(quality(frame.to_2d(pts3d), faces), dtype=np.float64)
+    return np.asarray(quality(frame.to_2d(pts3d), faces, measure=measure), dtype=np.float64)
 
 
 def heat_colors(q: np.ndarray) -> np.ndarray:
-    """RGBA per face: inverted = pure red, then red -> yellow -> green as q goes 0 -> 1."""
+    """RGBA per face from a heat-map position (the mean ratio itself, else
+    ``core.measures.goodness``): pure red at 0 (inverted, or at/past the measure's worst),
+    then red -> yellow (the threshold) -> green as it goes 0 -> 1."""
     q = np.clip(q, 0.0, 1.0)
     rgba = np.empty((q.size, 4), dtype=np.float32)
     rgba[:, 0] = np.clip(2.0 * (1.0 - q), 0.0, 1.0)
@@ -42,14 +53,17 @@ def heat_colors(q: np.ndarray) -> np.ndarray:
     return rgba
 
 
-QUALITY_LAYOUT = {mesh_io.QUALITY_NAME: ("FLOAT", "FACE"),
-                  mesh_io.QUALITY_COLOR_NAME: ("FLOAT_COLOR", "CORNER")}
+def quality_layout(measure: str = "mean_ratio") -> dict[str, tuple[str, str]]:
+    """Name -> (type, domain) of the two attributes Analyze writes for ``measure``."""
+    return {attribute_name(measure): ("FLOAT", "FACE"),
+            mesh_io.QUALITY_COLOR_NAME: ("FLOAT_COLOR", "CORNER")}
 
 
-def quality_name_clash(obj: bpy.types.Object) -> str | None:
-    """Why the quality attributes cannot be stored on ``obj``'s mesh, or None.
+def quality_name_clash(obj: bpy.types.Object, measure: str = "mean_ratio") -> str | None:
+    """Why the attributes of ``measure`` cannot be stored on ``obj``'s mesh, or None.
 
-    An existing ``eegt_quality`` / ``eegt_quality_color`` of the add-on's own type and domain
+    An existing measure attribute (``eegt_quality`` for the mean ratio, ``eegt_<measure>``
+    otherwise) or ``eegt_quality_color`` of the add-on's own type and domain
     is ours from an earlier run and is overwritten. One of another type or domain is the
     user's data (named so by hand, or by a script or geometry nodes): replacing it would
     delete it, and "attributes stay identical" (SPEC 7) is the promise, so storing is
@@ -58,7 +72,7 @@ def quality_name_clash(obj: bpy.types.Object) -> str | None:
     anything is written, so a refusal never leaves half the pair.
     """
     me = obj.data
-    for name, (data_type, domain) in QUALITY_LAYOUT.items():
+    for name, (data_type, domain) in quality_layout(measure).items():
         if obj.vertex_groups.get(name) is not None:
             return (f"a vertex group is named '{name}': rename it to store quality "
                     f"(nothing written)")
@@ -70,81 +84,98 @@ def quality_name_clash(obj: bpy.types.Object) -> str | None:
     return None
 
 
-def _attribute(me: bpy.types.Mesh, name: str):
+def _attribute(me: bpy.types.Mesh, name: str, layout: dict[str, tuple[str, str]]):
     """The quality attribute ``name`` (ours: reused, else created), or None if refused."""
     attr = me.attributes.get(name)
     if attr is None:
-        attr = me.attributes.new(name, *QUALITY_LAYOUT[name])
+        attr = me.attributes.new(name, *layout[name])
     return attr
 
 
-def write_quality_attributes(obj: bpy.types.Object, q: np.ndarray) -> str | None:
-    """Store ``eegt_quality`` (face float) and ``eegt_quality_color`` (corner color).
+def write_quality_attributes(obj: bpy.types.Object, q: np.ndarray,
+                             measure: str = "mean_ratio") -> str | None:
+    """Store the per-face values ``q`` of ``measure`` (face float: ``eegt_quality`` for the
+    mean ratio, ``eegt_<measure>`` otherwise) and their heat map ``eegt_quality_color``
+    (corner color, good -> bad in the measure's own direction and range).
 
     Returns an error line, with nothing written, when a user attribute of another type or
     domain has one of these names (see ``quality_name_clash``); an error line also when
     Blender refuses a name (a vertex group of the same name).
     """
     me = obj.data
-    clash = quality_name_clash(obj)
+    clash = quality_name_clash(obj, measure)
     if clash:
         return clash
+    layout = quality_layout(measure)
+    name = attribute_name(measure)
     had_colors = len(me.color_attributes) > 0
-    attr = _attribute(me, mesh_io.QUALITY_NAME)
+    attr = _attribute(me, name, layout)
     if attr is None:
-        return f"cannot create attribute '{mesh_io.QUALITY_NAME}' (name in use)"
+        return f"cannot create attribute '{name}' (name in use)"
     attr.data.foreach_set("value", q.astype(np.float32))
-    col = _attribute(me, mesh_io.QUALITY_COLOR_NAME)
+    col = _attribute(me, mesh_io.QUALITY_COLOR_NAME, layout)
     if col is None:
         return f"cannot create attribute '{mesh_io.QUALITY_COLOR_NAME}' (name in use)"
-    corner_face = mesh_io.corner_faces(mesh_io.read_topology(me))
-    col.data.foreach_set("color", heat_colors(q)[corner_face].ravel())
+    topo = mesh_io.read_topology(me)
+    corner_face = mesh_io.corner_faces(topo)
+    t = goodness(measure, q, topo.loop_total)
+    col.data.foreach_set("color", heat_colors(t)[corner_face].ravel())
     if not had_colors:
         me.color_attributes.active_color = col
     me.update()
     return None
 
 
-def _qualities(op: bpy.types.Operator, objs: list[bpy.types.Object]):
-    """(object, per-face quality) of every object that can be measured; one warning line
-    for each that cannot."""
+def _qualities(op: bpy.types.Operator, objs: list[bpy.types.Object],
+               measure: str = "mean_ratio"):
+    """(object, per-face values of ``measure``) of every object that can be measured; one
+    warning line for each that cannot."""
     found: list[tuple[bpy.types.Object, np.ndarray]] = []
     for obj in objs:
         try:
-            found.append((obj, face_quality(obj)))
+            found.append((obj, face_quality(obj, measure)))
         except ValueError as exc:
             op.report({"WARNING"}, f"{obj.name}: {str(exc).splitlines()[0]}")
     return found
 
 
-def _stats_line(name: str, q: np.ndarray) -> str:
+def _stats_line(obj: bpy.types.Object, q: np.ndarray, measure: str = "mean_ratio") -> str:
+    """The report line: min / mean / max and the count beyond the threshold (the mean
+    ratio keeps its inverted count, q_min and q_avg first)."""
+    summary = summarize(measure, q, mesh_io.read_topology(obj.data).loop_total)
+    if measure != "mean_ratio":
+        return f"{obj.name}: {summary.line()}"
     s = runner.stats_from_quality(q)
-    return (f"{name}: {q.size} faces, {s['n_inverted']} inverted, q_min {s['q_min']:.3f}, "
-            f"q_avg {s['q_avg']:.3f}")
+    poor = MEASURES["mean_ratio"].threshold(3)  # the same for every arity
+    return (f"{obj.name}: {q.size} faces, {s['n_inverted']} inverted, q_min {s['q_min']:.3f}, "
+            f"q_avg {s['q_avg']:.3f}, q_max {summary.max:.3f}, {summary.n_beyond} below "
+            f"{poor:g}")
 
 
 class MESH_OT_eegt_analyze(modes.TargetObjectsMixin, bpy.types.Operator):
-    """Measure the mean ratio quality of every face; store it as the eegt_quality face attribute and a heat-map color attribute"""  # noqa: E501
+    """Measure the quality of every face (mean ratio, angles, aspect ratio, scaled Jacobian or skewness); store it as a face attribute and a heat-map color attribute"""  # noqa: E501
 
     bl_idname = "mesh.eegt_analyze"
     bl_label = "Analyze Quality"
     bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
 
+    measure: props.measure_property(options={"SKIP_SAVE"})  # type: ignore[valid-type]
     store: BoolProperty(  # type: ignore[valid-type]
         name="Store Attributes", default=True,
-        description="Write the eegt_quality and eegt_quality_color attributes")
+        description="Write the measure's face attribute (eegt_quality for the mean ratio, "
+                    "eegt_<measure> otherwise) and the eegt_quality_color heat map")
 
     def _run(self, objs: list[bpy.types.Object]) -> set[str]:
-        found = _qualities(self, objs)
+        found = _qualities(self, objs, self.measure)
         for obj, q in found:
-            self.report({"INFO"}, _stats_line(obj.name, q))
+            self.report({"INFO"}, _stats_line(obj, q, self.measure))
         written = False
         if self.store and found:
             for obj, q in found:
                 if runner.refusal(obj):
                     self.report({"WARNING"}, f"{obj.name}: {runner.refusal(obj)}")
                     continue
-                err = write_quality_attributes(obj, q)
+                err = write_quality_attributes(obj, q, self.measure)
                 if err:
                     self.report({"ERROR"}, f"{obj.name}: {err}")
                 else:

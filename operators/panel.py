@@ -30,9 +30,11 @@ class VIEW3D_PT_eegt(_EEGTTab, bpy.types.Panel):
         row.scale_y = 1.4
         row.operator("mesh.eegt_untangle_smooth", icon="MOD_SMOOTH")
         row = col.row(align=True)
-        row.operator("mesh.eegt_analyze", icon="VIEWZOOM")
+        analyze = row.operator("mesh.eegt_analyze", icon="VIEWZOOM")
+        analyze.measure = settings.quality_measure
         row.operator("mesh.eegt_select_inverted", text="Select Inverted",
                      icon="RESTRICT_SELECT_OFF")
+        col.prop(settings, "quality_measure", text="Measure")
         layout.prop(settings, "backend")
         row = layout.row(align=True)
         row.operator("mesh.eegt_pin", icon="PINNED")

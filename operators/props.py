@@ -13,7 +13,7 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..core import EEGTParams
+from ..core import MEASURES, EEGTParams
 
 # Choices of string parameters (dataclass fields carry no choice list).
 STRING_CHOICES: dict[str, tuple[tuple[str, str, str], ...]] = {
@@ -69,6 +69,18 @@ BACKEND_ITEMS: tuple[tuple[str, str, str], ...] = (
     ("OPENCL", "OpenCL", "OpenCL device (NumPy when pyopencl or a device is missing)"),
     ("AUTO", "Auto", "OpenCL where it is faster (small meshes: its global stage only), else NumPy"),
 )
+
+
+# Analyze Quality's measures (core.measures): identifier, label, tooltip.
+MEASURE_ITEMS: tuple[tuple[str, str, str], ...] = tuple(
+    (m.name, m.label, m.description) for m in MEASURES.values())
+
+
+def measure_property(**kw: Any) -> Any:
+    """The quality measure choice (Analyze Quality and the scene setting)."""
+    return EnumProperty(name="Measure", items=MEASURE_ITEMS, default="mean_ratio",
+                        description="Element quality measure to compute, store as a face "
+                                    "attribute and show as the heat map", **kw)
 
 
 def param_fields() -> list[dataclasses.Field]:
@@ -146,6 +158,7 @@ def set_params(owner: Any, params: EEGTParams) -> None:
 
 def _settings_class() -> type:
     annotations = param_annotations()
+    annotations["quality_measure"] = measure_property()
     annotations["backend"] = EnumProperty(
         name="Backend", description="Compute backend", items=BACKEND_ITEMS, default="PREFS")
     annotations["use_pinned"] = BoolProperty(
