@@ -40,8 +40,8 @@ class NearestBoundary:
         hint_x: np.ndarray | None = None,
         hint_y: np.ndarray | None = None,
         min_cell: float = 0.0,
-        leaf_size: int = 8,
-        leaf_hints: int = 64,
+        leaf_size: int = 16,
+        leaf_hints: int = 256,
     ):
         """Build over boundary points (bx, by). Cells are refined only where the hint points
         (the queries expected, e.g. element centroids) lie, down to about `min_cell`."""

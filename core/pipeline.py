@@ -25,7 +25,8 @@ LOCAL_RINGS = (4, 8, 16)  # rings around EEGT's leftover folds tried by 'eegt+lo
 LOCAL_MAX_ITER = 1000  # untangling iterations of one such try (then wider rings, or the whole)
 LOCAL_SHARE = 0.5  # a sub-mesh of more than this share of the faces: the whole mesh instead
 LOCAL_LEFT = 0.1  # ... and so when EEGT left more than this share of the inverted faces
-LOCAL_POLISH_TOL = 1e-4  # 'eegt+local' polish: stops when 5 iterations gain less (relative)
+LOCAL_POLISH_TOL = 1e-4  # 'eegt+local' polish: stops when a run gains less (relative) ...
+LOCAL_POLISH_CHUNK = 10  # ... its runs of this many iterations, with fresh L-BFGS memory each
 
 Progress = Callable[[int, str, Stats], object]
 
@@ -375,6 +376,7 @@ class _Run:
             lift_first_iter=self.params.polish_iterations,
             lift_rounds=self.params.lift_rounds,
             lift_rel_tol=LOCAL_POLISH_TOL,
+            lift_chunk=LOCAL_POLISH_CHUNK,
             solver=self.lbfgs,
         )
         try:

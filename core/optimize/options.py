@@ -24,7 +24,8 @@ class GlobalOptions:
     and lowers q_avg, p < 1 the opposite); time_limit (s) stops it early; lift_first_iter
     bounds the first, whole-mesh run of `lift_min_quality` (it maximises the mean quality) and
     lift_rounds its rising-floor rounds; a lift run stops when 5 iterations lower its energy by
-    less than lift_rel_tol (relative); solver runs each L-BFGS solve (None: NumPy).
+    less than lift_rel_tol (relative); lift_chunk > 0 splits the whole-mesh run into runs of
+    that many iterations with fresh L-BFGS memory; solver runs each L-BFGS solve (None: NumPy).
     """
 
     max_iter: int = 3000
@@ -34,6 +35,7 @@ class GlobalOptions:
     lift_first_iter: int = 150
     lift_rounds: int = 6
     lift_rel_tol: float = 1e-5
+    lift_chunk: int = 0
     solver: Solver | None = None
 
     def __post_init__(self) -> None:

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
-from .options import GlobalOptions
+from .options import GlobalOptions, Solver
 from .solver import State, stops
 from .submesh import active_submesh
 
@@ -168,6 +168,34 @@ def untangle_global(
     return out, info
 
 
+def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: GlobalOptions,
+          tick: Callable[[int], bool] | None) -> tuple[np.ndarray, int]:
+    """The lift's whole-mesh run: one L-BFGS run, or (opt.lift_chunk > 0) runs of that many
+    iterations with fresh memory each, until one lowers the energy by less than
+    opt.lift_rel_tol (relative). Fresh memory matters on a large mesh with a few stiff
+    corners (a just-untangled spot): the memory's scale then shrinks every step of the whole
+    mesh (docs/global_untangle.md, "Restarts")."""
+    chunk, max_it, tol = opt.lift_chunk, opt.lift_first_iter, opt.lift_rel_tol
+    if chunk <= 0:
+        return run_lbfgs(en, st, v, EPS_MIN, max_it=max_it, guard=True, rel_tol=tol, tick=tick)
+    total = 0
+    e0 = en.value(*st.unpack(v), EPS_MIN)
+    while total < max_it:
+        sub = None if tick is None else (lambda it, base=total: tick(base + it))
+        v, its = run_lbfgs(
+            en, st, v, EPS_MIN, max_it=min(chunk, max_it - total), guard=True, rel_tol=tol,
+            tick=sub,
+        )
+        total += its
+        if tick is not None and stops(tick(total)):
+            break
+        e1 = en.value(*st.unpack(v), EPS_MIN)
+        if its < chunk or not e0 - e1 > tol * abs(e0):
+            break
+        e0 = e1
+    return v, total
+
+
 def lift_min_quality(
     points: np.ndarray,
     groups: Mapping[int, np.ndarray],
@@ -229,10 +257,7 @@ def lift_min_quality(
                 return not cancel
 
         if r == 0:  # the whole mesh: maximise q_avg at the input's floor
-            vt, its = run_lbfgs(
-                en, st, v, EPS_MIN, max_it=opt.lift_first_iter, guard=True,
-                rel_tol=opt.lift_rel_tol, tick=tick,
-            )
+            vt, its = _runs(run_lbfgs, en, st, v, opt, tick)
             xt, yt = st.unpack(vt)
         else:  # only near the elements under the new floor: the rest is at its optimum
             x, y = st.unpack(v)
