@@ -9,6 +9,9 @@
 // Parameters are kernel arguments (one build per device serves every parameter set); the
 // pow modes say how core.fpmath.power evaluates x ** c and x ** eta (0 exp(e log x), 1 square,
 // 2 identity, 3 ones, 4 sqrt, 5 reciprocal: NumPy's exact fast paths for those exponents).
+// Per-face targets (core/targets.py): the *_tgt kernels read a group's (6, n, F) target
+// array tg (fields x, y, c_n K_x, c_n K_y, cos_a, inv_sin; corner k of face j of field m is
+// tg[(m * n + k) * F + j]) and take the general formulas for every arity.
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
@@ -253,25 +256,76 @@ static inline double mean_ratio(const int n, const double *X, const double *Y,
     return ok ? mean_axis0(n, QK, F) : 0.0;
 }
 
+// Mean ratio of one face against its target (quality.py: _target_quality): corner k's
+// cos_a = tg[(4 n + k) F + j], inv_sin = tg[(5 n + k) F + j].
+static inline double target_ratio(const int n, const double *X, const double *Y,
+                                  __global const double *tg, const int F, const int j)
+{
+    double EX[MAXN], EY[MAXN], QK[MAXN];
+    for (int k = 0; k < n; ++k) {
+        const int k1 = (k + 1 == n) ? 0 : k + 1;
+        EX[k] = X[k1] - X[k];
+        EY[k] = Y[k1] - Y[k];
+    }
+    int ok = 1;
+    for (int k = 0; k < n; ++k) {
+        const int km = (k == 0) ? n - 1 : k - 1;
+        const double PX = EX[km], PY = EY[km];
+        const double ca = tg[(4 * n + k) * F + j], ci = tg[(5 * n + k) * F + j];
+        const double det = PX * EY[k] - PY * EX[k];
+        const double e1sq = EX[k] * EX[k] + EY[k] * EY[k];
+        const double mx = (-PX - ca * EX[k]) * ci;
+        const double my = (-PY - ca * EY[k]) * ci;
+        const double fro = (e1sq + mx * mx) + my * my;
+        ok = ok && det > 0.0 && fro > 0.0;
+        QK[k] = det > 0.0 ? ((2.0 * ci) * det) / fro : 0.0;
+    }
+    return ok ? mean_axis0(n, QK, F) : 0.0;
+}
+
+#define NO_TARGET ((__global const double *)0)
+
 // p^s - p for every corner of one face (transform.py: group_transform_delta), times w.
+// tg: the group's targets (transform.py: _target_stretch), or NO_TARGET (the paper's stretch).
 static inline void transform_moves(const int n, const int R, const double *X, const double *Y,
                                    const double lam, const double w, const int area,
                                    __global double2 *cmove, const int co, const int F,
-                                   const int j)
+                                   const int j, __global const double *tg)
 {
     double NX[MAXN], NY[MAXN], SX[MAXN], SY[MAXN], L[MAXN];
-    for (int k = 0; k < n; ++k) {
-        double nx = 0.0, ny = 0.0;
-        for (int r = 1; r <= R; ++r) {
-            const int kp = (k + r) % n;
-            const int km = (k - r + n) % n;
-            nx = nx + (Y[kp] - Y[km]);
-            ny = ny + (X[km] - X[kp]);
+    if (tg) {  // c_n cof(M) t_k, c_n M = P_centred (c_n K) summed corner by corner
+        const double CX0 = mean_axis0(n, X, F);
+        const double CY0 = mean_axis0(n, Y, F);
+        double m00 = 0.0, m01 = 0.0, m10 = 0.0, m11 = 0.0;
+        for (int k = 0; k < n; ++k) {
+            const double xh = X[k] - CX0, yh = Y[k] - CY0;
+            const double kx = tg[(2 * n + k) * F + j], ky = tg[(3 * n + k) * F + j];
+            m00 = m00 + xh * kx;
+            m01 = m01 + xh * ky;
+            m10 = m10 + yh * kx;
+            m11 = m11 + yh * ky;
         }
-        NX[k] = nx * lam;  // lambda n_k
-        NY[k] = ny * lam;
-        SX[k] = X[k] + NX[k];
-        SY[k] = Y[k] + NY[k];
+        for (int k = 0; k < n; ++k) {
+            const double tx = tg[k * F + j], ty = tg[(n + k) * F + j];
+            NX[k] = (m11 * tx - m10 * ty) * lam;
+            NY[k] = (m00 * ty - m01 * tx) * lam;
+            SX[k] = X[k] + NX[k];
+            SY[k] = Y[k] + NY[k];
+        }
+    } else {
+        for (int k = 0; k < n; ++k) {
+            double nx = 0.0, ny = 0.0;
+            for (int r = 1; r <= R; ++r) {
+                const int kp = (k + r) % n;
+                const int km = (k - r + n) % n;
+                nx = nx + (Y[kp] - Y[km]);
+                ny = ny + (X[km] - X[kp]);
+            }
+            NX[k] = nx * lam;  // lambda n_k
+            NY[k] = ny * lam;
+            SX[k] = X[k] + NX[k];
+            SY[k] = Y[k] + NY[k];
+        }
     }
     double before, after;
     if (area) {  // sqrt of the absolute shoelace area
@@ -473,11 +527,14 @@ static inline double nearest_d(const double qx, const double qy,
 // m - m % 8 faces once m >= 8, a fixed tree of them, then the rest in order), so the host
 // can finish q.sum() in NumPy's order. The partial sums rotate through r0..r7 (face t adds
 // to r0, then r0 moves to r7), which keeps them in registers. QUALITY_BODY(j) defines v.
-#define QUALITY_KERNEL(SUF, QUALITY_BODY)                                                    \
+#define QUALITY_KERNEL(SUF, QUALITY_BODY) QUALITY_KERNEL_X(SUF, QUALITY_BODY, )
+// EXTRA: more kernel arguments (a leading comma), or nothing
+#define QUALITY_KERNEL_X(SUF, QUALITY_BODY, EXTRA)                                           \
     __kernel void quality_##SUF(GROUP_ARGS, __global const double2 *restrict P,              \
                                 __global double *restrict q, const double two_sqrt3,         \
                                 __global double4 *restrict part, const int ro,               \
-                                __global const int *restrict bounds, const int n_blocks)     \
+                                __global const int *restrict bounds, const int n_blocks      \
+                                EXTRA)                                                       \
     {                                                                                        \
         const int g = get_global_id(0);                                                      \
         if (g >= n_blocks) return;                                                           \
@@ -535,6 +592,14 @@ QUALITY_KERNEL(tri, QUALITY_TRI)
 QUALITY_KERNEL(quad, QUALITY_QUAD)
 QUALITY_KERNEL(ngon, QUALITY_NGON)
 
+// per-face targets: one generic kernel for every arity (the group's target array last)
+#define TGT_ARG , __global const double *restrict tgt
+#define QUALITY_TGT(j)                                                                       \
+    double X[MAXN], Y[MAXN];                                                                 \
+    load_face(n, nodes, F, j, P, X, Y);                                                      \
+    const double v = target_ratio(n, X, Y, tgt, F, j);
+QUALITY_KERNEL_X(tgt, QUALITY_TGT, TGT_ARG)
+
 #define MOVE_ARGS                                                                            \
     GROUP_ARGS, __global const double2 *restrict P, __global const double *restrict q,      \
         __global double *restrict fdist, __global double2 *restrict cmove,                   \
@@ -562,8 +627,10 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
 
 // move_SUF: plain; move_SUF_d: the distance refresh first (separate builds of the body,
 // so the plain one carries none of the search code)
-#define MOVE_KERNEL(NAME, NN, RF)                                                            \
-    __kernel void NAME(MOVE_ARGS)                                                            \
+#define MOVE_KERNEL(NAME, NN, RF) MOVE_KERNEL_X(NAME, NN, RF, , NO_TARGET)
+// EXTRA: more kernel arguments (a leading comma) or nothing; TG: the target array or NO_TARGET
+#define MOVE_KERNEL_X(NAME, NN, RF, EXTRA, TG)                                               \
+    __kernel void NAME(MOVE_ARGS EXTRA)                                                      \
     {                                                                                        \
         const int refresh = RF;                                                              \
         const int j = get_global_id(0);                                                      \
@@ -571,7 +638,7 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
         double X[MAXN], Y[MAXN];                                                             \
         load_face(NN, nodes, F, j, P, X, Y);                                                 \
         MOVE_WEIGHT(mean_axis0(NN, X, F), mean_axis0(NN, Y, F))                                          \
-        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j);                         \
+        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j, TG);                     \
     }
 #define MAKE_KERNELS(SUF, NN)                                                                \
     MOVE_KERNEL(move_##SUF, NN, 0)                                                           \
@@ -591,6 +658,8 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
 MAKE_KERNELS(quad, 4)
 MAKE_KERNELS(ngon, n)
 MARK_KERNEL(tri, 3)
+MOVE_KERNEL_X(move_tgt, n, 0, TGT_ARG, tgt)
+MOVE_KERNEL_X(move_tgt_d, n, 1, TGT_ARG, tgt)
 
 // transform_moves for n = 3 (R = 1), scalar: lambda n_k, p^s - p for corner k.
 #define TRI_EDGE_LEN(AX, AY, BX, BY) SQRT(((BX) - (AX)) * ((BX) - (AX)) + ((BY) - (AY)) * ((BY) - (AY)))
