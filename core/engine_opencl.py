@@ -427,7 +427,7 @@ class OpenCLEngine:
             suf = {3: "tri", 4: "quad"}.get(g.n, "ngon")
             extra: tuple = ()
             if tg is not None:
-                suf = "tgt"
+                suf = {3: "tgt_tri", 4: "tgt_quad"}.get(g.n, "tgt")
                 fields = (tg.x, tg.y, tg.kx, tg.ky, tg.cos_a, tg.inv_sin)
                 extra = (self.cl.Buffer(
                     self.rt.ctx,

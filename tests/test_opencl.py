@@ -738,10 +738,10 @@ def test_targets_bit_identical_on_shared_meshes(cpu_device, name):
     step_exact(p, f, free_nodes(len(p), f), EEGTParams(scaling="area", eta=1.7, c=1.3), 6, 4, T)
 
 
-@pytest.mark.parametrize("n", [8, 20, 150])
+@pytest.mark.parametrize("n", [3, 5, 8, 20, 150])
 def test_targets_one_face_ngon_bit_identical(cpu_device, n):
-    """A lone n-gon (a group of one face: pairwise corner sums; n > 16: its own build)
-    ringed by quads, with targets."""
+    """A lone n-gon (a group of one face: pairwise corner sums; n > 16: its own build; a
+    lone triangle: the scalar triangle kernels) ringed by quads, with targets."""
     t = 2 * np.pi * np.arange(n) / n
     rng = np.random.default_rng(n)
     inner = np.column_stack([np.cos(t), np.sin(t)]) * (1 + 0.2 * rng.uniform(-1, 1, (n, 1)))
