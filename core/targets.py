@@ -12,8 +12,9 @@ consumer needs, per arity group as (n, F_n) arrays aligned with `ArityGroup.node
 - the centred, normalised target nodes T (2 x n) and c_n K, K = T^T (T T^T)^-1, for the
   generalised stretch (core.transform).
 
-A face whose target has a non-finite value or a corner with det(W_k) <= FLAT_TOL |w1| |w2|
-(concave, straight, degenerate or clockwise) falls back to the regular polygon.
+A face whose target has a non-finite value, a corner with det(W_k) <= FLAT_TOL |w1| |w2|
+(concave, straight, degenerate or clockwise) or a width below THIN_TOL of its length falls
+back to the regular polygon.
 """
 
 from __future__ import annotations
@@ -25,10 +26,11 @@ from functools import lru_cache
 import numpy as np
 
 from . import fpmath
-from .faces import FaceSet
+from .faces import FaceSet, as_faceset
 
 __all__ = [
     "FLAT_TOL",
+    "THIN_TOL",
     "GroupTargets",
     "Targets",
     "corner_factors",
@@ -42,6 +44,8 @@ __all__ = [
 # a target corner counts as flat when sin(angle) <= FLAT_TOL: straight corners of float32
 # data (sin ~1e-7 of round-off) fall back instead of demanding an exactly straight corner
 FLAT_TOL = 1e-6
+# a target counts as degenerate when thinner than THIN_TOL times its length (aspect 1e8)
+THIN_TOL = 1e-8
 
 
 def stretch_gain(n: int) -> float:
@@ -81,7 +85,7 @@ class GroupTargets:
 
     n: int
     fallback: np.ndarray  # (F,) bool: the target was unusable, the regular polygon is used
-    x: np.ndarray  # centred target nodes, max |coordinate| 1 (regular polygon for fallbacks)
+    x: np.ndarray  # centred target nodes, farthest node at (1, 0) (regular polygon: fallbacks)
     y: np.ndarray
     kx: np.ndarray  # c_n K: M c_n = P_centred (c_n K) is the least-squares map target -> face
     ky: np.ndarray
@@ -133,8 +137,10 @@ def _corner_vectors(x: np.ndarray, y: np.ndarray):
 
 
 def _normalised(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Targets of a group centred and scaled to max |coordinate| 1 per face (no overflow for
-    any finite input), and the (F,) mask of faces with finite, not all equal values."""
+    """Targets of a group centred, scaled to max |coordinate| 1 per face (no overflow for any
+    finite input) and turned so that the node farthest from the centroid lies on the x axis
+    (near a thin target's long axis, which keeps T T^T's det free of cancellation); and the
+    (F,) mask of faces with finite, not all equal values."""
     with np.errstate(invalid="ignore", over="ignore"):
         finite = np.isfinite(x).all(axis=0) & np.isfinite(y).all(axis=0)
         x, y = np.where(finite, x, 0.0), np.where(finite, y, 0.0)
@@ -144,10 +150,15 @@ def _normalised(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
             x, y = x / s, y / s
             x = x - x.sum(axis=0) / x.shape[0]
             y = y - y.sum(axis=0) / y.shape[0]
-        s = np.maximum(np.abs(x).max(axis=0), np.abs(y).max(axis=0))
-        ok = finite & (s > 0.0)
-        s = np.where(ok, s, 1.0)
-    return x / s, y / s, ok
+        r2 = x * x + y * y
+        far = r2.argmax(axis=0)[None, :]
+        r = np.sqrt(np.take_along_axis(r2, far, axis=0)[0])
+        ok = finite & (r > 0.0)
+        r = np.where(ok, r, 1.0)
+        ux = np.take_along_axis(x, far, axis=0)[0] / r
+        uy = np.take_along_axis(y, far, axis=0)[0] / r
+        x, y = (ux * x + uy * y) / r, (ux * y - uy * x) / r
+    return x, y, ok
 
 
 def _group_targets(n: int, x: np.ndarray, y: np.ndarray) -> GroupTargets:
@@ -156,18 +167,22 @@ def _group_targets(n: int, x: np.ndarray, y: np.ndarray) -> GroupTargets:
     det = w1x * w2y - w1y * w2x
     l1sq = w1x * w1x + w1y * w1y
     l2sq = w2x * w2x + w2y * w2y
-    convex = det > FLAT_TOL * np.sqrt(l1sq * l2sq)
-    fallback = ~(ok & convex.all(axis=0))
+    a, b, d = (x * x).sum(axis=0), (x * y).sum(axis=0), (y * y).sum(axis=0)
+    gram = a * d - b * b  # det(T T^T) = (a + d)^2 (thin / long)^2 roughly
+    with np.errstate(invalid="ignore", over="ignore"):
+        convex = det > FLAT_TOL * np.sqrt(l1sq * l2sq)
+        thick = gram > (THIN_TOL * (a + d)) ** 2
+    fallback = ~(ok & convex.all(axis=0) & thick)
     rx, ry = regular_polygon(n)
-    x = np.where(fallback, rx[:, None], x)
-    y = np.where(fallback, ry[:, None], y)
+    cos_r, sin_r = fpmath.regular_corner(n)
+    keep = ~fallback
+    x = np.where(keep, x, rx[:, None])
+    y = np.where(keep, y, ry[:, None])
     # K = T^T (T T^T)^-1 (T T^T is positive definite: a convex polygon spans the plane)
     a, b, d = (x * x).sum(axis=0), (x * y).sum(axis=0), (y * y).sum(axis=0)
     g = stretch_gain(n) / (a * d - b * b)
     kx = (x * d - y * b) * g
     ky = (y * a - x * b) * g
-    cos_r, sin_r = fpmath.regular_corner(n)
-    keep = ~fallback
     with np.errstate(invalid="ignore", divide="ignore"):
         cos_a = np.where(keep, (w1x * w2x + w1y * w2y) / l1sq, cos_r)
         inv_sin = np.where(keep, l1sq / det, 1.0 / sin_r)
@@ -236,13 +251,16 @@ def corner_factors(
     return out
 
 
-def face_shapes_2d(points3d, faces: FaceSet) -> np.ndarray:
+def face_shapes_2d(points3d, faces) -> np.ndarray:
     """(n_corners, 2) targets from faces in 3D: each face's corners in 2D coordinates of its
     own plane (Newell normal, counterclockwise about it), e.g. a UV face's 3D shape.
 
-    Faces with a zero normal (degenerate) get their corners as they are projected, which
-    makes them fall back to the regular polygon."""
+    Faces with a zero normal (degenerate) or non-finite points come out collinear or NaN,
+    which makes them fall back to the regular polygon."""
     p = np.asarray(points3d, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"points3d must be an (N, 3) array, got shape {p.shape}")
+    faces = as_faceset(faces, p.shape[0])
     out = np.zeros((faces.n_corners, 2))
     for g in faces.groups:
         P = p[g.nodes]  # (n, F, 3)

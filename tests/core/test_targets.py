@@ -14,6 +14,7 @@ from core.faces import as_faceset
 from core.quality import group_quality
 from core.targets import (
     FLAT_TOL,
+    THIN_TOL,
     corner_factors,
     face_shapes_2d,
     prepare_targets,
@@ -157,6 +158,25 @@ def test_unusable_targets_fall_back_and_are_counted():
     assert "7 faces have an unusable target shape" in res.message
     plain = untangle_and_smooth(pts, faces, params=EEGT_ONLY, targets=np.tile(good, (9, 1)))
     assert plain.n_target_fallback == 0 and "target" not in plain.message
+
+
+@pytest.mark.filterwarnings("error")
+def test_thin_targets_are_honoured_down_to_thin_tol_then_fall_back():
+    """A turned 1 x 1e-7 rectangle is a usable target (K stays accurate: the target is
+    turned onto its long axis first); one thinner than THIN_TOL falls back; no warnings."""
+    rect = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    face = [[0, 1, 2, 3]]
+    start = np.array([[0, 0], [1, 0], [1.2, 1], [0, 1.3]])
+    for thin, fallback in ((1e-3, False), (1e-7, False), (1e-9, True), (1e-200, True)):
+        T = (rect * [1.0, thin]) @ rot(0.7).T + [3.0, 4.0]
+        assert prepare_targets(T, single(4)).n_fallback == int(fallback)
+        p = start
+        for _ in range(200):
+            p = transform_polygon(p, 0.3, target=T)
+        assert quality(p, face, T)[0] > 1 - 1e-9, thin
+        if not fallback:
+            assert similar(p, T) < 1e-6
+    assert THIN_TOL == 1e-8
 
 
 @pytest.mark.parametrize(
