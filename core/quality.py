@@ -146,5 +146,5 @@ def quality(points, faces, targets=None) -> np.ndarray:
 
 def mesh_stats(points, faces, targets=None) -> Stats:
     """n_inverted, q_min, q_avg of a mesh (quality against `targets`, as in `quality`)."""
-    q = quality(points, faces, targets)
+    q = quality(points, faces, targets=targets)
     return stats_of([q])
