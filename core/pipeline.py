@@ -14,9 +14,10 @@ from .engine_numpy import NumpyEngine
 from .faces import FaceSet, as_faceset
 from .optimize import GlobalOptions, active_submesh, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
+from .optimize.reference import Factors
 from .params import EEGTParams
 from .quality import Stats, _check_points, group_quality, mesh_stats
-from .targets import Targets, prepare_targets, target_fallback_note
+from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import free_nodes
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
@@ -246,6 +247,7 @@ class _Run:
         self.engine.save_best()
         self.n_untangle = self.n_smooth = self.n_global = 0
         self.polished = False  # the global stage's polish (or the lift stage) has run
+        self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
         self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
 
     def report(self, it: int, phase: str, s: Stats) -> None:
@@ -341,7 +343,7 @@ class _Run:
         the input's inverted faces left, or a sub-mesh of more than LOCAL_SHARE of the faces,
         means EEGT did not do the bulk: the whole mesh is then optimized from the input
         instead (`global_stage`)."""
-        groups = self._global_groups()
+        groups, factors = self._global_groups()
         current = self.best
         left = self.best.n_inverted - self.n_frozen
         if left > LOCAL_LEFT * (self.before.n_inverted - self.n_frozen):
@@ -349,7 +351,7 @@ class _Run:
         for rings in LOCAL_RINGS:
             start = self.best_points()
             bad = self._inverted_movable(start)
-            sub, nodes, sfree = active_submesh(groups, self.free, bad, rings)
+            sub, nodes, sfree, sub_f = active_submesh(groups, self.free, bad, rings, factors)
             if not sfree.any() or sum(f.shape[0] for f in sub.values()) > LOCAL_SHARE * bad.size:
                 break
             base = self.n_untangle + self.n_global
@@ -362,7 +364,7 @@ class _Run:
             options = GlobalOptions(max_iter=budget + polish, polish_iter=polish)
             sub_pts, info = untangle_global(
                 start[nodes], sub, sfree, options,
-                progress=relay if self.progress is not None else None,
+                progress=relay if self.progress is not None else None, factors=sub_f,
             )
             self.n_global += int(info["iterations"])
             if info.get("status") == "cancelled":
@@ -390,7 +392,6 @@ class _Run:
         """'eegt+local' on a valid mesh: the lift's whole-mesh run maximises the mean quality
         (up to `polish_iterations`), its rounds raise the worst faces (`lift_rounds`)."""
         start = self.best_points()
-        groups = self._global_groups()
         self.lbfgs = solver_for(self.backend_name)
         options = GlobalOptions(
             lift_first_iter=self.params.polish_iterations,
@@ -400,7 +401,7 @@ class _Run:
             solver=self.lbfgs,
         )
         try:
-            pts = self.lift(start, groups, options)
+            pts = self.lift(start, options)
         finally:
             if self.lbfgs is not None:
                 self.lbfgs.release()
@@ -411,7 +412,7 @@ class _Run:
         """Foldover-free optimization of the whole mesh (from the input, or from the best
         iterate), then the lift; EEGT continues from its result."""
         start = self.p if from_input and self.mode == "eegt+local" else self.best_points()
-        groups = self._global_groups()
+        groups, factors = self._global_groups()
         base = self.n_untangle + self.n_global
 
         def relay(iterations: int, _max_iter: int, n_inv: int) -> None:
@@ -431,12 +432,13 @@ class _Run:
                 self.free,
                 options,
                 progress=relay if self.progress is not None else None,  # no pauses unasked
+                factors=factors,
             )
             self.n_global += int(info["iterations"])
             if info.get("status") == "cancelled":
                 raise _CancelRun
             if info.get("status") == "untangled" and self.params.lift_rounds > 0:
-                pts = self.lift(pts, groups, options)
+                pts = self.lift(pts, options)
         finally:
             if self.lbfgs is not None:  # the device solver outlives the run: not its tables
                 self.lbfgs.release()
@@ -461,24 +463,33 @@ class _Run:
             self.engine.save_best()
         return current
 
-    def _global_groups(self) -> dict[int, np.ndarray]:
+    def _global_groups(self) -> tuple[dict[int, np.ndarray], Factors | None]:
         """The global stage's faces: all but frozen faces whose every node is fixed (constant:
-        nothing to optimise, and an inverted one would block the lift's validity guard)."""
-        groups = {}
-        for g in self.fs.groups:
-            inert = self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0)
-            groups[g.n] = np.ascontiguousarray(g.nodes[:, ~inert].T)
-        return groups
+        nothing to optimise, and an inverted one would block the lift's validity guard), and
+        their target shapes (None: regular polygons)."""
+        if self._groups is None:
+            groups, factors = {}, None
+            all_factors = None if self.targets is None else corner_factors(self.targets, self.fs)
+            for g in self.fs.groups:
+                keep = ~(self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0))
+                groups[g.n] = np.ascontiguousarray(g.nodes[:, keep].T)
+                if all_factors is not None:
+                    factors = factors or {}
+                    factors[g.n] = tuple(u[keep] for u in all_factors[g.n])
+            self._groups = (groups, factors)
+        return self._groups
 
-    def lift(self, pts: np.ndarray, groups: dict, options: GlobalOptions) -> np.ndarray:
+    def lift(self, pts: np.ndarray, options: GlobalOptions) -> np.ndarray:
         """Raise q_min of the valid optimization result without lowering its q_avg."""
+        groups, factors = self._global_groups()
         base = self.n_untangle + self.n_global
 
         def relay(iterations: int, _rounds: int, q_min: float, q_avg: float) -> None:
             self.report(base + iterations, "global", Stats(self.n_frozen, q_min, q_avg))
 
         out, info = lift_min_quality(
-            pts, groups, self.free, options, progress=relay if self.progress is not None else None
+            pts, groups, self.free, options,
+            progress=relay if self.progress is not None else None, factors=factors,
         )
         self.n_global += int(info["iterations"])
         if info.get("status") == "cancelled":

@@ -247,3 +247,22 @@ def test_no_device_solver_on_a_gpu_and_opencl_runs_keep_the_host_global_stage(
     res = untangle_and_smooth(p, fs, backend="opencl")
     assert res.backend == "opencl" and res.global_iterations > 0
     assert np.array_equal(res.points, untangle_and_smooth(p, fs, backend="numpy").points)
+
+
+def test_target_factors_bit_identical_to_host(solver):
+    """Per-corner target factors (the faces' own shapes stretched 1 x 2): the device solver
+    reads them per corner, the same bits as the host, both energies."""
+    from core.targets import corner_factors
+
+    p, fs, groups, free = mesh("mixed_quad_tri")
+    T = p[fs.indices] * [1.0, 2.0]
+    factors = corner_factors(T, fs)
+    outs = []
+    for run in (lbfgs, solver):
+        opt = GlobalOptions(polish_iter=100, lift_rounds=3, solver=run)
+        u, info = untangle_global(p, groups, free, opt, factors=factors)
+        lifted, linfo = lift_min_quality(u, groups, free, opt, factors=factors)
+        outs.append((u, lifted, info["iterations"], linfo["iterations"]))
+    (uh, lh, ih, jh), (ud, ld, idv, jd) = outs
+    assert info["status"] == "untangled" and jh > 0
+    assert np.array_equal(uh, ud) and np.array_equal(lh, ld) and (ih, jh) == (idv, jd)

@@ -31,7 +31,14 @@ from collections.abc import Mapping
 import numpy as np
 
 from .. import fpmath
-from .reference import corner_triangles, mesh_tables, per_arity, reference_sizes
+from .reference import (
+    Factors,
+    corner_factor_values,
+    corner_triangles,
+    mesh_tables,
+    per_arity,
+    reference_sizes,
+)
 from .solver import TICK_CORNERS, TICK_EVERY, State
 
 __all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar"]
@@ -100,20 +107,25 @@ class FoldoverEnergy:
     float operation on the same operands as the per-entry formula beside it.
     """
 
-    def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
-        tabs = self._prepare(points, groups, free)
+    def __init__(
+        self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray,
+        factors: Factors | None = None,
+    ):
+        tabs = self._prepare(points, groups, free, factors)
         if tabs is None:
             return
         arity, size = tabs
         i0, i1, i2, eid = self.v0, self.v1, self.v2, self.veid
         keep = free[i0] | free[i1] | free[i2]  # other corners have a constant energy
-        self._set_corners(i0[keep], i1[keep], i2[keep], arity[eid[keep]], size[eid[keep]])
+        u = None if self.vu is None else tuple(a[keep] for a in self.vu)
+        self._set_corners(i0[keep], i1[keep], i2[keep], arity[eid[keep]], size[eid[keep]], u)
 
     def _prepare(
-        self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray
+        self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray,
+        factors: Factors | None,
     ):
-        """Tables, validity corners, reference sizes and preconditioner: (arity, size), or
-        None (and no energy corners) when there are no elements."""
+        """Tables, validity corners (with their target factors), reference sizes and
+        preconditioner: (arity, size), or None (and no energy corners) without elements."""
         self.n_nodes = points.shape[0]
         faces, arity, edges, edge_elem = mesh_tables(groups)
         self.n_elem = arity.shape[0]
@@ -124,6 +136,9 @@ class FoldoverEnergy:
         det = (x[v1] - x[v0]) * (y[v2] - y[v0]) - (y[v1] - y[v0]) * (x[v2] - x[v0])
         keep = free[v0] | free[v1] | free[v2] | (det > 0.0)
         self.v0, self.v1, self.v2, self.veid = v0[keep], v1[keep], v2[keep], veid[keep]
+        self.vu = None  # per validity corner (u00, u01, u11) of its target; None: regular
+        if factors is not None:
+            self.vu = tuple(a[keep] for a in corner_factor_values(groups, factors, False))
         self.power = 1.0
         self._full = None  # the layout of z = [x, y], built on first use
         self._pack = None  # (state, layout, fixed coordinates) of the last lbfgs call
@@ -138,16 +153,24 @@ class FoldoverEnergy:
         return arity, size
 
     def _set_corners(
-        self, i0: np.ndarray, i1: np.ndarray, i2: np.ndarray, arity: np.ndarray, s: np.ndarray
+        self, i0: np.ndarray, i1: np.ndarray, i2: np.ndarray, arity: np.ndarray, s: np.ndarray,
+        u: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> None:
-        """Energy corners (k, k+1, k-1) with their element's arity and reference size."""
+        """Energy corners (k, k+1, k-1) with their element's arity, reference size and
+        target factors u = (u00, u01, u11) (None: the regular polygon's corner)."""
         self.i0, self.i1, self.i2 = i0, i1, i2
         n = arity.astype(np.float64)
-        cos_a, sin_a = per_arity(arity, fpmath.regular_corner).T
-        # W = s [[1, cos a], [0, sin a]]  ->  W^-1 = [[1, -cot a], [0, 1 / sin a]] / s
-        self.w00 = 1.0 / s
-        self.w01 = -cos_a / (sin_a * s)
-        self.w11 = 1.0 / (sin_a * s)
+        if u is None:
+            cos_a, sin_a = per_arity(arity, fpmath.regular_corner).T
+            # W = s [[1, cos a], [0, sin a]]  ->  W^-1 = [[1, -cot a], [0, 1 / sin a]] / s
+            self.w00 = 1.0 / s
+            self.w01 = -cos_a / (sin_a * s)
+            self.w11 = 1.0 / (sin_a * s)
+        else:  # W = s [[u00, u01], [0, u11]] (regular: u00 = 1, the same bits as above)
+            u00, u01, u11 = u
+            self.w00 = 1.0 / (u00 * s)
+            self.w01 = -u01 / (u00 * u11 * s)
+            self.w11 = 1.0 / (u11 * s)
         # One weight per element (spread over its corners): uniform, not the reference area;
         # area weights let small elements absorb all distortion (see the docs).
         self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
@@ -308,14 +331,17 @@ class LiftEnergy(FoldoverEnergy):
     so element means are complete; only valid (guarded) iterates are evaluated.
     """
 
-    def __init__(self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray):
-        tabs = self._prepare(points, groups, free)
+    def __init__(
+        self, points: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray,
+        factors: Factors | None = None,
+    ):
+        tabs = self._prepare(points, groups, free, factors)
         self.qc = 0.0
         if tabs is None:
             return
         arity, size = tabs
         self.eid = self.veid
-        self._set_corners(self.v0, self.v1, self.v2, arity[self.eid], size[self.eid])
+        self._set_corners(self.v0, self.v1, self.v2, arity[self.eid], size[self.eid], self.vu)
         self.n_corners = np.bincount(self.eid, minlength=self.n_elem).astype(np.float64)
         self._neg_inv_nc = -1.0 / self.n_corners[self.eid]  # dq_e / du_k = this / u_k^2
         self._barrier_w = LIFT_BARRIER * self.weight

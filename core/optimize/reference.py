@@ -10,7 +10,13 @@ import numpy as np
 
 from .. import fpmath
 
-__all__ = ["corner_triangles", "mesh_tables", "per_arity", "reference_sizes"]
+__all__ = ["Factors", "corner_factor_values", "corner_triangles", "mesh_tables", "per_arity",
+           "reference_sizes"]
+
+# Per-face target shapes for the energies: arity -> (u00, u01, u11), each (F_n, n) and
+# aligned with the groups' rows; corner k's target matrix is s [[u00, u01], [0, u11]]
+# (core.targets.corner_factors). None: the regular polygon everywhere.
+Factors = Mapping[int, tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field
 
@@ -64,6 +70,23 @@ def corner_triangles(
         z = np.zeros(0, dtype=np.int64)
         return z, z, z, z
     return np.concatenate(i0), np.concatenate(i1), np.concatenate(i2), np.concatenate(eid)
+
+
+def corner_factor_values(
+    groups: Mapping[int, np.ndarray], factors: Factors, all_corners: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(u00, u01, u11) of every corner triangle, in `corner_triangles`' order."""
+    parts: tuple[list[np.ndarray], ...] = ([], [], [])
+    for n in sorted(groups):
+        if np.asarray(groups[n]).size == 0:
+            continue
+        for part, u in zip(parts, factors[n], strict=True):
+            u = np.asarray(u, dtype=np.float64).reshape(-1, int(n))
+            part.extend(u[:, k] for k in (range(n) if (n > 3 or all_corners) else range(1)))
+    if not parts[0]:
+        z = np.zeros(0)
+        return z, z, z
+    return tuple(np.concatenate(part) for part in parts)  # type: ignore[return-value]
 
 
 def per_arity(arity: np.ndarray, fn: Callable[[int], Any]) -> np.ndarray:

@@ -12,6 +12,7 @@ import numpy as np
 
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
 from .options import GlobalOptions, Solver
+from .reference import Factors
 from .solver import State, stops
 from .submesh import active_submesh
 
@@ -47,12 +48,14 @@ def untangle_global(
     free: np.ndarray,
     options: GlobalOptions | None = None,
     progress: Callable[[int, int, int], Any] | None = None,
+    factors: Factors | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Untangle a planar polygon mesh by minimising the foldover-free energy (eps continuation).
 
     points: (N, 2) float64; groups: arity -> (F_n, n) int node arrays, counterclockwise = valid;
     free: (N,) bool mask of the nodes that may move; options: budgets (max_iter, polish_iter,
-    polish_power, time_limit) and the solver (`GlobalOptions`; None: the defaults).
+    polish_power, time_limit) and the solver (`GlobalOptions`; None: the defaults); factors:
+    per-face target shapes (`reference.Factors`, aligned with groups; None: regular polygons).
     progress(iterations, max_iter, n_inverted) is called after each round and every
     `tick_every` L-BFGS iterations inside it (a few tenths of a second of work on any mesh
     size); a falsy answer other than None cancels (`stops`).
@@ -71,7 +74,7 @@ def untangle_global(
     opt = options if options is not None else GlobalOptions()
     max_iter, polish_iter = opt.max_iter, opt.polish_iter
     run_lbfgs = opt.run()
-    en = FoldoverEnergy(P, groups, free)
+    en = FoldoverEnergy(P, groups, free, factors)
     st = State(P, free)
     n_inv = en.n_inverted(st.x, st.y)
     info: dict[str, Any] = {
@@ -202,6 +205,7 @@ def lift_min_quality(
     free: np.ndarray,
     options: GlobalOptions | None = None,
     progress: Callable[[int, int, float, float], Any] | None = None,
+    factors: Factors | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Raise the worst element quality of a valid mesh without lowering its mean quality.
 
@@ -218,14 +222,15 @@ def lift_min_quality(
     status ("lifted", "unchanged", "cancelled").
     progress(iterations, rounds_done, q_min, q_avg) after each run and every few tenths of a
     second inside one, with the kept iterate's qualities; a falsy answer other than None
-    cancels (`stops`) and the input is returned. options.solver runs the L-BFGS solves.
+    cancels (`stops`) and the input is returned. options.solver runs the L-BFGS solves;
+    factors: per-face target shapes (the qualities are then against them).
     """
     t_start = time.perf_counter()
     P, free = _checked_input(points, free)
     opt = options if options is not None else GlobalOptions()
     rounds = opt.lift_rounds
     run_lbfgs = opt.run()
-    en = LiftEnergy(P, groups, free)
+    en = LiftEnergy(P, groups, free, factors)
     st = State(P, free)
     info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
     q = en.element_quality(st.x, st.y) if en.n_elem else np.zeros(0)
@@ -261,11 +266,13 @@ def lift_min_quality(
             xt, yt = st.unpack(vt)
         else:  # only near the elements under the new floor: the rest is at its optimum
             x, y = st.unpack(v)
-            sub, nodes, sfree = active_submesh(groups, free, q < LIFT_ACTIVE * en.qc, LIFT_RINGS)
+            sub, nodes, sfree, sub_f = active_submesh(
+                groups, free, q < LIFT_ACTIVE * en.qc, LIFT_RINGS, factors
+            )
             if not sfree.any():
                 break
             sp = np.stack([x[nodes], y[nodes]], axis=1)
-            sen = LiftEnergy(sp, sub, sfree)
+            sen = LiftEnergy(sp, sub, sfree, sub_f)
             sen.qc = en.qc
             sst = State(sp, sfree)
             sv, its = run_lbfgs(

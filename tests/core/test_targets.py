@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 from meshdata import load, load2d
 
-from core import EEGTParams, mesh_stats, quality, untangle_and_smooth, untangle_and_smooth_3d
+from core import (
+    EEGTParams,
+    free_nodes,
+    mesh_stats,
+    quality,
+    untangle_and_smooth,
+    untangle_and_smooth_3d,
+)
 from core.faces import as_faceset
 from core.quality import group_quality
 from core.targets import (
@@ -421,3 +428,64 @@ def test_group_quality_with_targets_in_mixed_meshes_matches_quality():
         assert np.array_equal(group_quality(p[g.nodes, 0], p[g.nodes, 1], t.corners), q[g.ids])
     x, y = regular_polygon(4)
     np.testing.assert_allclose(np.column_stack([x, y]), regular(4), atol=1e-15)
+
+
+def test_global_stage_with_regular_factors_is_bit_identical_to_none():
+    """The energies with every face's regular factors given explicitly: the same bits as
+    without factors (untangling, polish and the lift)."""
+    from core.optimize import GlobalOptions, lift_min_quality, untangle_global
+
+    p, f = load2d("mixed_quad_tri")
+    free = free_nodes(len(p), f)
+    groups, factors = f.by_arity(), corner_factors(None, f)
+    opt = GlobalOptions(polish_iter=60, lift_rounds=3)
+    a, ia = untangle_global(p, groups, free, opt)
+    b, ib = untangle_global(p, groups, free, opt, factors=factors)
+    assert np.array_equal(a, b) and ia["iterations"] == ib["iterations"] > 0
+    la, _ = lift_min_quality(a, groups, free, opt)
+    lb, _ = lift_min_quality(a, groups, free, opt, factors=factors)
+    assert np.array_equal(la, lb) and not np.array_equal(la, a)
+
+
+def test_default_pipeline_polishes_towards_the_targets():
+    """With default parameters the global stage (untangling, polish, lift) measures corners
+    against the targets: a tangled graded grid (rows 1.25x taller each) with its own cells as
+    targets comes back graded, while pulled towards squares it does not."""
+    ys = np.concatenate([[0.0], np.cumsum(0.2 * 1.25 ** np.arange(10))])
+    X, Y = np.meshgrid(np.linspace(0.0, ys[-1], 11), ys)
+    ref = np.column_stack([X.ravel(), Y.ravel()])
+    a = (np.arange(10)[:, None] * 11 + np.arange(10)[None, :]).ravel()
+    faces = np.column_stack([a, a + 1, a + 12, a + 11])
+    inner = ((X > 0) & (X < ys[-1]) & (Y > 0) & (Y < ys[-1])).ravel()
+    pts = ref.copy()
+    rng = np.random.default_rng(4)
+    cell = np.column_stack([np.full(len(ref), ys[-1] / 10), np.gradient(ys)[np.repeat(
+        np.arange(11), 11)]])
+    pts[inner] += rng.uniform(-0.45, 0.45, (int(inner.sum()), 2)) * cell[inner]
+    T = ref[faces.ravel()]
+    before = mesh_stats(pts, faces, T)
+    res = untangle_and_smooth(pts, faces, targets=T)
+    reg = untangle_and_smooth(pts, faces)
+    assert before.n_inverted > 0 and res.status == "untangled" and res.global_iterations > 0
+    assert res.after.q_min > 0.99 and res.after.q_avg > 0.999
+    off = mesh_stats(reg.points, faces, T)
+    assert off.q_min < 0.8 and off.q_avg < 0.95
+
+
+def test_local_stage_subsets_target_factors_with_its_faces():
+    """eegt+local on a grid with targets: the sub-mesh carries its own faces' factors."""
+    from core.optimize import active_submesh
+
+    pts, faces = tangled_grid(8, 12, 1.0, 3.0, 0.0, 2)
+    fs = as_faceset(faces, len(pts))
+    T = np.tile([[0, 0], [1, 0], [1, 3], [0, 3]], (len(faces), 1)).astype(float)
+    factors = corner_factors(T, fs)
+    seed = np.zeros(fs.n_faces, dtype=bool)
+    seed[40] = True
+    factors[4][1][:] = np.arange(fs.n_faces)[:, None]  # u01 names its face: traceable rows
+    sub, nodes, _free, sub_f = active_submesh(fs.by_arity(), free_nodes(len(pts), fs), seed, 1,
+                                              factors)
+    row_of = {tuple(r): i for i, r in enumerate(fs.by_arity()[4].tolist())}
+    rows = [row_of[tuple(r)] for r in nodes[sub[4]].tolist()]
+    assert sub_f[4][0].shape == sub[4].shape and 1 < len(rows) < fs.n_faces
+    assert np.array_equal(sub_f[4][1][:, 0], rows)
