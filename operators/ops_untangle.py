@@ -184,8 +184,9 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
     def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
         w = self._worker
         if event.type == "ESC":
+            # answered at once: the worker stops at its next progress call (it writes no
+            # Blender data, and its results are dropped with the jobs)
             w.cancel = True
-            w.thread.join()
             self._cleanup(context)
             self.report({"INFO"}, "EEGT cancelled: no mesh changed")
             return {"CANCELLED"}

@@ -387,14 +387,24 @@ def esc_cancel():
     w = rg["WINDOW"]
     xdo("mousemove", *to_x11(w.x + w.width // 3, w.y + w.height // 2))
     yield 0.1
+    def modal() -> bool:
+        return any(op.bl_idname == "MESH_OT_eegt_untangle_smooth" for op in win.modal_operators)
+
+    check(modal(), "ESC test: the operator is not running modal before ESC")
+    t_esc = time.time()
     xdo("key", "Escape")
+    answered = yield from wait_until(lambda: not modal(), 5, step=0.02)
+    latency = time.time() - t_esc
+    check(answered, "ESC test: the operator still runs 5 s after ESC")
+    check(latency < 2.0, f"ESC test: ESC answered after {latency:.2f} s")  # goal 0.5 s
     stopped = yield from wait_until(lambda: not workers(), 15)
     check(stopped, "ESC test: the worker still runs 15 s after ESC")
     yield 1.0
     check(np.array_equal(now(), start), "ESC test: the mesh changed although cancelled")
     check(len(bpy.context.window_manager.operators) == n_ops,
           "ESC test: a cancelled run registered an operator (undo step)")
-    log(f"ESC: run on {len(me.polygons)} faces cancelled, mesh exactly unchanged")
+    log(f"ESC: run on {len(me.polygons)} faces cancelled, answered in {latency:.2f} s "
+        "(the xdotool key included), mesh exactly unchanged")
 
 
 class CheckFailed(Exception):
