@@ -16,15 +16,20 @@ class EdgeInfo:
         a = np.concatenate([g.nodes.ravel() for g in faces.groups])
         b = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in faces.groups])
         lo, hi = np.minimum(a, b), np.maximum(a, b)
-        key = lo * n_nodes + hi
-        uniq, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+        # one sort of (edge key, direction bit): runs of equal keys are the uses of an edge
+        key = (lo * n_nodes + hi) * 2 + (a < b)
+        key.sort()
+        edge = key >> 1
+        first = np.flatnonzero(np.concatenate([[True], edge[1:] != edge[:-1]]))
+        uniq = edge[first]
+        counts = np.diff(np.append(first, key.size))
         self.n_nodes = n_nodes
         self.lo = uniq // n_nodes
         self.hi = uniq % n_nodes
         self.counts = counts
         # An interior edge of a consistently oriented surface is used once in each
         # direction; twice in the same direction means neighbouring faces disagree.
-        forward = np.bincount(inverse, weights=(a < b), minlength=uniq.size)
+        forward = np.add.reduceat(key & 1, first)
         self.conflict = (counts == 2) & (forward != 1)
 
     def boundary_mask(self) -> np.ndarray:
