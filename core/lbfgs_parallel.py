@@ -1,0 +1,387 @@
+"""The global stage's L-BFGS as many-work-item OpenCL kernels, bit-identical to the host.
+
+`ParallelLbfgs` is a drop-in for `global_untangle._lbfgs` (same arguments, same result to
+the last bit) that scales with the mesh and suits GPUs: energy terms and corner gradients
+run one work-item per corner (or per few corners), the gradient is a per-coordinate gather
+in np.bincount's order, vector updates are elementwise, and every dot product and energy sum
+is NumPy's pairwise summation split into fixed leaves and chunks (core/lbfgs_parallel.cl),
+so neither the work-group size nor the number of lanes per leaf changes a bit. The solver's
+scalars stay on the device; the host enqueues an iteration's kernels and reads back one
+64-byte status block per line-search trial (one per iteration when the first step is
+accepted). Tables are uploaded once per energy and kernel arguments bound once per table
+set; nothing is allocated per iteration.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from . import global_untangle as gu
+from .engine_opencl import _runtime, bincount_csr
+
+__all__ = ["KERNEL_FILE", "ParallelLbfgs", "device_solver", "reduction_plan"]
+
+KERNEL_FILE = Path(__file__).with_name("lbfgs_parallel.cl")
+CHUNK = 8192  # NumPy's reduction buffer (np.getbufsize())
+BLOCK = 128  # NumPy's pairwise base block
+LOCAL_SIZE = 64  # work-group size (any value gives the same bits; 64 was fastest on pocl)
+TRIALS = 40  # line-search halvings, as in _lbfgs
+# status block (S[0:8], see the kernel source)
+_STATUS, _ET, _DMIN, _LEN = 0, 1, 2, 3
+_S_EPS, _S_QC, _S_H0, _S_GUARD = 8, 9, 10, 11
+_REJECTED, _ACCEPTED, _NOT_DESCENT = 0, 1, 2
+_solvers: dict[tuple, ParallelLbfgs] = {}
+
+
+def device_solver(lanes: int | None = None, local_size: int | None = LOCAL_SIZE) -> ParallelLbfgs:
+    """The parallel solver of the chosen OpenCL device, made once per process, device and
+    settings; RuntimeError when there is no device or the kernels do not build."""
+    rt = _runtime()
+    key = (rt.name, lanes, local_size)
+    solver = _solvers.get(key)
+    if solver is None:
+        solver = _solvers[key] = ParallelLbfgs(lanes=lanes, local_size=local_size)
+    return solver
+
+
+def reduction_plan(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """How np.add.reduce cuts n terms: (leaf bounds, first leaf of each chunk + the end).
+
+    Chunks of CHUNK terms in order; each is halved at half its length rounded down to a
+    multiple of 8 until the pieces have at most BLOCK terms (the leaves)."""
+    bounds = [0]
+    first = []
+
+    def tree(off: int, m: int) -> None:
+        if m <= BLOCK:
+            bounds.append(off + m)
+            return
+        m2 = m // 2 - (m // 2) % 8
+        tree(off, m2)
+        tree(off + m2, m - m2)
+
+    n_full = n // CHUNK
+    per = CHUNK // BLOCK  # a full chunk: CHUNK / BLOCK leaves of BLOCK terms
+    if n_full:
+        bounds.extend(np.arange(1, n_full * per + 1) * BLOCK)
+        first.extend(range(0, n_full * per, per))
+    if n % CHUNK:
+        first.append(len(bounds) - 1)
+        tree(n_full * CHUNK, n % CHUNK)
+    first.append(len(bounds) - 1)
+    return np.asarray(bounds, dtype=np.int64), np.asarray(first, dtype=np.int64)
+
+
+class _Plan:
+    """A reduction plan on the device: PI (sizes, leaf bounds, chunk starts) and PD (leaf
+    partials, minima, chunk sums)."""
+
+    def __init__(self, solver: ParallelLbfgs, n: int, sums: int):
+        bounds, first = reduction_plan(n)
+        self.n, self.n_leaves, self.n_chunks = n, bounds.size - 1, first.size - 1
+        head = np.array([n, self.n_leaves, self.n_chunks, sums], dtype=np.int64)
+        self.ints = np.concatenate([head, bounds, first])
+        per_leaf = 1 if solver.lanes == 1 else 16
+        self.pd_len = (sums * per_leaf + solver.lanes) * self.n_leaves + (sums + 1) * self.n_chunks
+        self.leaf_items = self.n_leaves * solver.lanes
+
+
+class _Tables:
+    """One energy's arrays on the device, and the solver's kernels bound to them."""
+
+    def __init__(self, solver: ParallelLbfgs, en: gu._Energy, st: gu._State):
+        self.lift = lift = isinstance(en, gu._LiftEnergy)
+        nn, nc, nf = en.n_nodes, en.i0.size, st.nf
+        n2 = 2 * nf
+        ne = en.n_elem if lift else 0
+        self.n2, self.nc, self.ne = n2, nc, ne
+        # z = [v (n2) | x of fixed nodes | y of fixed nodes]: each node's positions in z
+        fixed = np.ones(nn, dtype=bool)
+        fixed[st.fidx] = False
+        fix = np.flatnonzero(fixed)
+        nx = fix.size
+        pos = np.empty((2, nn), dtype=np.int64)
+        pos[0, st.fidx] = np.arange(nf)
+        pos[1, st.fidx] = np.arange(nf, n2)
+        pos[0, fix] = np.arange(n2, n2 + nx)
+        pos[1, fix] = np.arange(n2 + nx, n2 + 2 * nx)
+        corner_pos = [pos[a, i] for i in (en.i1, en.i2, en.i0) for a in (0, 1)]
+        # gradient rows of the free nodes: np.bincount's order over idx = [i1, i2, i0]
+        ptr, order = bincount_csr(en.idx, nn)
+        cnt = ptr[st.fidx + 1] - ptr[st.fidx]
+        rows = np.zeros(nf + 1, dtype=np.int64)
+        np.cumsum(cnt, out=rows[1:])
+        take = np.repeat(ptr[st.fidx] - rows[:-1], cnt) + np.arange(rows[-1])
+        gpos = order[take]  # position in [ge1 | ge2 | ge0] (blocks of nc)
+        ints = [np.concatenate(corner_pos), np.concatenate([rows, gpos])]
+        if lift:
+            eptr, ecorn = bincount_csr(en.eid, ne)
+            ints += [np.concatenate([eptr, ecorn]), en.eid]
+        self.plans = [_Plan(solver, n2, 4), _Plan(solver, nc, 1)]
+        if lift:
+            self.plans.append(_Plan(solver, ne, 1))
+        ints += [p.ints for p in self.plans]
+        if max(int(a.max()) for a in ints if a.size) >= 2**31 or 4 * nc >= 2**31:
+            raise ValueError("mesh too large for the parallel solver's 32-bit indices")
+        buf, empty = solver._buffer, solver._empty
+        self.CI, self.GI = buf(ints[0]), buf(ints[1])
+        if lift:
+            self.EI, self.eid = buf(ints[2]), buf(ints[3])
+            self.EN = buf(np.concatenate([en.n_corners, -1.0 / en.n_corners]))
+            self.R, self.DQ = empty(8 * nc), empty(8 * ne)
+        self.PI = [buf(p.ints) for p in self.plans]
+        self.PD = [empty(8 * p.pd_len) for p in self.plans]
+        self.W = buf(np.concatenate([en.w00, en.w01, en.w11, en.weight]))
+        self.dpre = buf(np.tile(en.precond[st.fidx], 2))
+        self.z = buf(np.concatenate([np.zeros(n2), st.x[fix], st.y[fix]]))
+        self.v, self.g, self.q = empty(8 * n2), empty(8 * n2), empty(8 * n2)
+        ring = 8 * n2 * (gu.LBFGS_MEMORY + 1)  # M pairs and the candidate's spare slot
+        self.hs, self.hy = empty(ring), empty(ring)
+        self.G = empty(8 * 4 * nc)
+
+    def bind(self, k: dict) -> None:
+        """Set the arguments of the solver's kernels (once per table switch)."""
+        S = self.S
+        i32 = np.int32
+        (pv, pc, *pe), (dv, dc, *de) = self.PI, self.PD
+        vec = (S, pv, dv)
+        for h in range(gu.LBFGS_MEMORY):
+            k["loop1"][h].set_args(*vec, self.q, self.g, self.hs, self.hy, i32(h))
+            k["loop2"][h].set_args(*vec, self.q, self.g, self.hs, self.hy, i32(h))
+            k["finish_alpha"][h].set_args(*vec, i32(h))
+            k["finish_coef"][h].set_args(*vec, i32(h))
+        k["mid"].set_args(*vec, self.q, self.g, self.dpre, self.hy)
+        k["finish_mid"].set_args(*vec)
+        k["chunk_v1"].set_args(pv, dv, i32(1), i32(1))  # a dot (+ the mid's max |q|)
+        k["chunk_v4"].set_args(pv, dv, i32(4), i32(0))
+        k["chunk_c"].set_args(pc, dc, i32(1), i32(1))
+        k["forget"].set_args(S)
+        k["trial_point"].set_args(S, self.z, self.v, self.q, i32(self.n2))
+        corner = (S, pc, dc, self.z, self.CI, self.W)
+        pe, de = (pe[0], de[0]) if self.lift else (pc, dc)
+        for name, init in (("finish_trial", 0), ("finish_init", 1)):
+            k[name].set_args(S, pc, dc, pe, de, i32(self.ne), i32(init))
+        if self.lift:
+            k["lift_corner"].set_args(*corner, self.R)
+            k["lift_element"].set_args(S, pe, de, self.R, self.EI, self.EN, self.DQ)
+            k["chunk_e"].set_args(pe, de, i32(1), i32(0))
+            k["lift_grad"].set_args(
+                self.z, self.CI, self.W, self.G, i32(self.nc), self.eid, self.EN, self.DQ,
+                i32(self.ne),
+            )
+        else:
+            k["fold_corner"].set_args(*corner)
+            k["fold_grad"].set_args(S, self.z, self.CI, self.W, self.G, i32(self.nc))
+        nf = i32(self.n2 // 2)
+        k["gather_init"].set_args(S, self.g, self.GI, self.G, nf, i32(self.nc))
+        k["update"].set_args(
+            *vec, self.z, self.v, self.g, self.dpre, self.hs, self.hy, self.GI, self.G,
+            i32(self.nc),
+        )
+        k["finish_pair"].set_args(*vec)
+
+
+class ParallelLbfgs:
+    """`_lbfgs` for `untangle_global` / `lift_min_quality`, run by many-work-item kernels.
+
+    lanes: work-items per leaf of 128 terms in the reductions (1: one work-item sums a leaf,
+    best on CPUs; 8: one per partial sum, more parallelism for GPUs; None: 1 on CPU devices,
+    8 elsewhere). local_size: the work-group size (None: the implementation's choice).
+    Neither changes the result."""
+
+    def __init__(self, lanes: int | None = None, local_size: int | None = LOCAL_SIZE):
+        rt = _runtime()
+        self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
+        self.device_name = rt.name
+        self.lanes = int(lanes or (1 if rt.is_cpu else 8))
+        if self.lanes not in (1, 2, 4, 8):
+            raise ValueError("lanes must be 1, 2, 4 or 8")
+        self.local_size = local_size
+        prg = rt.build(
+            f"lbfgs_parallel M={gu.LBFGS_MEMORY} LANES={self.lanes}",
+            KERNEL_FILE.read_text(),
+            [f"-DM={gu.LBFGS_MEMORY}", f"-DLANES={self.lanes}"],
+            what="parallel L-BFGS kernels",
+        )
+
+        def kern(name: str):
+            return self.cl.Kernel(prg, name)
+
+        m = gu.LBFGS_MEMORY
+        self._k: dict = {name: [kern(name) for _ in range(m)]
+                         for name in ("loop1", "loop2", "finish_alpha", "finish_coef")}
+        for name in ("mid", "finish_mid", "forget", "trial_point", "fold_corner", "fold_grad",
+                     "lift_corner", "lift_element", "lift_grad", "gather_init", "update",
+                     "finish_pair"):
+            self._k[name] = kern(name)
+        for name in ("chunk_v1", "chunk_v4", "chunk_c", "chunk_e"):
+            self._k[name] = kern("chunk_sums")
+        self._k["finish_trial"] = kern("finish_trial")
+        self._k["finish_init"] = kern("finish_trial")
+        s_len = 16 + m + 3 * (m + 1)
+        self._S_host = np.zeros(s_len)
+        self.S = self._empty(8 * s_len)
+        self._rb = np.zeros(8)
+        self._last: tuple[gu._Energy, gu._State, _Tables] | None = None
+
+    def release(self) -> None:
+        """Forget the uploaded tables (and the energy they came from): end of a run."""
+        self._last = None
+
+    def _buffer(self, a: np.ndarray):
+        mf = self.cl.mem_flags
+        a = np.ascontiguousarray(a, dtype=np.int32 if a.dtype.kind in "iub" else np.float64)
+        if a.size == 0:
+            return self._empty(8)
+        return self.cl.Buffer(self.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=a)
+
+    def _empty(self, nbytes: int):
+        return self.cl.Buffer(self.ctx, self.cl.mem_flags.READ_WRITE, max(int(nbytes), 8))
+
+    def _tables_for(self, en: gu._Energy, st: gu._State) -> _Tables:
+        """The device tables of (en, st), with the kernels bound to them."""
+        if self._last is None or self._last[0] is not en or self._last[1] is not st:
+            self._last = None  # free the old tables first
+            tb = _Tables(self, en, st)
+            tb.S = self.S
+            tb.bind(self._k)
+            self._last = (en, st, tb)
+        return self._last[2]
+
+    # -- enqueue helpers -------------------------------------------------------------------
+    def _go(self, name: str | object, items: int) -> None:
+        kernel = self._k[name] if isinstance(name, str) else name
+        ls = self.local_size
+        if ls is None:
+            self.cl.enqueue_nd_range_kernel(self.queue, kernel, (max(items, 1),), None)
+        else:
+            gs = max(ls, -(-items // ls) * ls)
+            self.cl.enqueue_nd_range_kernel(self.queue, kernel, (gs,), (ls,))
+
+    def _one(self, name: str | object) -> None:
+        kernel = self._k[name] if isinstance(name, str) else name
+        self.cl.enqueue_nd_range_kernel(self.queue, kernel, (1,), (1,))
+
+    def _reduce(self, kernel, chunk: str, plan: _Plan, finish) -> None:
+        """A leaf kernel, the chunk sums when there are several chunks, its finish."""
+        self._go(kernel, plan.leaf_items)
+        if plan.n_chunks > 1:
+            self._go(chunk, plan.n_chunks)
+        self._one(finish)
+
+    def _direction(self, tb: _Tables, pairs: int) -> None:
+        """The two-loop recursion over at most `pairs` pairs (the device knows how many),
+        the slope and the first step."""
+        k, pv = self._k, tb.plans[0]
+        for h in range(pairs - 1, -1, -1):
+            self._reduce(k["loop1"][h], "chunk_v1", pv, k["finish_alpha"][h])
+        self._reduce(k["mid"], "chunk_v1", pv, "finish_mid")
+        for h in range(pairs):
+            self._reduce(k["loop2"][h], "chunk_v1", pv, k["finish_coef"][h])
+
+    def _energy(self, tb: _Tables, finish: str) -> None:
+        """Energy and min det at z (`finish`: the Armijo test, or the starting point's)."""
+        pc = tb.plans[1]
+        if tb.lift:
+            self._go("lift_corner", pc.leaf_items)
+            if pc.n_chunks > 1:
+                self._go("chunk_c", pc.n_chunks)
+            pe = tb.plans[2]
+            self._go("lift_element", pe.leaf_items)
+            if pe.n_chunks > 1:
+                self._go("chunk_e", pe.n_chunks)
+            self._one(finish)
+        else:
+            self._reduce(self._k["fold_corner"], "chunk_c", pc, finish)
+
+    def _trial(self, tb: _Tables) -> np.ndarray:
+        """One line-search trial; the status block."""
+        self._go("trial_point", tb.n2)
+        self._energy(tb, "finish_trial")
+        self.cl.enqueue_copy(self.queue, self._rb, self.S)
+        return self._rb
+
+    def _gradient(self, tb: _Tables) -> None:
+        self._go("lift_grad" if tb.lift else "fold_grad", tb.nc)
+
+    def _accept(self, tb: _Tables) -> None:
+        """Gradient at the accepted point, the new pair and the memory update."""
+        self._gradient(tb)
+        self._reduce(self._k["update"], "chunk_v4", tb.plans[0], "finish_pair")
+
+    def __call__(
+        self,
+        en: gu._Energy,
+        st: gu._State,
+        v0: np.ndarray,
+        eps: float,
+        *,
+        max_it: int,
+        guard: bool,
+        rel_tol: float = 1e-7,
+        tick: Callable[[int], bool] | None = None,
+    ) -> tuple[np.ndarray, int]:
+        kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
+        if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernels: the host's
+            return gu._lbfgs(en, st, v0, eps, **kw)
+        try:
+            tb = self._tables_for(en, st)
+        except ValueError:  # indices beyond 32 bits: the host solver, same result
+            return gu._lbfgs(en, st, v0, eps, **kw)
+        cl, queue = self.cl, self.queue
+        s = self._S_host
+        s[:] = 0.0
+        s[_S_EPS], s[_S_QC] = eps, getattr(en, "qc", 0.0)
+        s[_S_H0], s[_S_GUARD] = 0.1 * en.h_mean, float(bool(guard))
+        v0 = np.ascontiguousarray(v0, dtype=np.float64)
+        cl.enqueue_copy(queue, self.S, s)
+        cl.enqueue_copy(queue, tb.v, v0)
+        cl.enqueue_copy(queue, tb.z, v0)
+        self._energy(tb, "finish_init")
+        self._gradient(tb)
+        self._go("gather_init", tb.n2)
+        cl.enqueue_copy(queue, self._rb, self.S)
+        e_hist = [float(self._rb[_ET])]
+        it, pairs, at = 0, 0, tb.v  # pairs: most the device may hold; at: the current point
+        m = gu.LBFGS_MEMORY
+        while it < max_it:
+            it += 1
+            self._direction(tb, pairs)
+            rb = self._trial(tb)
+            if rb[_STATUS] == _NOT_DESCENT:  # restart from preconditioned descent
+                self._one("forget")
+                self._direction(tb, 0)
+                pairs = 0
+                rb = self._trial(tb)
+                if rb[_STATUS] == _NOT_DESCENT:
+                    break
+            n_pairs = int(rb[_LEN])
+            trials = 1
+            while rb[_STATUS] == _REJECTED and trials < TRIALS:
+                rb = self._trial(tb)
+                trials += 1
+            if rb[_STATUS] != _ACCEPTED:
+                if n_pairs:  # drop the memory and retry once from plain descent
+                    self._one("forget")
+                    pairs = 0
+                    continue
+                break
+            at = tb.z
+            e, dmin_t = float(rb[_ET]), float(rb[_DMIN])
+            if not guard and dmin_t > 0.0:  # just became valid
+                break
+            e_hist.append(e)
+            if len(e_hist) > 5 and e_hist[-6] - e <= rel_tol * abs(e_hist[-6]):
+                break
+            if tick is not None and it % en.tick_every == 0 and gu.stops(tick(it)):
+                break
+            if it < max_it:
+                self._accept(tb)
+                pairs = min(n_pairs + 1, m)
+                at = tb.v
+        v = np.empty(tb.n2, dtype=np.float64)
+        cl.enqueue_copy(queue, v, at)
+        return v, it
