@@ -27,11 +27,15 @@
 //              mid                        q -= y0 alpha0, q *= dpre gamma, partials of y0.q
 //                                         (no memory: q = -g dpre, partials of g.q, max |q|)
 //              loop2[h] (h = 0 .. len-1)  q += s c, partials of the next y.q (or g.q)
-//   trial:     trial_point (vt = v + q step), fold_corner or lift_corner + lift_element
-//              (leaf partials of the energy terms, min det), finish_trial (Armijo test)
-//   accepted:  fold_grad or lift_grad (dF/dE per corner), update (gradient gather per free
-//              coordinate, s and y into the spare ring slot, v = vt, g = gt, partials of
-//              s.y, s.s, y.y, y.dpre y), finish_pair (L-BFGS memory update)
+//   trial:     trial_point (vt = v + q step into the node coordinates), fold_corner or
+//              lift_corner (terms and dets, one work-item per corner), corner_sum (their
+//              leaf partials and minimum), lift_element (lift: per-element terms),
+//              finish_trial (the Armijo test)
+//   accepted:  lift_grad (dF/dE per corner, written in the gather's order; fold_corner
+//              writes the foldover-free energy's with each trial),
+//              gather_grad (the gradient, one work-item per free node), update (s and y into the spare ring slot,
+//              v = vt, g = gt, partials of s.y, s.s, y.y, y.dpre y), finish_pair (the
+//              L-BFGS memory update)
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
@@ -394,99 +398,128 @@ __kernel void forget(__global double *S)
 }
 
 // ---- energies ---------------------------------------------------------------------------
-// z = [trial point v (n2) | fixed coordinates]; CI = the z positions of each corner's
-// [x1 | y1 | x2 | y2 | x0 | y0] (blocks of nc).
+// Corner kernels run over the corners in a sweep order (a space-filling curve over their
+// positions) and node coordinates live in Z, (x, y) pairs in the order the sweep first
+// touches the nodes, so that neighbouring work-items read and write neighbouring memory
+// whatever the mesh's numbering; results that are summed go to their place in NumPy's order.
+// Z: the fixed nodes' coordinates set once, the free nodes' written by trial_point.
+// Per corner of the sweep: CI = (i1, i2, i0) places in Z and the corner's place in the sum,
+// W = (w00, w01, w11, weight), SL = its gather slots.
 
-__kernel void trial_point(__global const double *S, __global double *z,
-                          __global const double *v, __global const double *q, const int n2)
+// Free node f of the trial point v + q step (init: of v) into its place zf[f] in Z
+__kernel void trial_point(__global const double *S, __global double *Z,
+                          __global const double *v, __global const double *q,
+                          __global const int *zf, const int nf, const int init)
 {
-    const int i = get_global_id(0);
-    if (i < n2)
-        z[i] = v[i] + q[i] * S[S_STEP];
+    const int f = get_global_id(0);
+    if (f >= nf)
+        return;
+    const int node = zf[f];
+    if (init) {
+        Z[2 * node] = v[f];
+        Z[2 * node + 1] = v[nf + f];
+    } else {
+        const double step = S[S_STEP];
+        Z[2 * node] = v[f] + q[f] * step;
+        Z[2 * node + 1] = v[nf + f] + q[nf + f] * step;
+    }
 }
 
 #define JACOBIAN                                                              \
-    const double x0 = z[CI[4 * nc + k]], y0 = z[CI[5 * nc + k]];             \
-    const double e1x = z[CI[k]] - x0, e1y = z[CI[nc + k]] - y0;              \
-    const double e2x = z[CI[2 * nc + k]] - x0, e2y = z[CI[3 * nc + k]] - y0; \
-    const double w00 = W[k], w01 = W[nc + k], w11 = W[2 * nc + k];           \
+    const int4 ci = vload4(k, CI);                                           \
+    __global const double *wk = W + 4 * k;                                   \
+    const double2 p0 = vload2(ci.z, Z), p1 = vload2(ci.x, Z), p2 = vload2(ci.y, Z); \
+    const double x0 = p0.x, y0 = p0.y;                                       \
+    const double e1x = p1.x - x0, e1y = p1.y - y0;                           \
+    const double e2x = p2.x - x0, e2y = p2.y - y0;                           \
+    const double w00 = wk[0], w01 = wk[1], w11 = wk[2];                      \
     const double j00 = e1x * w00, j10 = e1y * w00;                           \
     const double j01 = e1x * w01 + e2x * w11, j11 = e1y * w01 + e2y * w11;   \
     const double d = j00 * j11 - j01 * j10;                                  \
     const double tf = ((j00 * j00 + j01 * j01) + j10 * j10) + j11 * j11;
 
-// W = [w00 | w01 | w11 | weight] (blocks of nc)
 #define FOLD_TERMS                                                           \
     const double eps = S[S_EPS], dd = d * d;                                 \
     const double root = SQRT(dd + eps * eps);                                \
     const double chi = (d >= 0.0) ? 0.5 * (d + root) : ((0.5 * eps) * eps) / (root + FABS(d)); \
     const double num = (1.0 - THETA) * tf + THETA * (dd + 1.0);              \
-    const double inv_chi = W[3 * nc + k] / chi;
+    const double inv_chi = wk[3] / chi;
 
 // _Energy._eval (power 1): partials of the terms num / chi w and the minimum det
-__kernel void fold_corner(__global const double *S, __global const int *PI,
-                          __global double *PD, __global const double *z,
-                          __global const int *CI, __global const double *W)
+// Leaf partials of the corner terms (in the sum's order) and the minimum det: TD holds a
+// record of rec doubles per corner, (term, det, ...)
+__kernel void corner_sum(__global const int *PI, __global double *PD,
+                         __global const double *TD, const int rec)
 {
     const Plan pl = plan_of(PI, PD);
     LEAF_HEAD(pl)
-    const int nc = pl.n;
     double mn = INFINITY;
     LEAF_SUMS(1, pl,
-        JACOBIAN
-        FOLD_TERMS
+        const double d = TD[rec * k + 1];
         mn = MIN_NAN(mn, d);
-        t[0] = num * inv_chi;)
+        t[0] = TD[rec * k];)
     pl.PMIN[w] = mn;
 }
 
-// dF/dE = dF/dJ W^-T of corner k into G = [ge1x | ge2x | ge1y | ge2y] (blocks of nc)
+// dF/dE = dF/dJ W^-T of corner k, written where the gradient gather reads it: GS holds
+// (x, y) pairs in the gather's order (each free node's terms, in np.bincount's order), SL
+// the slots of each corner's (i1 (e1), i2 (e2), i0 (-(e1 + e2))) (-1: a fixed node)
+static inline void put(__global double *GS, const int s, const double x, const double y)
+{
+    if (s >= 0) {
+        GS[2 * s] = x;
+        GS[2 * s + 1] = y;
+    }
+}
+
 #define CORNER_GRAD(a, b)                                                    \
     const double g00 = a * j00 + b * j11, g10 = a * j10 - b * j01;           \
     const double g01 = a * j01 - b * j10, g11 = a * j11 + b * j00;           \
-    G[k] = g00 * w00 + g01 * w01;                                            \
-    G[nc + k] = g01 * w11;                                                   \
-    G[2 * nc + k] = g10 * w00 + g11 * w01;                                   \
-    G[3 * nc + k] = g11 * w11;
+    const double ge1x = g00 * w00 + g01 * w01, ge1y = g10 * w00 + g11 * w01; \
+    const double ge2x = g01 * w11, ge2y = g11 * w11;                         \
+    put(GS, SL[3 * k], ge1x, ge1y);                                          \
+    put(GS, SL[3 * k + 1], ge2x, ge2y);                                      \
+    put(GS, SL[3 * k + 2], -(ge1x + ge2x), -(ge1y + ge2y));
 
-__kernel void fold_grad(__global const double *S, __global const double *z,
-                        __global const int *CI, __global const double *W, __global double *G,
-                        const int nc)
+// _Energy._eval (power 1) and _grad, corner k of the sweep: its term num / chi w and det
+// into TD at its place in the sum (CI.w), dF/dE into GS (used only if the point is accepted:
+// cheaper than a second pass over the corners)
+__kernel void fold_corner(__global const double *S, __global const double *Z,
+                          __global const int *CI, __global const double *W,
+                          __global double *TD, const int nc, __global const int *SL,
+                          __global double *GS)
 {
     const int k = get_global_id(0);
     if (k >= nc)
         return;
     JACOBIAN
     FOLD_TERMS
+    vstore2((double2)(num * inv_chi, d), ci.w, TD);
     const double a = (2.0 * (1.0 - THETA)) * inv_chi;
     const double b = inv_chi * ((2.0 * THETA) * d - num / root);
     CORNER_GRAD(a, b)
 }
 
-// _LiftEnergy._eval, corners: R = 1 / u = q_corner, partials of weight u, minimum det
-__kernel void lift_corner(__global const double *S, __global const int *PI,
-                          __global double *PD, __global const double *z,
+// _LiftEnergy._eval, corner k of the sweep: (its term weight u, det, 1 / u = q_corner) into
+// TD at its place in the sum (CI.w)
+__kernel void lift_corner(__global const double *S, __global const double *Z,
                           __global const int *CI, __global const double *W,
-                          __global double *R)
+                          __global double *TD, const int nc)
 {
-    const Plan pl = plan_of(PI, PD);
-    LEAF_HEAD(pl)
-    const int nc = pl.n;
-    double mn = INFINITY;
-    LEAF_SUMS(1, pl,
-        JACOBIAN
-        const double u = (0.5 * tf) / d;
-        R[k] = 1.0 / u;
-        mn = MIN_NAN(mn, d);
-        t[0] = W[3 * nc + k] * u;)
-    pl.PMIN[w] = mn;
+    const int k = get_global_id(0);
+    if (k >= nc)
+        return;
+    JACOBIAN
+    const double u = (0.5 * tf) / d;
+    vstore3((double3)(wk[3] * u, d, 1.0 / u), ci.w, TD);
 }
 
-// _LiftEnergy._eval, elements: q_e (its corners' R in index order / corners), the floor
-// term's partials, dF/dq_e into DQ. EI = [eptr (ne + 1) | corners by element]; EN = [corner
-// count | -1 / corner count] per element.
+// _LiftEnergy._eval, elements: q_e (its corners' q_corner in index order / corners), the
+// floor term's partials, and dF/dq_e dq_e/du_k u_k^2 = (-1 - k gap) (-1 / n_e) into DQ at
+// each of its corners' places in the sweep. EI = [eptr (ne + 1) | corners by element (sum
+// order) | the same corners' places in the sweep]; EN = [corner count | -1 / corner count].
 __kernel void lift_element(__global const double *S, __global const int *PI,
-                           __global double *PD, __global const double *R,
+                           __global double *PD, __global const double *TD,
                            __global const int *EI, __global const double *EN,
                            __global double *DQ)
 {
@@ -494,33 +527,33 @@ __kernel void lift_element(__global const double *S, __global const int *PI,
     LEAF_HEAD(pl)
     const int ne = pl.n;
     const double qc = S[S_QC], kq = (2.0 * PENALTY) / qc;
-    __global const int *ec = EI + ne + 1;
+    __global const int *ec = EI + ne + 1, *es = ec + EI[ne];
     LEAF_SUMS(1, pl,
         double sq = 0.0;
         for (int p = EI[k]; p < EI[k + 1]; ++p)
-            sq = sq + R[ec[p]];
+            sq = sq + TD[3 * ec[p] + 2];
         const double qe = sq / EN[k];
         double gap = qc - qe;
         gap = (isnan(gap) || gap >= 0.0) ? gap : 0.0;
         gap = gap / qc;
-        DQ[k] = -1.0 - kq * gap;
+        const double dq = (-1.0 - kq * gap) * EN[ne + k];
+        for (int p = EI[k]; p < EI[k + 1]; ++p)
+            DQ[es[p]] = dq;
         t[0] = (PENALTY * gap) * gap - qe;)
 }
 
-// eid: each corner's element
-__kernel void lift_grad(__global const double *z, __global const int *CI,
-                        __global const double *W, __global double *G, const int nc,
-                        __global const int *eid, __global const double *EN,
-                        __global const double *DQ, const int ne)
+// _LiftEnergy._grad, corner k of the sweep (DQ from lift_element)
+__kernel void lift_grad(__global const double *Z, __global const int *CI,
+                        __global const double *W, __global const int *SL, __global double *GS,
+                        const int nc, __global const double *DQ)
 {
     const int k = get_global_id(0);
     if (k >= nc)
         return;
     JACOBIAN
     const double u = (0.5 * tf) / d;
-    const int e = eid[k];
-    double de_du = (DQ[e] * EN[ne + e]) / (u * u);
-    de_du = de_du + BARRIER * W[3 * nc + k];
+    double de_du = DQ[k] / (u * u);
+    de_du = de_du + BARRIER * wk[3];
     const double a = de_du / d;
     const double b = (-de_du * u) / d;
     CORNER_GRAD(a, b)
@@ -570,47 +603,44 @@ __kernel void finish_trial(__global double *S, __global const int *PIc,
 
 // ---- gradient gather and the memory pair ------------------------------------------------
 
-// np.bincount of the corner gradients at free coordinate k: its row of GI = [row starts
-// (nf + 1) | positions], a position p < 2 nc names ge1 (p < nc) or ge2 of corner p mod nc,
-// p >= 2 nc the third node's -(ge1 + ge2) of corner p - 2 nc
-static double gather(const int k, const int nf, const int nc, __global const int *GI,
-                     __global const double *G)
+// np.bincount of the corner gradients, row r: its free node's GS pairs in order, from 0.0,
+// into out[f] (x) and out[nf + f] (y), f = the row's free node. rows = [row starts (nf + 1)
+// | free node of each row] (rows in Z order); init: 0 where the first point has none
+__kernel void gather_grad(__global const double *S, __global double *out,
+                          __global const int *rows, __global const double *GS, const int nf,
+                          const int init)
 {
-    const int f = (k < nf) ? k : k - nf;
-    __global const double *gc = G + ((k < nf) ? 0 : 2 * nc);
-    __global const int *pos = GI + nf + 1;
-    double s = 0.0;
-    for (int p = GI[f]; p < GI[f + 1]; ++p) {
-        const int c = pos[p];
-        s = s + ((c < 2 * nc) ? gc[c] : -(gc[c - 2 * nc] + gc[c - nc]));
+    const int r = get_global_id(0);
+    if (r >= nf)
+        return;
+    const int f = rows[nf + 1 + r];
+    double gx = 0.0, gy = 0.0;
+    for (int j = rows[r]; j < rows[r + 1]; ++j) {
+        gx = gx + GS[2 * j];
+        gy = gy + GS[2 * j + 1];
     }
-    return s;
+    if (init && S[S_OK] == 0.0)
+        gx = gy = 0.0;
+    out[f] = gx;
+    out[nf + f] = gy;
 }
 
-__kernel void gather_init(__global const double *S, __global double *g,
-                          __global const int *GI, __global const double *G, const int nf,
-                          const int nc)
-{
-    const int k = get_global_id(0);
-    if (k < 2 * nf)
-        g[k] = (S[S_OK] != 0.0) ? gather(k, nf, nc, GI, G) : 0.0;
-}
-
-// The accepted trial point vt = z: gt gathered, s = vt - v and y = gt - g into the spare
-// ring slot, v = vt, g = gt, partials of s.y, s.s, y.y, y.(dpre y)
+// The accepted trial point vt = v + q step with its gradient gt: s = vt - v and y = gt - g into the
+// spare ring slot, v = vt, g = gt, partials of s.y, s.s, y.y, y.(dpre y)
 __kernel void update(__global const double *S, __global const int *PI, __global double *PD,
-                     __global const double *z, __global double *v, __global double *g,
-                     __global const double *dpre, __global double *hs, __global double *hy,
-                     __global const int *GI, __global const double *G, const int nc)
+                     __global const double *q, __global const double *gt,
+                     __global double *v, __global double *g, __global const double *dpre,
+                     __global double *hs, __global double *hy)
 {
     const Plan pl = plan_of(PI, PD);
     LEAF_HEAD(pl)
-    const int n2 = pl.n, nf = n2 / 2;
+    const int n2 = pl.n;
     const int spare = SLOT((int)S[S_LEN]);
+    const double step = S[S_STEP];
     __global double *sn = hs + spare * n2, *yn = hy + spare * n2;
     LEAF_SUMS(4, pl,
-        const double gk = gather(k, nf, nc, GI, G);
-        const double vt = z[k];
+        const double gk = gt[k];
+        const double vt = v[k] + q[k] * step;
         const double sk = vt - v[k], yk = gk - g[k];
         sn[k] = sk;
         yn[k] = yk;

@@ -75,6 +75,35 @@ def reduction_plan(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(bounds, dtype=np.int64), np.asarray(first, dtype=np.int64)
 
 
+def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
+    """The corners in Z-order (Morton) along their centroids: a permutation of the corners
+    that keeps neighbours in space near each other in the sequence."""
+    c = sum(xy[i] for i in corner_nodes)
+    c = np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0)
+    lo = c.min(axis=0)
+    span = float((c.max(axis=0) - lo).max()) or 1.0
+    cells = ((c - lo) * (65535.0 / span)).astype(np.uint64)  # 16 bits per axis
+
+    def spread(b: np.ndarray) -> np.ndarray:  # bit k -> bit 2k
+        for shift, mask in ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555)):
+            b = (b | (b << np.uint64(shift))) & np.uint64(mask)
+        return b
+
+    return np.argsort(spread(cells[:, 0]) | (spread(cells[:, 1]) << np.uint64(1)), kind="stable")
+
+
+def _first_touch(nodes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(position of each of n nodes, node at each position) in the order of their first
+    occurrence in `nodes`; nodes that never occur come last, in index order."""
+    seen, first = np.unique(nodes, return_index=True)
+    when = np.full(n, nodes.size, dtype=np.int64)
+    when[seen] = first
+    order = np.argsort(when, kind="stable")
+    pos = np.empty(n, dtype=np.int64)
+    pos[order] = np.arange(n)
+    return pos, order
+
+
 class _Plan:
     """A reduction plan on the device: PI (sizes, leaf bounds, chunk starts) and PD (leaf
     partials, minima, chunk sums)."""
@@ -98,28 +127,38 @@ class _Tables:
         n2 = 2 * nf
         ne = en.n_elem if lift else 0
         self.n2, self.nc, self.ne = n2, nc, ne
-        # z = [v (n2) | x of fixed nodes | y of fixed nodes]: each node's positions in z
-        fixed = np.ones(nn, dtype=bool)
-        fixed[st.fidx] = False
-        fix = np.flatnonzero(fixed)
-        nx = fix.size
-        pos = np.empty((2, nn), dtype=np.int64)
-        pos[0, st.fidx] = np.arange(nf)
-        pos[1, st.fidx] = np.arange(nf, n2)
-        pos[0, fix] = np.arange(n2, n2 + nx)
-        pos[1, fix] = np.arange(n2 + nx, n2 + 2 * nx)
-        corner_pos = [pos[a, i] for i in (en.i1, en.i2, en.i0) for a in (0, 1)]
-        # gradient rows of the free nodes: np.bincount's order over idx = [i1, i2, i0]
-        ptr, order = bincount_csr(en.idx, nn)
-        cnt = ptr[st.fidx + 1] - ptr[st.fidx]
+        # Corner kernels run along a sweep (a space-filling curve over the corners), node
+        # coordinates live in Z in the order the sweep first touches them, and the gradient
+        # rows of the free nodes follow Z: neighbouring work-items touch neighbouring memory
+        # whatever the mesh's numbering (see the kernel source).
+        sweep = _sweep_order(np.stack([st.x, st.y], axis=1), en.i0, en.i1, en.i2)
+        i1, i2, i0 = en.i1[sweep], en.i2[sweep], en.i0[sweep]
+        zpos, order = _first_touch(np.stack([i1, i2, i0], axis=1).ravel(), nn)
+        self.zpos = zpos
+        rowf = np.argsort(zpos[st.fidx], kind="stable")  # row r: free node fidx[rowf[r]]
+        # each row's terms: np.bincount's order over idx = [i1, i2, i0]
+        ptr, by_node = bincount_csr(en.idx, nn)
+        nodes = st.fidx[rowf]
+        cnt = ptr[nodes + 1] - ptr[nodes]
         rows = np.zeros(nf + 1, dtype=np.int64)
         np.cumsum(cnt, out=rows[1:])
-        take = np.repeat(ptr[st.fidx] - rows[:-1], cnt) + np.arange(rows[-1])
-        gpos = order[take]  # position in [ge1 | ge2 | ge0] (blocks of nc)
-        ints = [np.concatenate(corner_pos), np.concatenate([rows, gpos])]
+        take = np.repeat(ptr[nodes] - rows[:-1], cnt) + np.arange(rows[-1])
+        slot = np.full(3 * nc, -1, dtype=np.int64)  # [e1 | e2 | -(e1 + e2)] -> gather slot
+        slot[by_node[take]] = np.arange(rows[-1])
+        self.n_slots = int(rows[-1])
+        del ptr, by_node, take, nodes, order
+        ints = [
+            np.stack([zpos[i1], zpos[i2], zpos[i0], sweep], axis=1).ravel(),
+            slot.reshape(3, nc).T[sweep].ravel(),  # per corner: its three gather slots
+            np.concatenate([rows, rowf]),  # row starts, each row's free node
+            zpos[st.fidx],  # each free node's place in Z
+        ]
+        del i0, i1, i2, slot
         if lift:
+            at = np.empty(nc, dtype=np.int64)
+            at[sweep] = np.arange(nc)  # each corner's place in the sweep
             eptr, ecorn = bincount_csr(en.eid, ne)
-            ints += [np.concatenate([eptr, ecorn]), en.eid]
+            ints.append(np.concatenate([eptr, ecorn, at[ecorn]]))
         self.plans = [_Plan(solver, n2, 4), _Plan(solver, nc, 1)]
         if lift:
             self.plans.append(_Plan(solver, ne, 1))
@@ -127,20 +166,24 @@ class _Tables:
         if max(int(a.max()) for a in ints if a.size) >= 2**31 or 4 * nc >= 2**31:
             raise ValueError("mesh too large for the parallel solver's 32-bit indices")
         buf, empty = solver._buffer, solver._empty
-        self.CI, self.GI = buf(ints[0]), buf(ints[1])
+        self.CI, self.SL, self.rows, self.zfree = (buf(a) for a in ints[:4])
         if lift:
-            self.EI, self.eid = buf(ints[2]), buf(ints[3])
+            self.EI = buf(ints[4])
             self.EN = buf(np.concatenate([en.n_corners, -1.0 / en.n_corners]))
-            self.R, self.DQ = empty(8 * nc), empty(8 * ne)
+            self.DQ = empty(8 * nc)  # per corner of the sweep
         self.PI = [buf(p.ints) for p in self.plans]
         self.PD = [empty(8 * p.pd_len) for p in self.plans]
-        self.W = buf(np.concatenate([en.w00, en.w01, en.w11, en.weight]))
+        self.W = buf(np.stack([en.w00, en.w01, en.w11, en.weight], axis=1)[sweep].ravel())
+        self.rec = 3 if lift else 2  # per corner, in the sum's order: (term, det[, 1 / u])
+        self.TD = empty(8 * self.rec * nc)
         self.dpre = buf(np.tile(en.precond[st.fidx], 2))
-        self.z = buf(np.concatenate([np.zeros(n2), st.x[fix], st.y[fix]]))
-        self.v, self.g, self.q = empty(8 * n2), empty(8 * n2), empty(8 * n2)
+        xy = np.empty((nn, 2))
+        xy[zpos, 0], xy[zpos, 1] = st.x, st.y
+        self.Z = buf(xy.ravel())  # node (x, y) pairs in Z order; the free ones: trial points
+        self.v, self.g, self.q, self.gt = (empty(8 * n2) for _ in range(4))
         ring = 8 * n2 * (gu.LBFGS_MEMORY + 1)  # M pairs and the candidate's spare slot
         self.hs, self.hy = empty(ring), empty(ring)
-        self.G = empty(8 * 4 * nc)
+        self.GS = empty(16 * self.n_slots)
 
     def bind(self, k: dict) -> None:
         """Set the arguments of the solver's kernels (once per table switch)."""
@@ -159,28 +202,26 @@ class _Tables:
         k["chunk_v4"].set_args(pv, dv, i32(4), i32(0))
         k["chunk_c"].set_args(pc, dc, i32(1), i32(1))
         k["forget"].set_args(S)
-        k["trial_point"].set_args(S, self.z, self.v, self.q, i32(self.n2))
-        corner = (S, pc, dc, self.z, self.CI, self.W)
+        nf = i32(self.n2 // 2)
+        k["trial_point"].set_args(S, self.Z, self.v, self.q, self.zfree, nf, i32(0))
+        k["place"].set_args(S, self.Z, self.v, self.q, self.zfree, nf, i32(1))
+        corner = (S, self.Z, self.CI, self.W, self.TD, i32(self.nc))
+        k["corner_sum"].set_args(pc, dc, self.TD, i32(self.rec))
         pe, de = (pe[0], de[0]) if self.lift else (pc, dc)
         for name, init in (("finish_trial", 0), ("finish_init", 1)):
             k[name].set_args(S, pc, dc, pe, de, i32(self.ne), i32(init))
         if self.lift:
-            k["lift_corner"].set_args(*corner, self.R)
-            k["lift_element"].set_args(S, pe, de, self.R, self.EI, self.EN, self.DQ)
+            k["lift_corner"].set_args(*corner)
+            k["lift_element"].set_args(S, pe, de, self.TD, self.EI, self.EN, self.DQ)
             k["chunk_e"].set_args(pe, de, i32(1), i32(0))
             k["lift_grad"].set_args(
-                self.z, self.CI, self.W, self.G, i32(self.nc), self.eid, self.EN, self.DQ,
-                i32(self.ne),
+                self.Z, self.CI, self.W, self.SL, self.GS, i32(self.nc), self.DQ
             )
         else:
-            k["fold_corner"].set_args(*corner)
-            k["fold_grad"].set_args(S, self.z, self.CI, self.W, self.G, i32(self.nc))
-        nf = i32(self.n2 // 2)
-        k["gather_init"].set_args(S, self.g, self.GI, self.G, nf, i32(self.nc))
-        k["update"].set_args(
-            *vec, self.z, self.v, self.g, self.dpre, self.hs, self.hy, self.GI, self.G,
-            i32(self.nc),
-        )
+            k["fold_corner"].set_args(*corner, self.SL, self.GS)
+        k["gather_init"].set_args(S, self.g, self.rows, self.GS, nf, i32(1))
+        k["gather_grad"].set_args(S, self.gt, self.rows, self.GS, nf, i32(0))
+        k["update"].set_args(*vec, self.q, self.gt, self.v, self.g, self.dpre, self.hs, self.hy)
         k["finish_pair"].set_args(*vec)
 
 
@@ -213,12 +254,15 @@ class ParallelLbfgs:
         m = gu.LBFGS_MEMORY
         self._k: dict = {name: [kern(name) for _ in range(m)]
                          for name in ("loop1", "loop2", "finish_alpha", "finish_coef")}
-        for name in ("mid", "finish_mid", "forget", "trial_point", "fold_corner", "fold_grad",
-                     "lift_corner", "lift_element", "lift_grad", "gather_init", "update",
-                     "finish_pair"):
+        self._k["trial_point"], self._k["place"] = kern("trial_point"), kern("trial_point")
+        for name in ("mid", "finish_mid", "forget", "fold_corner",
+                     "lift_corner", "lift_element", "lift_grad", "update", "finish_pair",
+                     "corner_sum"):
             self._k[name] = kern(name)
         for name in ("chunk_v1", "chunk_v4", "chunk_c", "chunk_e"):
             self._k[name] = kern("chunk_sums")
+        self._k["gather_grad"] = kern("gather_grad")
+        self._k["gather_init"] = kern("gather_grad")
         self._k["finish_trial"] = kern("finish_trial")
         self._k["finish_init"] = kern("finish_trial")
         s_len = 16 + m + 3 * (m + 1)
@@ -285,8 +329,9 @@ class ParallelLbfgs:
     def _energy(self, tb: _Tables, finish: str) -> None:
         """Energy and min det at z (`finish`: the Armijo test, or the starting point's)."""
         pc = tb.plans[1]
+        self._go("lift_corner" if tb.lift else "fold_corner", tb.nc)
         if tb.lift:
-            self._go("lift_corner", pc.leaf_items)
+            self._go("corner_sum", pc.leaf_items)
             if pc.n_chunks > 1:
                 self._go("chunk_c", pc.n_chunks)
             pe = tb.plans[2]
@@ -295,21 +340,25 @@ class ParallelLbfgs:
                 self._go("chunk_e", pe.n_chunks)
             self._one(finish)
         else:
-            self._reduce(self._k["fold_corner"], "chunk_c", pc, finish)
+            self._reduce(self._k["corner_sum"], "chunk_c", pc, finish)
 
     def _trial(self, tb: _Tables) -> np.ndarray:
         """One line-search trial; the status block."""
-        self._go("trial_point", tb.n2)
+        self._go("trial_point", tb.n2 // 2)
         self._energy(tb, "finish_trial")
         self.cl.enqueue_copy(self.queue, self._rb, self.S)
         return self._rb
 
     def _gradient(self, tb: _Tables) -> None:
-        self._go("lift_grad" if tb.lift else "fold_grad", tb.nc)
+        """dF/dE per corner at the last evaluated point (fold_corner wrote the foldover-free
+        energy's already)."""
+        if tb.lift:
+            self._go("lift_grad", tb.nc)
 
     def _accept(self, tb: _Tables) -> None:
         """Gradient at the accepted point, the new pair and the memory update."""
         self._gradient(tb)
+        self._go("gather_grad", tb.n2 // 2)
         self._reduce(self._k["update"], "chunk_v4", tb.plans[0], "finish_pair")
 
     def __call__(
@@ -339,13 +388,14 @@ class ParallelLbfgs:
         v0 = np.ascontiguousarray(v0, dtype=np.float64)
         cl.enqueue_copy(queue, self.S, s)
         cl.enqueue_copy(queue, tb.v, v0)
-        cl.enqueue_copy(queue, tb.z, v0)
+        self._go("place", tb.n2 // 2)
         self._energy(tb, "finish_init")
         self._gradient(tb)
-        self._go("gather_init", tb.n2)
+        self._go("gather_init", tb.n2 // 2)
         cl.enqueue_copy(queue, self._rb, self.S)
         e_hist = [float(self._rb[_ET])]
-        it, pairs, at = 0, 0, tb.v  # pairs: most the device may hold; at: the current point
+        it, pairs = 0, 0  # pairs: the most the device may hold
+        trial = False  # the current point is the accepted trial in Z (not yet in v)
         m = gu.LBFGS_MEMORY
         while it < max_it:
             it += 1
@@ -369,7 +419,7 @@ class ParallelLbfgs:
                     pairs = 0
                     continue
                 break
-            at = tb.z
+            trial = True
             e, dmin_t = float(rb[_ET]), float(rb[_DMIN])
             if not guard and dmin_t > 0.0:  # just became valid
                 break
@@ -381,7 +431,12 @@ class ParallelLbfgs:
             if it < max_it:
                 self._accept(tb)
                 pairs = min(n_pairs + 1, m)
-                at = tb.v
+                trial = False
+        if trial:  # the free rows of Z
+            xy = np.empty(2 * en.n_nodes, dtype=np.float64)
+            cl.enqueue_copy(queue, xy, tb.Z)
+            zf = 2 * tb.zpos[st.fidx]
+            return np.concatenate([xy[zf], xy[zf + 1]]), it
         v = np.empty(tb.n2, dtype=np.float64)
-        cl.enqueue_copy(queue, v, at)
+        cl.enqueue_copy(queue, v, tb.v)
         return v, it
