@@ -29,6 +29,11 @@ CHUNK = 8192  # NumPy's reduction buffer (np.getbufsize())
 BLOCK = 128  # NumPy's pairwise base block
 LOCAL_SIZE = 64  # work-group size (any value gives the same bits; 64 was fastest on pocl)
 TRIALS = 40  # line-search halvings, as in _lbfgs
+INDEX_LIMIT = 2**31  # the kernels' indices are 32-bit: larger tables use the host solver
+# Below this many energy corners the single-work-item kernel beats the parallel kernels on
+# the pocl CPU device (~35 launches and a read per iteration, ~0.15 ms; crossover measured
+# at 10-20k corners by bench/lbfgs_parallel_bench.py)
+SMALL_CORNERS = 20_000
 # status block (S[0:8], see the kernel source)
 _STATUS, _ET, _DMIN, _LEN = 0, 1, 2, 3
 _S_EPS, _S_QC, _S_H0, _S_GUARD = 8, 9, 10, 11
@@ -36,14 +41,30 @@ _REJECTED, _ACCEPTED, _NOT_DESCENT = 0, 1, 2
 _solvers: dict[tuple, ParallelLbfgs] = {}
 
 
-def device_solver(lanes: int | None = None, local_size: int | None = LOCAL_SIZE) -> ParallelLbfgs:
+def device_solver(
+    lanes: int | None = None,
+    local_size: int | None = LOCAL_SIZE,
+    small_corners: int | None = None,
+) -> ParallelLbfgs:
     """The parallel solver of the chosen OpenCL device, made once per process, device and
-    settings; RuntimeError when there is no device or the kernels do not build."""
+    settings; RuntimeError when there is no device or the kernels do not build.
+
+    On a CPU device, problems with fewer than `small_corners` energy corners (None:
+    SMALL_CORNERS) go to the single-work-item kernel (core/lbfgs_opencl.py), faster there;
+    elsewhere every problem runs in parallel. Either way the result is the host's."""
     rt = _runtime()
-    key = (rt.name, lanes, local_size)
+    if small_corners is None:
+        small_corners = SMALL_CORNERS if rt.is_cpu else 0
+    key = (rt.name, lanes, local_size, small_corners)
     solver = _solvers.get(key)
     if solver is None:
-        solver = _solvers[key] = ParallelLbfgs(lanes=lanes, local_size=local_size)
+        small = None
+        if small_corners > 0:
+            from .lbfgs_opencl import OpenCLLbfgs
+
+            small = OpenCLLbfgs()
+        solver = ParallelLbfgs(lanes, local_size, small=small, small_corners=small_corners)
+        _solvers[key] = solver
     return solver
 
 
@@ -163,7 +184,9 @@ class _Tables:
         if lift:
             self.plans.append(_Plan(solver, ne, 1))
         ints += [p.ints for p in self.plans]
-        if max(int(a.max()) for a in ints if a.size) >= 2**31 or 4 * nc >= 2**31:
+        sizes = [6 * nc, (gu.LBFGS_MEMORY + 1) * n2, 2 * nn]  # the largest offsets used
+        top = max([int(a.max()) for a in ints if a.size] + sizes)
+        if top >= INDEX_LIMIT:
             raise ValueError("mesh too large for the parallel solver's 32-bit indices")
         buf, empty = solver._buffer, solver._empty
         self.CI, self.SL, self.rows, self.zfree = (buf(a) for a in ints[:4])
@@ -231,9 +254,18 @@ class ParallelLbfgs:
     lanes: work-items per leaf of 128 terms in the reductions (1: one work-item sums a leaf,
     best on CPUs; 8: one per partial sum, more parallelism for GPUs; None: 1 on CPU devices,
     8 elsewhere). local_size: the work-group size (None: the implementation's choice).
-    Neither changes the result."""
+    Neither changes the result. small: a solver with the same contract (the single-work-item
+    kernel) for problems with fewer than small_corners energy corners."""
 
-    def __init__(self, lanes: int | None = None, local_size: int | None = LOCAL_SIZE):
+    def __init__(
+        self,
+        lanes: int | None = None,
+        local_size: int | None = LOCAL_SIZE,
+        *,
+        small: Callable[..., tuple[np.ndarray, int]] | None = None,
+        small_corners: int = 0,
+    ):
+        self.small, self.small_corners = small, int(small_corners) if small else 0
         rt = _runtime()
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
@@ -274,6 +306,8 @@ class ParallelLbfgs:
     def release(self) -> None:
         """Forget the uploaded tables (and the energy they came from): end of a run."""
         self._last = None
+        if self.small is not None and hasattr(self.small, "release"):
+            self.small.release()
 
     def _buffer(self, a: np.ndarray):
         mf = self.cl.mem_flags
@@ -376,6 +410,8 @@ class ParallelLbfgs:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
         if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernels: the host's
             return gu._lbfgs(en, st, v0, eps, **kw)
+        if en.i0.size < self.small_corners:
+            return self.small(en, st, v0, eps, **kw)
         try:
             tb = self._tables_for(en, st)
         except ValueError:  # indices beyond 32 bits: the host solver, same result
