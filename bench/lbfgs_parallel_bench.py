@@ -14,13 +14,17 @@ gradient at the accepted point and the memory update. Each time is the median ov
 runs stop only at the cap or (untangle) when the mesh becomes valid; the iterations are
 printed (the same for every solver: checked with the end points); the solvers' tables are
 built before.
-Also checks that the three solvers end at the same point (bit for bit).
+Also checks that the three solvers end at the same point (bit for bit), and prints the
+process CPU time per iteration (every thread, the device's included): on a machine shared
+with other jobs it tells the work apart from the waiting (wall = CPU / cores when the
+device's threads have the cores to themselves).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import time
 
@@ -69,27 +73,38 @@ def problems(n: int):
     return fs.n_faces, out
 
 
+def cpu_seconds() -> float:
+    """CPU time of this process, all threads (the pocl device's included)."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def per_iteration(run, en, st, v0, eps, guard, short: int, long: int, repeats: int):
-    """(median seconds per iteration, end point of the long run)."""
-    run(en, st, v0, eps, max_it=1, guard=guard, rel_tol=0.0)  # tables, kernel builds
-    times, end = [], None
+    """(median wall seconds, median CPU seconds per iteration, end point of the long run).
+    A stage that stops before `long` iterations (untangling reaches a valid mesh) is timed
+    over (its iterations // 3, its iterations)."""
+    _, its = run(en, st, v0, eps, max_it=long, guard=guard, rel_tol=0.0)  # tables, builds
+    if its < long:
+        short, long = its // 3, its
+    wall, cpu, end = [], [], None
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_seconds()
         _, its_s = run(en, st, v0, eps, max_it=short, guard=guard, rel_tol=0.0)
-        t1 = time.perf_counter()
+        t1, c1 = time.perf_counter(), cpu_seconds()
         end, its_l = run(en, st, v0, eps, max_it=long, guard=guard, rel_tol=0.0)
-        t2 = time.perf_counter()
+        t2, c2 = time.perf_counter(), cpu_seconds()
         if its_l <= its_s:
             raise RuntimeError(f"stopped early: {its_s}, {its_l} iterations")
-        times.append(((t2 - t1) - (t1 - t0)) / (its_l - its_s))
-    return statistics.median(times), (end, its_s, its_l)
+        wall.append(((t2 - t1) - (t1 - t0)) / (its_l - its_s))
+        cpu.append(((c2 - c1) - (c1 - c0)) / (its_l - its_s))
+    return statistics.median(wall), statistics.median(cpu), (end, its_s, its_l)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--iters", type=int, nargs=2, default=[3, 13], metavar=("SHORT", "LONG"))
+    ap.add_argument("--iters", type=int, nargs=2, default=[10, 30], metavar=("SHORT", "LONG"))
     ap.add_argument("--only", default="numpy,single,parallel")
     args = ap.parse_args()
     sv = solvers(set(args.only.split(",")))
@@ -97,23 +112,25 @@ def main() -> None:
     print(f"device: {sv.get('device', 'none')}; load before: "
           + "/".join(f"{x:.2f}" for x in os.getloadavg()))
     head = "| triangles | stage | corners | iterations | " + " | ".join(f"{k} ms" for k in names)
-    head += " | parallel vs numpy | parallel vs single | same point |"
+    head += " | parallel vs numpy | parallel vs single | CPU ms " + "/".join(names)
+    head += " | same point |"
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     for n in args.sizes:
         n_faces, probs = problems(n)
         for stage, en, st, v0, eps, guard in probs:
-            res, ends = {}, []
+            res, cpu, ends = {}, {}, []
             for k in names:
-                res[k], end = per_iteration(sv[k], en, st, v0, eps, guard, *args.iters,
-                                            args.repeats)
+                res[k], cpu[k], end = per_iteration(sv[k], en, st, v0, eps, guard, *args.iters,
+                                                    args.repeats)
                 ends.append(end)
             same = all(np.array_equal(ends[0][0], e[0]) and ends[0][1:] == e[1:] for e in ends)
             its = f"{ends[0][1]}/{ends[0][2]}"
             ms = " | ".join(f"{1e3 * res[k]:.2f}" for k in names)
             r_np = f"{res['numpy'] / res['parallel']:.1f}x" if {"numpy", "parallel"} <= res.keys() else "-"
             r_si = f"{res['single'] / res['parallel']:.1f}x" if {"single", "parallel"} <= res.keys() else "-"
-            print(f"| {n_faces} | {stage} | {en.i0.size} | {its} | {ms} | {r_np} | {r_si} | {same} |",
+            c_ms = "/".join(f"{1e3 * cpu[k]:.1f}" for k in names)
+            print(f"| {n_faces} | {stage} | {en.i0.size} | {its} | {ms} | {r_np} | {r_si} | {c_ms} | {same} |",
                   flush=True)
         for k in names:
             if hasattr(sv[k], "release"):

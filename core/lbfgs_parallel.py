@@ -96,21 +96,43 @@ def reduction_plan(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(bounds, dtype=np.int64), np.asarray(first, dtype=np.int64)
 
 
-def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
-    """The corners in Z-order (Morton) along their centroids: a permutation of the corners
-    that keeps neighbours in space near each other in the sequence."""
-    c = sum(xy[i] for i in corner_nodes)
+RUN_BREAK = 30.0  # a run of the sweep ends where a corner lies this many median steps away
+
+
+def _morton(c: np.ndarray) -> np.ndarray:
+    """Z-order (Morton) keys of 2D points: 16 bits per axis, interleaved."""
     c = np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0)
     lo = c.min(axis=0)
     span = float((c.max(axis=0) - lo).max()) or 1.0
-    cells = ((c - lo) * (65535.0 / span)).astype(np.uint64)  # 16 bits per axis
+    cells = ((c - lo) * (65535.0 / span)).astype(np.uint64)
 
     def spread(b: np.ndarray) -> np.ndarray:  # bit k -> bit 2k
         for shift, mask in ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555)):
             b = (b | (b << np.uint64(shift))) & np.uint64(mask)
         return b
 
-    return np.argsort(spread(cells[:, 0]) | (spread(cells[:, 1]) << np.uint64(1)), kind="stable")
+    return spread(cells[:, 0]) | (spread(cells[:, 1]) << np.uint64(1))
+
+
+def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
+    """A permutation of the corners that keeps neighbours in space near each other in the
+    sequence and keeps the mesh's own order where it is already local: the corners are cut
+    into runs where consecutive corners lie near each other (a jump of more than RUN_BREAK
+    median steps between centroids starts a new run) and the runs are ordered along a
+    Z-order curve through their first corners. Neighbouring corners of a run also sit
+    together in the sums, so their terms are written together."""
+    c = sum(xy[i] for i in corner_nodes)
+    if c.shape[0] < 2:
+        return np.arange(c.shape[0])
+    step = np.hypot(*np.diff(c, axis=0).T)
+    breaks = np.flatnonzero(~(step <= RUN_BREAK * np.median(step))) + 1  # NaN: a break
+    first = np.concatenate([[0], breaks])
+    run = np.zeros(c.shape[0], dtype=np.int64)
+    run[breaks] = 1
+    np.cumsum(run, out=run)
+    rank = np.empty(first.size, dtype=np.int64)
+    rank[np.argsort(_morton(c[first]), kind="stable")] = np.arange(first.size)
+    return np.argsort(rank[run], kind="stable")  # runs by rank, each in its own order
 
 
 def _first_touch(nodes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
