@@ -14,8 +14,9 @@
 //     (a leaf under 8 terms: 0.0 + its terms in order). A work-item computes LPW = 8 / LANES
 //     of those partial sums: LANES 1 finishes the leaf itself, LANES > 1 writes its lanes'
 //     partial sums and tail terms, which the next stage combines in that fixed order;
-//   - one work-item per chunk adds its leaves along the same binary tree (chunk_sums), and
-//     a single-work-item finish kernel adds the chunk sums in order, from 0.0.
+//   - one work-item per chunk adds its leaves along the same binary tree (chunk_sums; with
+//     LANES > 1 a work-group of 64 per chunk, one work-item per leaf, then one walks the
+//     tree), and a single-work-item finish kernel adds the chunk sums in order, from 0.0.
 // The partition is fixed by n alone, so the bits do not depend on the work-group size or on
 // LANES. min/max reductions keep NumPy's NaN semantics (a NaN wins; otherwise the order does
 // not matter).
@@ -227,8 +228,47 @@ static double chunk_sum(__global const double *P, const int first, const int m)
     return ret;
 }
 
-// One work-item per chunk: the chunk's pairwise sum of each of the first `sums` sums, and
-// (mins != 0) the minimum of its work-items' minima
+// The pairwise tree of one chunk of m terms over its leaf sums L[0 ..] (local memory)
+static double chunk_tree(__local const double *L, const int m)
+{
+    int fn[10], fs[10];
+    double fl[10];
+    int sp = 0, leaf = 0;
+    double ret = 0.0;
+    fn[0] = m;
+    fs[0] = 0;
+    while (sp >= 0) {
+        const int k = fn[sp];
+        int k2 = k / 2;
+        k2 -= k2 % 8;
+        if (fs[sp] == 0) {
+            if (k <= PW_BLOCK) {
+                ret = L[leaf];
+                ++leaf;
+                --sp;
+            } else {
+                fs[sp] = 1;
+                ++sp;
+                fn[sp] = k2;
+                fs[sp] = 0;
+            }
+        } else if (fs[sp] == 1) {
+            fl[sp] = ret;
+            fs[sp] = 2;
+            ++sp;
+            fn[sp] = k - k2;
+            fs[sp] = 0;
+        } else {
+            ret = fl[sp] + ret;
+            --sp;
+        }
+    }
+    return ret;
+}
+
+#if LANES == 1
+// One work-item per chunk (the leaf sums are final): the chunk's pairwise sum of each of the
+// first `sums` sums, and (mins != 0) the minimum of its work-items' minima
 __kernel void chunk_sums(__global const int *PI, __global double *PD, const int sums,
                          const int mins)
 {
@@ -246,13 +286,55 @@ __kernel void chunk_sums(__global const int *PI, __global double *PD, const int 
         pl.CM[c] = mn;
     }
 }
+#else
+// One work-group of WG_CHUNK work-items per chunk: they combine the lane partials of the
+// chunk's leaves (64 to 128 of them: leaves of a split chunk have 64 to 128 terms), then one
+// adds the leaves along the chunk's tree (the same sums and minima as above; always run,
+// even for one chunk, so that no single work-item walks a whole chunk)
+#define WG_CHUNK 64
+#define MAX_LEAVES (CHUNK / 64)
+__kernel __attribute__((reqd_work_group_size(WG_CHUNK, 1, 1)))
+void chunk_sums(__global const int *PI, __global double *PD, const int sums, const int mins)
+{
+    __local double L[MAX_LEAVES];
+    const Plan pl = plan_of(PI, PD);
+    const int c = get_group_id(0), l = get_local_id(0);
+    const int on = c < pl.nch;
+    const int first = on ? pl.cl[c] : 0, leaves = on ? pl.cl[c + 1] - first : 0;
+    const int m = on ? min(CHUNK, pl.n - c * CHUNK) : 0;
+    for (int s = 0; s < sums; ++s) {
+        for (int j = l; j < leaves; j += WG_CHUNK)
+            L[j] = leaf_sum(pl.P + s * pl.ps, first + j, pl.lb[first + j + 1] - pl.lb[first + j]);
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (l == 0 && on)
+            pl.CS[s * pl.nch + c] = chunk_tree(L, m);
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (mins) {
+        double mn = INFINITY;
+        for (int j = l; j < leaves; j += WG_CHUNK)
+            for (int k = (first + j) * LANES; k < (first + j + 1) * LANES; ++k)
+                mn = MIN_NAN(mn, pl.PMIN[k]);
+        L[l] = mn;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (l == 0 && on) {
+            for (int k = 1; k < WG_CHUNK; ++k)
+                mn = MIN_NAN(mn, L[k]);
+            pl.CM[c] = mn;
+        }
+    }
+}
+#endif
 
-// np.add.reduce of sum s: the chunk sums in order from 0.0 (one chunk: its tree here)
+// np.add.reduce of sum s: the chunk sums in order from 0.0 (one chunk and final leaf sums:
+// its tree here)
 static double total(const Plan *pl, const int s)
 {
     double acc = 0.0;
+#if LANES == 1
     if (pl->nch == 1)
         return acc + chunk_sum(pl->P + s * pl->ps, 0, pl->n);
+#endif
     for (int c = 0; c < pl->nch; ++c)
         acc = acc + pl->CS[s * pl->nch + c];
     return acc;
@@ -261,13 +343,15 @@ static double total(const Plan *pl, const int s)
 static double total_min(const Plan *pl)
 {
     double mn = INFINITY;
+#if LANES == 1
     if (pl->nch == 1) {
-        for (int k = 0; k < pl->nl * LANES; ++k)
+        for (int k = 0; k < pl->nl; ++k)
             mn = MIN_NAN(mn, pl->PMIN[k]);
-    } else {
-        for (int c = 0; c < pl->nch; ++c)
-            mn = MIN_NAN(mn, pl->CM[c]);
+        return mn;
     }
+#endif
+    for (int c = 0; c < pl->nch; ++c)
+        mn = MIN_NAN(mn, pl->CM[c]);
     return mn;
 }
 

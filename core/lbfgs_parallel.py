@@ -365,11 +365,22 @@ class ParallelLbfgs:
         kernel = self._k[name] if isinstance(name, str) else name
         self.cl.enqueue_nd_range_kernel(self.queue, kernel, (1,), (1,))
 
-    def _reduce(self, kernel, chunk: str, plan: _Plan, finish) -> None:
-        """A leaf kernel, the chunk sums when there are several chunks, its finish."""
-        self._go(kernel, plan.leaf_items)
-        if plan.n_chunks > 1:
+    def _chunks(self, chunk: str, plan: _Plan) -> None:
+        """The chunk sums of a plan: one work-item per chunk when there are several chunks
+        (one chunk: its finish kernel walks it); with lanes > 1 a work-group of 64 per
+        chunk, always (see chunk_sums in the kernel source)."""
+        if self.lanes > 1:
+            n = 64  # WG_CHUNK in the kernel source
+            self.cl.enqueue_nd_range_kernel(
+                self.queue, self._k[chunk], (n * plan.n_chunks,), (n,)
+            )
+        elif plan.n_chunks > 1:
             self._go(chunk, plan.n_chunks)
+
+    def _reduce(self, kernel, chunk: str, plan: _Plan, finish) -> None:
+        """A leaf kernel, its chunk sums and its finish."""
+        self._go(kernel, plan.leaf_items)
+        self._chunks(chunk, plan)
         self._one(finish)
 
     def _direction(self, tb: _Tables, pairs: int) -> None:
@@ -388,12 +399,10 @@ class ParallelLbfgs:
         self._go("lift_corner" if tb.lift else "fold_corner", tb.nc)
         if tb.lift:
             self._go("corner_sum", pc.leaf_items)
-            if pc.n_chunks > 1:
-                self._go("chunk_c", pc.n_chunks)
+            self._chunks("chunk_c", pc)
             pe = tb.plans[2]
             self._go("lift_element", pe.leaf_items)
-            if pe.n_chunks > 1:
-                self._go("chunk_e", pe.n_chunks)
+            self._chunks("chunk_e", pe)
             self._one(finish)
         else:
             self._reduce(self._k["corner_sum"], "chunk_c", pc, finish)

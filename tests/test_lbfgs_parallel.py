@@ -174,7 +174,9 @@ def device_sum(rt, prg, lanes: int, x: np.ndarray, local_size: int) -> tuple[flo
     fin.set_args(PI, PD, OUT)
     gs = -(-plan.leaf_items // local_size) * local_size
     cl.enqueue_nd_range_kernel(rt.queue, leaf, (gs,), (local_size,))
-    if plan.n_chunks > 1:
+    if lanes > 1:  # a work-group of 64 per chunk, always
+        cl.enqueue_nd_range_kernel(rt.queue, chunk, (64 * plan.n_chunks,), (64,))
+    elif plan.n_chunks > 1:  # a work-item per chunk; one chunk: the finish walks it
         cl.enqueue_nd_range_kernel(rt.queue, chunk, (plan.n_chunks,), None)
     cl.enqueue_nd_range_kernel(rt.queue, fin, (1,), (1,))
     cl.enqueue_copy(rt.queue, out, OUT)
