@@ -127,21 +127,21 @@ def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
     step = np.hypot(*np.diff(c, axis=0).T)
     breaks = np.flatnonzero(~(step <= RUN_BREAK * np.median(step))) + 1  # NaN: a break
     first = np.concatenate([[0], breaks])
-    run = np.zeros(c.shape[0], dtype=np.int64)
-    run[breaks] = 1
-    np.cumsum(run, out=run)
-    rank = np.empty(first.size, dtype=np.int64)
-    rank[np.argsort(_morton(c[first]), kind="stable")] = np.arange(first.size)
-    return np.argsort(rank[run], kind="stable")  # runs by rank, each in its own order
+    length = np.diff(np.append(first, c.shape[0]))
+    by_key = np.argsort(_morton(c[first]), kind="stable")
+    start, length = first[by_key], length[by_key]
+    to = np.cumsum(length) - length  # where each run goes
+    return np.arange(c.shape[0]) + np.repeat(start - to, length)  # runs in their own order
 
 
 def _first_touch(nodes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(position of each of n nodes, node at each position) in the order of their first
-    occurrence in `nodes`; nodes that never occur come last, in index order."""
-    seen, first = np.unique(nodes, return_index=True)
+    occurrence in `nodes`; nodes that never occur come last, in index order. (Only memory
+    locality depends on the order: any permutation gives the same results.)"""
+    at = np.arange(nodes.size)
     when = np.full(n, nodes.size, dtype=np.int64)
-    when[seen] = first
-    order = np.argsort(when, kind="stable")
+    when[nodes[::-1]] = at[::-1]  # the earliest occurrence (NumPy assigns in order)
+    order = np.concatenate([nodes[when[nodes] == at], np.flatnonzero(when == nodes.size)])
     pos = np.empty(n, dtype=np.int64)
     pos[order] = np.arange(n)
     return pos, order
@@ -178,7 +178,9 @@ class _Tables:
         i1, i2, i0 = en.i1[sweep], en.i2[sweep], en.i0[sweep]
         zpos, order = _first_touch(np.stack([i1, i2, i0], axis=1).ravel(), nn)
         self.zpos = zpos
-        rowf = np.argsort(zpos[st.fidx], kind="stable")  # row r: free node fidx[rowf[r]]
+        vpos = np.full(nn, -1, dtype=np.int64)
+        vpos[st.fidx] = np.arange(nf)
+        rowf = vpos[order[vpos[order] >= 0]]  # row r (Z order): free node fidx[rowf[r]]
         # each row's terms: np.bincount's order over idx = [i1, i2, i0]
         ptr, by_node = bincount_csr(en.idx, nn)
         nodes = st.fidx[rowf]

@@ -218,6 +218,24 @@ def test_reduction_plan_cuts_like_numpy():
     assert lp.reduction_plan(5)[0].tolist() == [0, 5]
 
 
+def test_sweep_and_first_touch_are_permutations():
+    """The memory orders (corner sweep, node places) are permutations whatever the input:
+    random corners, repeated and unused nodes, NaN positions, fewer than two corners."""
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 7, 500):
+        nodes = rng.integers(0, n, 3 * n)
+        pos, order = lp._first_touch(nodes, n + 3)  # three nodes never touched
+        assert np.array_equal(np.sort(order), np.arange(n + 3))
+        assert np.array_equal(pos[order], np.arange(n + 3))
+        _, first = np.unique(nodes, return_index=True)
+        assert np.array_equal(order[: first.size], nodes[np.sort(first)])
+        xy = rng.random((n, 2))
+        xy[0] = np.nan
+        corners = [rng.integers(0, n, 2 * n) for _ in range(3)]
+        assert np.array_equal(np.sort(lp._sweep_order(xy, *corners)), np.arange(2 * n))
+    assert lp._sweep_order(np.zeros((3, 2)), *(np.array([1]),) * 3).tolist() == [0]
+
+
 # ---- solver paths --------------------------------------------------------------------------
 
 
