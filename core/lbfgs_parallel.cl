@@ -32,8 +32,8 @@
 //              lift_corner (terms and dets, one work-item per corner), corner_sum (their
 //              leaf partials and minimum), lift_element (lift: per-element terms),
 //              finish_trial (the Armijo test)
-//   accepted:  lift_grad (dF/dE per corner, written in the gather's order; fold_corner
-//              writes the foldover-free energy's with each trial),
+//   accepted:  fold_grad or lift_grad (dF/dE per corner, written in the gather's order;
+//              fold_corner can write it with the trial instead),
 //              gather_grad (the gradient, one work-item per free node), update (s and y into the spare ring slot,
 //              v = vt, g = gt, partials of s.y, s.s, y.y, y.dpre y), finish_pair (the
 //              L-BFGS memory update)
@@ -565,13 +565,13 @@ static inline void put(__global double *GS, const int s, const double x, const d
     put(GS, SL[3 * k + 1], ge2x, ge2y);                                      \
     put(GS, SL[3 * k + 2], -(ge1x + ge2x), -(ge1y + ge2y));
 
-// _Energy._eval (power 1) and _grad, corner k of the sweep: its term num / chi w and det
-// into TD at its place in the sum (CI.w), dF/dE into GS (used only if the point is accepted:
-// cheaper than a second pass over the corners)
+// _Energy._eval (power 1), corner k of the sweep: its term num / chi w and det into TD at
+// its place in the sum (CI.w); with_grad: _grad's dF/dE into GS too (one pass when the
+// trial is accepted; the host asks for it when the first trial usually is)
 __kernel void fold_corner(__global const double *S, __global const double *Z,
                           __global const int *CI, __global const double *W,
                           __global double *TD, const int nc, __global const int *SL,
-                          __global double *GS)
+                          __global double *GS, const int with_grad)
 {
     const int k = get_global_id(0);
     if (k >= nc)
@@ -579,6 +579,23 @@ __kernel void fold_corner(__global const double *S, __global const double *Z,
     JACOBIAN
     FOLD_TERMS
     vstore2((double2)(num * inv_chi, d), ci.w, TD);
+    if (with_grad) {
+        const double a = (2.0 * (1.0 - THETA)) * inv_chi;
+        const double b = inv_chi * ((2.0 * THETA) * d - num / root);
+        CORNER_GRAD(a, b)
+    }
+}
+
+// _Energy._grad at the last trial point (accepted after a trial without the gradient)
+__kernel void fold_grad(__global const double *S, __global const double *Z,
+                        __global const int *CI, __global const double *W,
+                        __global const int *SL, __global double *GS, const int nc)
+{
+    const int k = get_global_id(0);
+    if (k >= nc)
+        return;
+    JACOBIAN
+    FOLD_TERMS
     const double a = (2.0 * (1.0 - THETA)) * inv_chi;
     const double b = inv_chi * ((2.0 * THETA) * d - num / root);
     CORNER_GRAD(a, b)

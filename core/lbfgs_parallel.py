@@ -265,7 +265,9 @@ class _Tables:
                 self.Z, self.CI, self.W, self.SL, self.GS, i32(self.nc), self.DQ
             )
         else:
-            k["fold_corner"].set_args(*corner, self.SL, self.GS)
+            k["fold_corner"].set_args(*corner, self.SL, self.GS, i32(0))
+            k["fold_corner_grad"].set_args(*corner, self.SL, self.GS, i32(1))
+            k["fold_grad"].set_args(S, self.Z, self.CI, self.W, self.SL, self.GS, i32(self.nc))
         k["gather_init"].set_args(S, self.g, self.rows, self.GS, nf, i32(1))
         k["gather_grad"].set_args(S, self.gt, self.rows, self.GS, nf, i32(0))
         k["update"].set_args(*vec, self.q, self.gt, self.v, self.g, self.dpre, self.hs, self.hy)
@@ -311,7 +313,8 @@ class ParallelLbfgs:
         self._k: dict = {name: [kern(name) for _ in range(m)]
                          for name in ("loop1", "loop2", "finish_alpha", "finish_coef")}
         self._k["trial_point"], self._k["place"] = kern("trial_point"), kern("trial_point")
-        for name in ("mid", "finish_mid", "forget", "fold_corner",
+        self._k["fold_corner_grad"] = kern("fold_corner")
+        for name in ("mid", "finish_mid", "forget", "fold_corner", "fold_grad",
                      "lift_corner", "lift_element", "lift_grad", "update", "finish_pair",
                      "corner_sum"):
             self._k[name] = kern(name)
@@ -395,10 +398,14 @@ class ParallelLbfgs:
         for h in range(pairs):
             self._reduce(k["loop2"][h], "chunk_v1", pv, k["finish_coef"][h])
 
-    def _energy(self, tb: _Tables, finish: str) -> None:
-        """Energy and min det at z (`finish`: the Armijo test, or the starting point's)."""
+    def _energy(self, tb: _Tables, finish: str, grad: bool = False) -> None:
+        """Energy and min det at the point in Z (`finish`: the Armijo test, or the starting
+        point's); grad: the foldover-free energy's gradient terms too."""
         pc = tb.plans[1]
-        self._go("lift_corner" if tb.lift else "fold_corner", tb.nc)
+        if tb.lift:
+            self._go("lift_corner", tb.nc)
+        else:
+            self._go("fold_corner_grad" if grad else "fold_corner", tb.nc)
         if tb.lift:
             self._go("corner_sum", pc.leaf_items)
             self._chunks("chunk_c", pc)
@@ -409,22 +416,22 @@ class ParallelLbfgs:
         else:
             self._reduce(self._k["corner_sum"], "chunk_c", pc, finish)
 
-    def _trial(self, tb: _Tables) -> np.ndarray:
-        """One line-search trial; the status block."""
+    def _trial(self, tb: _Tables, grad: bool) -> np.ndarray:
+        """One line-search trial (grad: with the foldover-free energy's gradient terms, for
+        a trial that is likely accepted); the status block."""
         self._go("trial_point", tb.n2 // 2)
-        self._energy(tb, "finish_trial")
+        self._energy(tb, "finish_trial", grad)
         self.cl.enqueue_copy(self.queue, self._rb, self.S)
         return self._rb
 
     def _gradient(self, tb: _Tables) -> None:
-        """dF/dE per corner at the last evaluated point (fold_corner wrote the foldover-free
-        energy's already)."""
-        if tb.lift:
-            self._go("lift_grad", tb.nc)
+        """dF/dE per corner at the last evaluated point."""
+        self._go("lift_grad" if tb.lift else "fold_grad", tb.nc)
 
-    def _accept(self, tb: _Tables) -> None:
+    def _accept(self, tb: _Tables, have_grad: bool) -> None:
         """Gradient at the accepted point, the new pair and the memory update."""
-        self._gradient(tb)
+        if not have_grad:
+            self._gradient(tb)
         self._go("gather_grad", tb.n2 // 2)
         self._reduce(self._k["update"], "chunk_v4", tb.plans[0], "finish_pair")
 
@@ -458,30 +465,38 @@ class ParallelLbfgs:
         cl.enqueue_copy(queue, self.S, s)
         cl.enqueue_copy(queue, tb.v, v0)
         self._go("place", tb.n2 // 2)
-        self._energy(tb, "finish_init")
-        self._gradient(tb)
+        self._energy(tb, "finish_init", grad=True)
+        if tb.lift:
+            self._gradient(tb)
         self._go("gather_init", tb.n2 // 2)
         cl.enqueue_copy(queue, self._rb, self.S)
         e_hist = [float(self._rb[_ET])]
         it, pairs = 0, 0  # pairs: the most the device may hold
         trial = False  # the current point is the accepted trial in Z (not yet in v)
         m = gu.LBFGS_MEMORY
+        # The foldover-free energy's gradient terms cost a third of a trial and serve only
+        # the accepted one: computed with the first trial while first trials get accepted
+        # (one pass), else in a pass of their own after the accepted trial. Bits unchanged.
+        first_ok = not tb.lift
         while it < max_it:
             it += 1
             self._direction(tb, pairs)
-            rb = self._trial(tb)
+            grad = first_ok
+            rb = self._trial(tb, grad)
             if rb[_STATUS] == _NOT_DESCENT:  # restart from preconditioned descent
                 self._one("forget")
                 self._direction(tb, 0)
                 pairs = 0
-                rb = self._trial(tb)
+                rb = self._trial(tb, grad)
                 if rb[_STATUS] == _NOT_DESCENT:
                     break
             n_pairs = int(rb[_LEN])
             trials = 1
             while rb[_STATUS] == _REJECTED and trials < TRIALS:
-                rb = self._trial(tb)
+                grad = False
+                rb = self._trial(tb, grad)
                 trials += 1
+            first_ok = not tb.lift and trials == 1
             if rb[_STATUS] != _ACCEPTED:
                 if n_pairs:  # drop the memory and retry once from plain descent
                     self._one("forget")
@@ -498,7 +513,7 @@ class ParallelLbfgs:
             if tick is not None and it % en.tick_every == 0 and gu.stops(tick(it)):
                 break
             if it < max_it:
-                self._accept(tb)
+                self._accept(tb, grad)
                 pairs = min(n_pairs + 1, m)
                 trial = False
         if trial:  # the free rows of Z
