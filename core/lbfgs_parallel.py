@@ -124,8 +124,10 @@ def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
     c = sum(xy[i] for i in corner_nodes)
     if c.shape[0] < 2:
         return np.arange(c.shape[0])
-    step = np.hypot(*np.diff(c, axis=0).T)
-    breaks = np.flatnonzero(~(step <= RUN_BREAK * np.median(step))) + 1  # NaN: a break
+    dx, dy = np.diff(c, axis=0).T
+    step2 = dx * dx + dy * dy  # squared steps (any order would give the same results)
+    far = RUN_BREAK * RUN_BREAK * np.median(step2)
+    breaks = np.flatnonzero(~(step2 <= far)) + 1  # NaN: a break
     first = np.concatenate([[0], breaks])
     length = np.diff(np.append(first, c.shape[0]))
     by_key = np.argsort(_morton(c[first]), kind="stable")
