@@ -2,14 +2,15 @@
 
 `ParallelLbfgs` is a drop-in for `global_untangle._lbfgs` (same arguments, same result to
 the last bit) that scales with the mesh and suits GPUs: energy terms and corner gradients
-run one work-item per corner (or per few corners), the gradient is a per-coordinate gather
-in np.bincount's order, vector updates are elementwise, and every dot product and energy sum
-is NumPy's pairwise summation split into fixed leaves and chunks (core/lbfgs_parallel.cl),
-so neither the work-group size nor the number of lanes per leaf changes a bit. The solver's
-scalars stay on the device; the host enqueues an iteration's kernels and reads back one
-64-byte status block per line-search trial (one per iteration when the first step is
-accepted). Tables are uploaded once per energy and kernel arguments bound once per table
-set; nothing is allocated per iteration.
+run one work-item per corner (along a locality-preserving sweep), the gradient is a
+per-node gather in np.bincount's order, vector updates are elementwise, and every dot
+product and energy sum is NumPy's pairwise summation split into fixed leaves and chunks
+(core/lbfgs_parallel.cl), so neither the work-group size nor the number of lanes per leaf
+changes a bit. The solver's scalars stay on the device; the host enqueues an iteration's
+kernels and reads back one 64-byte status block per line-search trial (one per iteration
+when the first step is accepted). Tables are uploaded once per energy and kernel arguments
+bound once per table set; nothing is allocated per iteration. docs/opencl.md describes the
+kernels and the measurements.
 """
 
 from __future__ import annotations
