@@ -1,0 +1,773 @@
+// The global stage's L-BFGS (core/global_untangle.py: _lbfgs with _Energy or _LiftEnergy)
+// as many-work-item float64 kernels, bit-identical to the host solver on any work-group
+// size, lane count and device. The host (core/lbfgs_parallel.py) enqueues the kernels of an
+// iteration and reads back one small status block per line-search trial; every scalar of
+// the solver (step, slope, alphas, ring state) lives in the device buffer S.
+//
+// Same numbers as NumPy: every floating-point operation is the NumPy code's, same operands,
+// same order, FP contraction off. np.bincount is a per-row gather in index order (CSR built
+// on the host), np.add.reduce is NumPy's pairwise summation split over work-items:
+//   - a vector of n terms is cut like NumPy cuts it: chunks of 8192, each halved (at n / 2
+//     rounded down to a multiple of 8) down to leaves of at most 128 terms;
+//   - a leaf is 8 partial sums r[j] (terms j, j + 8, ..., in order), combined as
+//     ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then the n % 8 tail terms in order
+//     (a leaf under 8 terms: 0.0 + its terms in order). A work-item computes LPW = 8 / LANES
+//     of those partial sums: LANES 1 finishes the leaf itself, LANES > 1 writes its lanes'
+//     partial sums and tail terms, which the next stage combines in that fixed order;
+//   - one work-item per chunk adds its leaves along the same binary tree (chunk_sums; with
+//     LANES > 1 a work-group of 64 per chunk, one work-item per leaf, then one walks the
+//     tree), and a single-work-item finish kernel adds the chunk sums in order, from 0.0.
+// The partition is fixed by n alone, so the bits do not depend on the work-group size or on
+// LANES. min/max reductions keep NumPy's NaN semantics (a NaN wins; otherwise the order does
+// not matter).
+//
+// Kernels of one iteration (n2 = 2 x free nodes, nc corners, ne elements; "leaf" kernels
+// run one work-item per leaf lane and leave leaf partials; each reduction is followed by
+// chunk_sums when the vector has more than one chunk, then its finish kernel):
+//   direction: loop1[h] (h = len-1 .. 0)  q -= y alpha (or q = -g), partials of s.q
+//              mid                        q -= y0 alpha0, q *= dpre gamma, partials of y0.q
+//                                         (no memory: q = -g dpre, partials of g.q, max |q|)
+//              loop2[h] (h = 0 .. len-1)  q += s c, partials of the next y.q (or g.q)
+//   trial:     trial_point (vt = v + q step into the node coordinates), fold_corner or
+//              lift_corner (terms and dets, one work-item per corner), corner_sum (their
+//              leaf partials and minimum), lift_element (lift: per-element terms),
+//              finish_trial (the Armijo test)
+//   accepted:  fold_grad or lift_grad (dF/dE per corner, written in the gather's order;
+//              fold_corner can write it with the trial instead),
+//              gather_grad (the gradient, one work-item per free node), update (s and y into the spare ring slot,
+//              v = vt, g = gt, partials of s.y, s.s, y.y, y.dpre y), finish_pair (the
+//              L-BFGS memory update)
+
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF
+
+#ifndef M
+#define M 4  // LBFGS_MEMORY (the host passes it)
+#endif
+#ifndef LANES
+#define LANES 1  // work-items per leaf of 128 terms: 1, 2, 4 or 8 (the host passes it)
+#endif
+#if LANES != 1 && LANES != 2 && LANES != 4 && LANES != 8
+#error "LANES must be 1, 2, 4 or 8"
+#endif
+#define SLOTS (M + 1)  // ring slots: M pairs and a spare for the candidate pair
+#define LPW (8 / LANES)  // leaf partial sums per work-item
+#define PPL ((LANES == 1) ? 1 : 16)  // partials per leaf and sum: the sum, or 8 lanes + 8 tails
+#define THETA 0.0625  // global_untangle.THETA
+#define PENALTY 1000.0  // LIFT_PENALTY
+#define BARRIER 0.01  // LIFT_BARRIER
+#define CHUNK 8192  // NumPy's reduction buffer size
+#define PW_BLOCK 128  // NumPy's pairwise block
+
+#define SQRT(x) __builtin_sqrt(x)
+#define FABS(x) __builtin_fabs(x)
+#define MIN_NAN(m, d) ((isnan(m) || (m) <= (d)) ? (m) : (d))  // np.minimum: NaN wins
+
+// ---- scalars in S (doubles; counts stored as exact small integers) --------------------------
+// 0..7 are the status block the host reads back after each trial.
+#define S_STATUS 0  // 0 trial rejected (step halved), 1 accepted, 2 not a descent direction
+#define S_ET 1  // the trial's energy
+#define S_DMIN 2  // the trial's smallest corner det
+#define S_LEN 3  // pairs in memory
+#define S_E 4  // energy of the current point
+#define S_START 5  // ring slot of the oldest pair
+#define S_SLOPE 6
+#define S_STEP 7
+#define S_EPS 8
+#define S_QC 9
+#define S_H0 10
+#define S_GUARD 11
+#define S_OK 12  // the first evaluation may have a gradient (lift: every det > 0)
+#define S_BAD 13  // the direction is not a descent direction
+#define S_COEF 14  // the second loop's coefficient al - rho y.q
+#define S_ALPHA 16  // [M]
+#define S_RHO (S_ALPHA + M)  // [SLOTS] per ring slot: 1 / s.y
+#define S_SY (S_RHO + SLOTS)  // [SLOTS] s.y
+#define S_YDY (S_SY + SLOTS)  // [SLOTS] y.(dpre y)
+#define S_LEN_ALL (S_YDY + SLOTS)
+
+// ---- reduction plans --------------------------------------------------------------------
+// PI (int): n, leaves, chunks, sums | leaf bounds [leaves + 1] | first leaf of each chunk
+// [chunks + 1]. PD (double): leaf partials [sums][leaves * PPL] | per-work-item minima
+// [leaves * LANES] | chunk sums [sums][chunks] | chunk minima [chunks].
+
+typedef struct {
+    int n, nl, nch, ps;
+    __global const int *lb, *cl;
+    __global double *P, *PMIN, *CS, *CM;
+} Plan;
+
+static Plan plan_of(__global const int *PI, __global double *PD)
+{
+    Plan p;
+    p.n = PI[0];
+    p.nl = PI[1];
+    p.nch = PI[2];
+    const int sums = PI[3];
+    p.ps = p.nl * PPL;
+    p.lb = PI + 4;
+    p.cl = p.lb + p.nl + 1;
+    p.P = PD;
+    p.PMIN = p.P + sums * p.ps;
+    p.CS = p.PMIN + p.nl * LANES;
+    p.CM = p.CS + sums * p.nch;
+    return p;
+}
+
+// The leaf and lanes of this work-item: elements o + i + j0 + jj (i = 0, 8, ... < full,
+// jj < LPW), then its tail elements. Returns from the kernel past the last leaf.
+#define LEAF_HEAD(pl)                                             \
+    const int w = get_global_id(0);                               \
+    if (w >= (pl).nl * LANES)                                     \
+        return;                                                   \
+    const int leaf = w / LANES, j0 = (w % LANES) * LPW;           \
+    const int o = (pl).lb[leaf], n = (pl).lb[leaf + 1] - o;       \
+    const int full = n - n % 8;
+
+#define COMBINE8(r) ((((r)[0] + (r)[1]) + ((r)[2] + (r)[3])) + (((r)[4] + (r)[5]) + ((r)[6] + (r)[7])))
+
+// Runs the statement list BODY (reads the element index k, sets t[0 .. K-1]) on each of
+// this work-item's elements and stores the leaf partials of the K sums.
+#if LANES == 1
+#define LEAF_SUMS(K, pl, ...)                                             \
+    {                                                                     \
+        double r[K][8], t[K], res[K];                                     \
+        for (int i = 0; i < full; i += 8)                                 \
+            for (int jj = 0; jj < 8; ++jj) {                              \
+                const int k = o + i + jj;                                 \
+                __VA_ARGS__                                               \
+                for (int s = 0; s < K; ++s)                               \
+                    r[s][jj] = (i == 0) ? t[s] : r[s][jj] + t[s];         \
+            }                                                             \
+        for (int s = 0; s < K; ++s)                                       \
+            res[s] = full ? COMBINE8(r[s]) : 0.0;                         \
+        for (int k = o + full; k < o + n; ++k) {                          \
+            __VA_ARGS__                                                   \
+            for (int s = 0; s < K; ++s)                                   \
+                res[s] = res[s] + t[s];                                   \
+        }                                                                 \
+        for (int s = 0; s < K; ++s)                                       \
+            (pl).P[s * (pl).ps + leaf] = res[s];                          \
+    }
+#else
+#define LEAF_SUMS(K, pl, ...)                                             \
+    {                                                                     \
+        double r[K][LPW], t[K];                                           \
+        for (int i = 0; i < full; i += 8)                                 \
+            for (int jj = 0; jj < LPW; ++jj) {                            \
+                const int k = o + i + j0 + jj;                            \
+                __VA_ARGS__                                               \
+                for (int s = 0; s < K; ++s)                               \
+                    r[s][jj] = (i == 0) ? t[s] : r[s][jj] + t[s];         \
+            }                                                             \
+        __global double *pp = (pl).P + 16 * leaf + j0;                    \
+        for (int jj = 0; jj < LPW; ++jj) {                                \
+            for (int s = 0; s < K; ++s)                                   \
+                pp[s * (pl).ps + jj] = full ? r[s][jj] : 0.0;             \
+            if (j0 + jj < n - full) {                                     \
+                const int k = o + full + j0 + jj;                         \
+                __VA_ARGS__                                               \
+                for (int s = 0; s < K; ++s)                               \
+                    pp[s * (pl).ps + 8 + jj] = t[s];                      \
+            }                                                             \
+        }                                                                 \
+    }
+#endif
+
+// The sum of leaf `leaf` (m terms) from its partials
+static double leaf_sum(__global const double *P, const int leaf, const int m)
+{
+#if LANES == 1
+    return P[leaf];
+#else
+    __global const double *r = P + 16 * leaf;
+    const int full = m - m % 8;
+    double res = full ? COMBINE8(r) : 0.0;
+    for (int t = 0; t < m - full; ++t)
+        res = res + r[8 + t];
+    return res;
+#endif
+}
+
+// NumPy's pairwise sum of one chunk of m terms whose leaves start at `first`: the recursion
+// pairwise(m) = m <= 128 ? leaf : pairwise(m2) + pairwise(m - m2), unrolled on a stack
+static double chunk_sum(__global const double *P, const int first, const int m)
+{
+    int fn[10], fs[10];
+    double fl[10];
+    int sp = 0, leaf = first;
+    double ret = 0.0;
+    fn[0] = m;
+    fs[0] = 0;
+    while (sp >= 0) {
+        const int k = fn[sp];
+        int k2 = k / 2;
+        k2 -= k2 % 8;
+        if (fs[sp] == 0) {
+            if (k <= PW_BLOCK) {
+                ret = leaf_sum(P, leaf, k);
+                ++leaf;
+                --sp;
+            } else {
+                fs[sp] = 1;
+                ++sp;
+                fn[sp] = k2;
+                fs[sp] = 0;
+            }
+        } else if (fs[sp] == 1) {
+            fl[sp] = ret;
+            fs[sp] = 2;
+            ++sp;
+            fn[sp] = k - k2;
+            fs[sp] = 0;
+        } else {
+            ret = fl[sp] + ret;
+            --sp;
+        }
+    }
+    return ret;
+}
+
+// The pairwise tree of one chunk of m terms over its leaf sums L[0 ..] (local memory)
+static double chunk_tree(__local const double *L, const int m)
+{
+    int fn[10], fs[10];
+    double fl[10];
+    int sp = 0, leaf = 0;
+    double ret = 0.0;
+    fn[0] = m;
+    fs[0] = 0;
+    while (sp >= 0) {
+        const int k = fn[sp];
+        int k2 = k / 2;
+        k2 -= k2 % 8;
+        if (fs[sp] == 0) {
+            if (k <= PW_BLOCK) {
+                ret = L[leaf];
+                ++leaf;
+                --sp;
+            } else {
+                fs[sp] = 1;
+                ++sp;
+                fn[sp] = k2;
+                fs[sp] = 0;
+            }
+        } else if (fs[sp] == 1) {
+            fl[sp] = ret;
+            fs[sp] = 2;
+            ++sp;
+            fn[sp] = k - k2;
+            fs[sp] = 0;
+        } else {
+            ret = fl[sp] + ret;
+            --sp;
+        }
+    }
+    return ret;
+}
+
+#if LANES == 1
+// One work-item per chunk (the leaf sums are final): the chunk's pairwise sum of each of the
+// first `sums` sums, and (mins != 0) the minimum of its work-items' minima
+__kernel void chunk_sums(__global const int *PI, __global double *PD, const int sums,
+                         const int mins)
+{
+    const Plan pl = plan_of(PI, PD);
+    const int c = get_global_id(0);
+    if (c >= pl.nch)
+        return;
+    const int m = min(CHUNK, pl.n - c * CHUNK);
+    for (int s = 0; s < sums; ++s)
+        pl.CS[s * pl.nch + c] = chunk_sum(pl.P + s * pl.ps, pl.cl[c], m);
+    if (mins) {
+        double mn = INFINITY;
+        for (int k = pl.cl[c] * LANES; k < pl.cl[c + 1] * LANES; ++k)
+            mn = MIN_NAN(mn, pl.PMIN[k]);
+        pl.CM[c] = mn;
+    }
+}
+#else
+// One work-group of WG_CHUNK work-items per chunk: they combine the lane partials of the
+// chunk's leaves (64 to 128 of them: leaves of a split chunk have 64 to 128 terms), then one
+// adds the leaves along the chunk's tree (the same sums and minima as above; always run,
+// even for one chunk, so that no single work-item walks a whole chunk)
+#define WG_CHUNK 64
+#define MAX_LEAVES (CHUNK / 64)
+__kernel __attribute__((reqd_work_group_size(WG_CHUNK, 1, 1)))
+void chunk_sums(__global const int *PI, __global double *PD, const int sums, const int mins)
+{
+    __local double L[MAX_LEAVES];
+    const Plan pl = plan_of(PI, PD);
+    const int c = get_group_id(0), l = get_local_id(0);
+    const int on = c < pl.nch;
+    const int first = on ? pl.cl[c] : 0, leaves = on ? pl.cl[c + 1] - first : 0;
+    const int m = on ? min(CHUNK, pl.n - c * CHUNK) : 0;
+    for (int s = 0; s < sums; ++s) {
+        for (int j = l; j < leaves; j += WG_CHUNK)
+            L[j] = leaf_sum(pl.P + s * pl.ps, first + j, pl.lb[first + j + 1] - pl.lb[first + j]);
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (l == 0 && on)
+            pl.CS[s * pl.nch + c] = chunk_tree(L, m);
+        barrier(CLK_LOCAL_MEM_FENCE);
+    }
+    if (mins) {
+        double mn = INFINITY;
+        for (int j = l; j < leaves; j += WG_CHUNK)
+            for (int k = (first + j) * LANES; k < (first + j + 1) * LANES; ++k)
+                mn = MIN_NAN(mn, pl.PMIN[k]);
+        L[l] = mn;
+        barrier(CLK_LOCAL_MEM_FENCE);
+        if (l == 0 && on) {
+            for (int k = 1; k < WG_CHUNK; ++k)
+                mn = MIN_NAN(mn, L[k]);
+            pl.CM[c] = mn;
+        }
+    }
+}
+#endif
+
+// np.add.reduce of sum s: the chunk sums in order from 0.0 (one chunk and final leaf sums:
+// its tree here)
+static double total(const Plan *pl, const int s)
+{
+    double acc = 0.0;
+#if LANES == 1
+    if (pl->nch == 1)
+        return acc + chunk_sum(pl->P + s * pl->ps, 0, pl->n);
+#endif
+    for (int c = 0; c < pl->nch; ++c)
+        acc = acc + pl->CS[s * pl->nch + c];
+    return acc;
+}
+
+static double total_min(const Plan *pl)
+{
+    double mn = INFINITY;
+#if LANES == 1
+    if (pl->nch == 1) {
+        for (int k = 0; k < pl->nl; ++k)
+            mn = MIN_NAN(mn, pl->PMIN[k]);
+        return mn;
+    }
+#endif
+    for (int c = 0; c < pl->nch; ++c)
+        mn = MIN_NAN(mn, pl->CM[c]);
+    return mn;
+}
+
+#define SLOT(h) ((((int)S[S_START]) + (h)) % SLOTS)
+
+// ---- direction: the two-loop recursion --------------------------------------------------
+
+// First loop, pair h (newest first): the previous step's q -= y alpha (or q = -g for the
+// newest pair), then partials of s_h . q
+__kernel void loop1(__global double *S, __global const int *PI, __global double *PD,
+                    __global double *q, __global const double *g, __global const double *hs,
+                    __global const double *hy, const int h)
+{
+    const int len = (int)S[S_LEN];
+    if (h >= len)
+        return;
+    const Plan pl = plan_of(PI, PD);
+    LEAF_HEAD(pl)
+    const int n2 = pl.n, first = (h == len - 1);
+    __global const double *sh = hs + SLOT(h) * n2;
+    __global const double *yp = hy + SLOT(first ? h : h + 1) * n2;
+    const double al = first ? 0.0 : S[S_ALPHA + h + 1];
+    LEAF_SUMS(1, pl,
+        const double qk = first ? -g[k] : q[k] - yp[k] * al;
+        q[k] = qk;
+        t[0] = sh[k] * qk;)
+}
+
+__kernel void finish_alpha(__global double *S, __global const int *PI, __global double *PD,
+                           const int h)
+{
+    if (get_global_id(0) != 0 || h >= (int)S[S_LEN])
+        return;
+    const Plan pl = plan_of(PI, PD);
+    S[S_ALPHA + h] = S[S_RHO + SLOT(h)] * total(&pl, 0);
+}
+
+// With memory: the first loop's last q -= y0 alpha0, q *= dpre gamma, partials of y0 . q.
+// Without: q = -g dpre, partials of g . q and the minimum of -|q| (= -max |q|).
+__kernel void mid(__global double *S, __global const int *PI, __global double *PD,
+                  __global double *q, __global const double *g, __global const double *dpre,
+                  __global const double *hy)
+{
+    const Plan pl = plan_of(PI, PD);
+    LEAF_HEAD(pl)
+    const int len = (int)S[S_LEN];
+    double mn = INFINITY;
+    if (len > 0) {
+        __global const double *y0 = hy + SLOT(0) * pl.n;
+        const int newest = SLOT(len - 1);
+        const double al = S[S_ALPHA], gamma = S[S_SY + newest] / S[S_YDY + newest];
+        LEAF_SUMS(1, pl,
+            double qk = q[k] - y0[k] * al;
+            qk = qk * (dpre[k] * gamma);
+            q[k] = qk;
+            t[0] = y0[k] * qk;)
+    } else {
+        LEAF_SUMS(1, pl,
+            const double qk = -g[k] * dpre[k];
+            q[k] = qk;
+            mn = MIN_NAN(mn, -FABS(qk));
+            t[0] = g[k] * qk;)
+    }
+    pl.PMIN[w] = mn;
+}
+
+__kernel void finish_mid(__global double *S, __global const int *PI, __global double *PD)
+{
+    if (get_global_id(0) != 0)
+        return;
+    const Plan pl = plan_of(PI, PD);
+    const double dot = total(&pl, 0);
+    if ((int)S[S_LEN] > 0) {
+        S[S_COEF] = S[S_ALPHA] - S[S_RHO + SLOT(0)] * dot;
+    } else {
+        const double qmax = -total_min(&pl);
+        S[S_SLOPE] = dot;
+        S[S_STEP] = (qmax > 0.0) ? S[S_H0] / qmax : 0.0;
+        S[S_BAD] = !(dot < 0.0);
+    }
+}
+
+// Second loop, pair h (oldest first): q += s_h c, then partials of y_{h+1} . q, or of g . q
+// (the slope) after the newest pair
+__kernel void loop2(__global double *S, __global const int *PI, __global double *PD,
+                    __global double *q, __global const double *g, __global const double *hs,
+                    __global const double *hy, const int h)
+{
+    const int len = (int)S[S_LEN];
+    if (h >= len)
+        return;
+    const Plan pl = plan_of(PI, PD);
+    LEAF_HEAD(pl)
+    const int n2 = pl.n, last = (h == len - 1);
+    __global const double *sh = hs + SLOT(h) * n2;
+    __global const double *yn = last ? g : hy + SLOT(h + 1) * n2;
+    const double c = S[S_COEF];
+    LEAF_SUMS(1, pl,
+        const double qk = q[k] + sh[k] * c;
+        q[k] = qk;
+        t[0] = yn[k] * qk;)
+}
+
+__kernel void finish_coef(__global double *S, __global const int *PI, __global double *PD,
+                          const int h)
+{
+    const int len = (int)S[S_LEN];
+    if (get_global_id(0) != 0 || h >= len)
+        return;
+    const Plan pl = plan_of(PI, PD);
+    const double dot = total(&pl, 0);
+    if (h < len - 1) {
+        S[S_COEF] = S[S_ALPHA + h + 1] - S[S_RHO + SLOT(h + 1)] * dot;
+    } else {
+        S[S_SLOPE] = dot;
+        S[S_STEP] = 1.0;
+        S[S_BAD] = !(dot < 0.0);
+    }
+}
+
+// A restart from preconditioned descent: no pairs
+__kernel void forget(__global double *S)
+{
+    if (get_global_id(0) == 0) {
+        S[S_LEN] = 0.0;
+        S[S_START] = 0.0;
+    }
+}
+
+// ---- energies ---------------------------------------------------------------------------
+// Corner kernels run over the corners in a sweep order (a space-filling curve over their
+// positions) and node coordinates live in Z, (x, y) pairs in the order the sweep first
+// touches the nodes, so that neighbouring work-items read and write neighbouring memory
+// whatever the mesh's numbering; results that are summed go to their place in NumPy's order.
+// Z: the fixed nodes' coordinates set once, the free nodes' written by trial_point.
+// Per corner of the sweep: CI = (i1, i2, i0) places in Z and the corner's place in the sum,
+// W = (w00, w01, w11, weight), SL = its gather slots.
+
+// Free node f of the trial point v + q step (init: of v) into its place zf[f] in Z
+__kernel void trial_point(__global const double *S, __global double *Z,
+                          __global const double *v, __global const double *q,
+                          __global const int *zf, const int nf, const int init)
+{
+    const int f = get_global_id(0);
+    if (f >= nf)
+        return;
+    const int node = zf[f];
+    if (init) {
+        Z[2 * node] = v[f];
+        Z[2 * node + 1] = v[nf + f];
+    } else {
+        const double step = S[S_STEP];
+        Z[2 * node] = v[f] + q[f] * step;
+        Z[2 * node + 1] = v[nf + f] + q[nf + f] * step;
+    }
+}
+
+#define JACOBIAN                                                              \
+    const int4 ci = vload4(k, CI);                                           \
+    __global const double *wk = W + 4 * k;                                   \
+    const double2 p0 = vload2(ci.z, Z), p1 = vload2(ci.x, Z), p2 = vload2(ci.y, Z); \
+    const double x0 = p0.x, y0 = p0.y;                                       \
+    const double e1x = p1.x - x0, e1y = p1.y - y0;                           \
+    const double e2x = p2.x - x0, e2y = p2.y - y0;                           \
+    const double w00 = wk[0], w01 = wk[1], w11 = wk[2];                      \
+    const double j00 = e1x * w00, j10 = e1y * w00;                           \
+    const double j01 = e1x * w01 + e2x * w11, j11 = e1y * w01 + e2y * w11;   \
+    const double d = j00 * j11 - j01 * j10;                                  \
+    const double tf = ((j00 * j00 + j01 * j01) + j10 * j10) + j11 * j11;
+
+#define FOLD_TERMS                                                           \
+    const double eps = S[S_EPS], dd = d * d;                                 \
+    const double root = SQRT(dd + eps * eps);                                \
+    const double chi = (d >= 0.0) ? 0.5 * (d + root) : ((0.5 * eps) * eps) / (root + FABS(d)); \
+    const double num = (1.0 - THETA) * tf + THETA * (dd + 1.0);              \
+    const double inv_chi = wk[3] / chi;
+
+// _Energy._eval (power 1): partials of the terms num / chi w and the minimum det
+// Leaf partials of the corner terms (in the sum's order) and the minimum det: TD holds a
+// record of rec doubles per corner, (term, det, ...)
+__kernel void corner_sum(__global const int *PI, __global double *PD,
+                         __global const double *TD, const int rec)
+{
+    const Plan pl = plan_of(PI, PD);
+    LEAF_HEAD(pl)
+    double mn = INFINITY;
+    LEAF_SUMS(1, pl,
+        const double d = TD[rec * k + 1];
+        mn = MIN_NAN(mn, d);
+        t[0] = TD[rec * k];)
+    pl.PMIN[w] = mn;
+}
+
+// dF/dE = dF/dJ W^-T of corner k, written where the gradient gather reads it: GS holds
+// (x, y) pairs in the gather's order (each free node's terms, in np.bincount's order), SL
+// the slots of each corner's (i1 (e1), i2 (e2), i0 (-(e1 + e2))) (-1: a fixed node)
+static inline void put(__global double *GS, const int s, const double x, const double y)
+{
+    if (s >= 0) {
+        GS[2 * s] = x;
+        GS[2 * s + 1] = y;
+    }
+}
+
+#define CORNER_GRAD(a, b)                                                    \
+    const double g00 = a * j00 + b * j11, g10 = a * j10 - b * j01;           \
+    const double g01 = a * j01 - b * j10, g11 = a * j11 + b * j00;           \
+    const double ge1x = g00 * w00 + g01 * w01, ge1y = g10 * w00 + g11 * w01; \
+    const double ge2x = g01 * w11, ge2y = g11 * w11;                         \
+    put(GS, SL[3 * k], ge1x, ge1y);                                          \
+    put(GS, SL[3 * k + 1], ge2x, ge2y);                                      \
+    put(GS, SL[3 * k + 2], -(ge1x + ge2x), -(ge1y + ge2y));
+
+// _Energy._eval (power 1), corner k of the sweep: its term num / chi w and det into TD at
+// its place in the sum (CI.w); with_grad: _grad's dF/dE into GS too (one pass when the
+// trial is accepted; the host asks for it when the first trial usually is)
+__kernel void fold_corner(__global const double *S, __global const double *Z,
+                          __global const int *CI, __global const double *W,
+                          __global double *TD, const int nc, __global const int *SL,
+                          __global double *GS, const int with_grad)
+{
+    const int k = get_global_id(0);
+    if (k >= nc)
+        return;
+    JACOBIAN
+    FOLD_TERMS
+    vstore2((double2)(num * inv_chi, d), ci.w, TD);
+    if (with_grad) {
+        const double a = (2.0 * (1.0 - THETA)) * inv_chi;
+        const double b = inv_chi * ((2.0 * THETA) * d - num / root);
+        CORNER_GRAD(a, b)
+    }
+}
+
+// _Energy._grad at the last trial point (accepted after a trial without the gradient)
+__kernel void fold_grad(__global const double *S, __global const double *Z,
+                        __global const int *CI, __global const double *W,
+                        __global const int *SL, __global double *GS, const int nc)
+{
+    const int k = get_global_id(0);
+    if (k >= nc)
+        return;
+    JACOBIAN
+    FOLD_TERMS
+    const double a = (2.0 * (1.0 - THETA)) * inv_chi;
+    const double b = inv_chi * ((2.0 * THETA) * d - num / root);
+    CORNER_GRAD(a, b)
+}
+
+// _LiftEnergy._eval, corner k of the sweep: (its term weight u, det, 1 / u = q_corner) into
+// TD at its place in the sum (CI.w)
+__kernel void lift_corner(__global const double *S, __global const double *Z,
+                          __global const int *CI, __global const double *W,
+                          __global double *TD, const int nc)
+{
+    const int k = get_global_id(0);
+    if (k >= nc)
+        return;
+    JACOBIAN
+    const double u = (0.5 * tf) / d;
+    vstore3((double3)(wk[3] * u, d, 1.0 / u), ci.w, TD);
+}
+
+// _LiftEnergy._eval, elements: q_e (its corners' q_corner in index order / corners), the
+// floor term's partials, and dF/dq_e dq_e/du_k u_k^2 = (-1 - k gap) (-1 / n_e) into DQ at
+// each of its corners' places in the sweep. EI = [eptr (ne + 1) | corners by element (sum
+// order) | the same corners' places in the sweep]; EN = [corner count | -1 / corner count].
+__kernel void lift_element(__global const double *S, __global const int *PI,
+                           __global double *PD, __global const double *TD,
+                           __global const int *EI, __global const double *EN,
+                           __global double *DQ)
+{
+    const Plan pl = plan_of(PI, PD);
+    LEAF_HEAD(pl)
+    const int ne = pl.n;
+    const double qc = S[S_QC], kq = (2.0 * PENALTY) / qc;
+    __global const int *ec = EI + ne + 1, *es = ec + EI[ne];
+    LEAF_SUMS(1, pl,
+        double sq = 0.0;
+        for (int p = EI[k]; p < EI[k + 1]; ++p)
+            sq = sq + TD[3 * ec[p] + 2];
+        const double qe = sq / EN[k];
+        double gap = qc - qe;
+        gap = (isnan(gap) || gap >= 0.0) ? gap : 0.0;
+        gap = gap / qc;
+        const double dq = (-1.0 - kq * gap) * EN[ne + k];
+        for (int p = EI[k]; p < EI[k + 1]; ++p)
+            DQ[es[p]] = dq;
+        t[0] = (PENALTY * gap) * gap - qe;)
+}
+
+// _LiftEnergy._grad, corner k of the sweep (DQ from lift_element)
+__kernel void lift_grad(__global const double *Z, __global const int *CI,
+                        __global const double *W, __global const int *SL, __global double *GS,
+                        const int nc, __global const double *DQ)
+{
+    const int k = get_global_id(0);
+    if (k >= nc)
+        return;
+    JACOBIAN
+    const double u = (0.5 * tf) / d;
+    double de_du = DQ[k] / (u * u);
+    de_du = de_du + BARRIER * wk[3];
+    const double a = de_du / d;
+    const double b = (-de_du * u) / d;
+    CORNER_GRAD(a, b)
+}
+
+// Energy, min det and the Armijo test of the trial point (init: the starting point's
+// energy and whether it has a gradient). ne = 0: the foldover-free energy.
+__kernel void finish_trial(__global double *S, __global const int *PIc,
+                           __global double *PDc, __global const int *PIe,
+                           __global double *PDe, const int ne, const int init)
+{
+    if (get_global_id(0) != 0)
+        return;
+    const Plan pc = plan_of(PIc, PDc);
+    const double dmin = total_min(&pc);
+    double et;
+    if (ne == 0) {
+        et = total(&pc, 0);
+    } else if (!(dmin > 0.0)) {
+        et = INFINITY;
+    } else {
+        const Plan pe = plan_of(PIe, PDe);
+        et = total(&pe, 0);
+        et = et + BARRIER * total(&pc, 0);
+    }
+    S[S_ET] = et;
+    S[S_DMIN] = dmin;
+    if (init) {
+        S[S_E] = et;
+        S[S_OK] = (ne == 0) || dmin > 0.0;
+        return;
+    }
+    if (S[S_BAD] != 0.0) {
+        S[S_STATUS] = 2.0;
+        return;
+    }
+    const double step = S[S_STEP];
+    const int guard = S[S_GUARD] != 0.0;
+    if (isfinite(et) && et <= S[S_E] + (1e-4 * step) * S[S_SLOPE] && !(guard && dmin <= 0.0)) {
+        S[S_STATUS] = 1.0;
+        S[S_E] = et;
+    } else {
+        S[S_STATUS] = 0.0;
+        S[S_STEP] = step * 0.5;
+    }
+}
+
+// ---- gradient gather and the memory pair ------------------------------------------------
+
+// np.bincount of the corner gradients, row r: its free node's GS pairs in order, from 0.0,
+// into out[f] (x) and out[nf + f] (y), f = the row's free node. rows = [row starts (nf + 1)
+// | free node of each row] (rows in Z order); init: 0 where the first point has none
+__kernel void gather_grad(__global const double *S, __global double *out,
+                          __global const int *rows, __global const double *GS, const int nf,
+                          const int init)
+{
+    const int r = get_global_id(0);
+    if (r >= nf)
+        return;
+    const int f = rows[nf + 1 + r];
+    double gx = 0.0, gy = 0.0;
+    for (int j = rows[r]; j < rows[r + 1]; ++j) {
+        gx = gx + GS[2 * j];
+        gy = gy + GS[2 * j + 1];
+    }
+    if (init && S[S_OK] == 0.0)
+        gx = gy = 0.0;
+    out[f] = gx;
+    out[nf + f] = gy;
+}
+
+// The accepted trial point vt = v + q step with its gradient gt: s = vt - v and y = gt - g into the
+// spare ring slot, v = vt, g = gt, partials of s.y, s.s, y.y, y.(dpre y)
+__kernel void update(__global const double *S, __global const int *PI, __global double *PD,
+                     __global const double *q, __global const double *gt,
+                     __global double *v, __global double *g, __global const double *dpre,
+                     __global double *hs, __global double *hy)
+{
+    const Plan pl = plan_of(PI, PD);
+    LEAF_HEAD(pl)
+    const int n2 = pl.n;
+    const int spare = SLOT((int)S[S_LEN]);
+    const double step = S[S_STEP];
+    __global double *sn = hs + spare * n2, *yn = hy + spare * n2;
+    LEAF_SUMS(4, pl,
+        const double gk = gt[k];
+        const double vt = v[k] + q[k] * step;
+        const double sk = vt - v[k], yk = gk - g[k];
+        sn[k] = sk;
+        yn[k] = yk;
+        v[k] = vt;
+        g[k] = gk;
+        t[0] = sk * yk;
+        t[1] = sk * sk;
+        t[2] = yk * yk;
+        t[3] = yk * (dpre[k] * yk);)
+}
+
+__kernel void finish_pair(__global double *S, __global const int *PI, __global double *PD)
+{
+    if (get_global_id(0) != 0)
+        return;
+    const Plan pl = plan_of(PI, PD);
+    const double sy = total(&pl, 0), ss = total(&pl, 1), yy = total(&pl, 2);
+    const double ydy = total(&pl, 3);
+    if (sy > 1e-12 * SQRT(ss * yy)) {
+        const int len = (int)S[S_LEN], spare = SLOT(len);
+        S[S_RHO + spare] = 1.0 / sy;
+        S[S_SY + spare] = sy;
+        S[S_YDY + spare] = ydy;
+        if (len < M)
+            S[S_LEN] = len + 1;
+        else
+            S[S_START] = (double)((((int)S[S_START]) + 1) % SLOTS);
+    }
+}
