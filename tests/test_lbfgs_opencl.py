@@ -137,12 +137,13 @@ def test_pipeline_cancel_during_device_global_stage(solver):
 
 def test_device_solver_failure_falls_back_to_host(monkeypatch):
     """A kernel that does not build: one warning, the host solver, the same result."""
+    from core.optimize import solver_parallel
     from core.optimize.device import solver_for
 
     def broken():
         raise RuntimeError("L-BFGS kernel build failed on test device: line 1:1: boom")
 
-    monkeypatch.setattr(lo, "device_solver", broken)
+    monkeypatch.setattr(solver_parallel, "device_solver", broken)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         solver = solver_for("opencl")
@@ -169,11 +170,14 @@ def test_auto_small_mesh_numpy_steps_device_global_stage_same_result(solver):
 
 
 def test_device_solver_keeps_no_tables_after_a_run(solver):
-    """The per-process solver forgets a run's energies and device tables when it ends."""
+    """The per-process solvers forget a run's energies and device tables when it ends."""
+    from core.optimize import solver_parallel
+
     p, fs, _groups, _free = mesh("quad_hole")
     res = untangle_and_smooth(p, fs, backend="opencl")
     assert res.global_iterations > 0
-    assert lo.device_solver()._last is None
+    parallel = solver_parallel.device_solver()
+    assert parallel._last is None and parallel.small is not None and parallel.small._last is None
 
 
 @settings(
@@ -236,13 +240,15 @@ def test_auto_small_mesh_on_a_gpu_runs_numpy_and_says_so(solver, monkeypatch):
     assert np.array_equal(res.points, untangle_and_smooth(p, fs, backend="numpy").points)
 
 
-def test_no_device_solver_on_a_gpu_and_opencl_runs_keep_the_host_global_stage(
-    solver, monkeypatch
-):
-    """On a non-CPU device there is no device solver (one work-item would be one GPU thread):
-    an 'opencl' run keeps its engine on the device and the global stage on the host."""
+def test_on_a_gpu_every_global_solve_runs_on_the_parallel_kernels(solver, monkeypatch):
+    """On a non-CPU device there is no single-work-item solver (it would be one GPU thread):
+    the parallel kernels solve every problem, and an 'opencl' run still gives NumPy's bits."""
+    from core.optimize import solver_parallel
+
     monkeypatch.setattr(eo._Runtime, "is_cpu", property(lambda self: False))
     assert lo.device_solver() is None
+    gpu = solver_parallel.device_solver()
+    assert gpu.small is None and gpu.small_corners == 0
     p, fs, _groups, _free = mesh("quad_hole")
     res = untangle_and_smooth(p, fs, backend="opencl")
     assert res.backend == "opencl" and res.global_iterations > 0

@@ -1,4 +1,4 @@
-"""The global stage's parallel L-BFGS (core/lbfgs_parallel.py): bit-identical to the host
+"""The global stage's parallel L-BFGS (core/optimize/solver_parallel.py): bit-identical to the host
 solver for every energy, argument and path, whatever the work-group size and lane count.
 
 Needs a float64 OpenCL device (pocl's CPU device is enough); skips, saying why, without one.
@@ -14,13 +14,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 
 from bench.meshgen import holed_square
-from core import global_untangle as gu
 from core.faces import as_faceset
 from core.obj_io import read_obj
+from core.optimize import GlobalOptions, lift_min_quality, untangle_global
+from core.optimize.energy import FoldoverEnergy, LiftEnergy
+from core.optimize.solver import State, lbfgs
+from core.optimize.stages import EPS_MIN
 from core.pipeline import free_nodes
 
 eo = pytest.importorskip("core.engine_opencl")
-lp = pytest.importorskip("core.lbfgs_parallel")
+lp = pytest.importorskip("core.optimize.solver_parallel")
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -57,10 +60,11 @@ class Recorder:
         return out
 
 
-def run_stage(p, groups, free, lbfgs, polish_iter=300, lift_rounds=10):
-    """untangle_global, then lift_min_quality on its result, through `lbfgs`."""
-    u, info = gu.untangle_global(p, groups, free, polish_iter=polish_iter, lbfgs=lbfgs)
-    lifted, linfo = gu.lift_min_quality(u, groups, free, rounds=lift_rounds, lbfgs=lbfgs)
+def run_stage(p, groups, free, run, polish_iter=300, lift_rounds=10):
+    """untangle_global, then lift_min_quality on its result, through the solver `run`."""
+    u, info = untangle_global(p, groups, free, GlobalOptions(polish_iter=polish_iter, solver=run))
+    lifted, linfo = lift_min_quality(u, groups, free,
+                                     GlobalOptions(lift_rounds=lift_rounds, solver=run))
     return u, info, lifted, linfo
 
 
@@ -92,7 +96,7 @@ def test_untangle_and_lift_bit_identical_to_host_call_by_call(solver, name):
     the lift's with its sub-meshes and floor), triangles, quads and n-gons: every solve gives
     the host's point and iteration count, and the stages the host's points and info."""
     p, groups, free = mesh(name)
-    host, dev = Recorder(gu._lbfgs), Recorder(solver)
+    host, dev = Recorder(lbfgs), Recorder(solver)
     a = run_stage(p, groups, free, host)
     b = run_stage(p, groups, free, dev)
     assert a[1]["status"] == "untangled" and a[3]["iterations"] > 0
@@ -104,8 +108,8 @@ def test_untangle_and_lift_bit_identical_to_host_call_by_call(solver, name):
 def test_naca_deform_untangles_bit_identically(solver):
     """The hardest shared mesh (hundreds of unguarded iterations, many eps rounds)."""
     p, groups, free = mesh("naca_deform")
-    a = gu.untangle_global(p, groups, free, polish_iter=100)
-    b = gu.untangle_global(p, groups, free, polish_iter=100, lbfgs=solver)
+    a = untangle_global(p, groups, free, GlobalOptions(polish_iter=100))
+    b = untangle_global(p, groups, free, GlobalOptions(polish_iter=100, solver=solver))
     assert a[1]["iterations"] == b[1]["iterations"] > 100
     assert np.array_equal(a[0], b[0])
 
@@ -119,16 +123,16 @@ def test_result_does_not_depend_on_lanes_or_work_group_size(device, lanes, local
     and work-group size."""
     p, fs = holed_square(20_000, seed=3)
     groups, free = fs.by_arity(), free_nodes(len(p), fs)
-    en = gu._Energy(p, groups, free)
+    en = FoldoverEnergy(p, groups, free)
     assert en.i0.size > 2 * lp.CHUNK and 2 * int(free.sum()) > 2 * lp.CHUNK
     solver = lp.ParallelLbfgs(lanes=lanes, local_size=local_size)
-    kw = {"max_iter": 150, "polish_iter": 40}
-    a = gu.untangle_global(p, groups, free, **kw)
-    b = gu.untangle_global(p, groups, free, lbfgs=solver, **kw)
+    a = untangle_global(p, groups, free, GlobalOptions(max_iter=150, polish_iter=40))
+    b = untangle_global(p, groups, free, GlobalOptions(max_iter=150, polish_iter=40,
+                                                          solver=solver))
     assert a[1]["iterations"] == b[1]["iterations"] > 40
     assert np.array_equal(a[0], b[0])
-    la = gu.lift_min_quality(a[0], groups, free, rounds=2)
-    lb = gu.lift_min_quality(a[0], groups, free, rounds=2, lbfgs=solver)
+    la = lift_min_quality(a[0], groups, free, GlobalOptions(lift_rounds=2))
+    lb = lift_min_quality(a[0], groups, free, GlobalOptions(lift_rounds=2, solver=solver))
     assert la[1]["iterations"] == lb[1]["iterations"] > 0
     assert np.array_equal(la[0], lb[0])
 
@@ -242,20 +246,20 @@ def test_sweep_and_first_touch_are_permutations():
 def test_ticks_pause_and_cancel_like_the_host(solver):
     """A tick every tick_every iterations; False stops at that iteration with its point."""
     p, groups, free = mesh("quad_hole")
-    u, _ = gu.untangle_global(p, groups, free, polish_iter=0)
-    for en in (gu._LiftEnergy(u, groups, free), gu._Energy(u, groups, free)):
-        st = gu._State(u, free)
+    u, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
+    for en in (LiftEnergy(u, groups, free), FoldoverEnergy(u, groups, free)):
+        st = State(u, free)
         en.qc = 0.5
         v0 = st.pack(st.x, st.y)
         seen: dict[str, list[int]] = {"host": [], "dev": []}
         res = {}
-        for key, run in (("host", gu._lbfgs), ("dev", solver)):
+        for key, run in (("host", lbfgs), ("dev", solver)):
 
             def tick(it, calls=seen[key], stop=2 * en.tick_every):
                 calls.append(it)
                 return it < stop
 
-            res[key] = run(en, st, v0, gu.EPS_MIN, max_it=150, guard=True, rel_tol=0.0,
+            res[key] = run(en, st, v0, EPS_MIN, max_it=150, guard=True, rel_tol=0.0,
                            tick=tick)
         assert seen["host"] == seen["dev"] == [en.tick_every, 2 * en.tick_every]
         assert res["host"][1] == res["dev"][1] == 2 * en.tick_every
@@ -267,14 +271,15 @@ def test_untangle_progress_cancel_bit_identical(solver):
     status, iterations and points as the host."""
     p, groups, free = mesh("tri_two_holes")
     out = []
-    for lbfgs in (None, solver):
+    for run in (None, solver):
         calls = []
 
         def progress(it, total, n_inv, calls=calls):
             calls.append((it, n_inv))
             return it < 90
 
-        out.append((gu.untangle_global(p, groups, free, progress=progress, lbfgs=lbfgs), calls))
+        res = untangle_global(p, groups, free, GlobalOptions(solver=run), progress=progress)
+        out.append((res, calls))
     (a, ca), (b, cb) = out
     assert a[1]["status"] == b[1]["status"] == "cancelled" and ca == cb
     assert a[1]["iterations"] == b[1]["iterations"] and np.array_equal(a[0], b[0])
@@ -284,8 +289,8 @@ def test_max_it_and_every_stop_rule_match(solver):
     """max_it 0, 1 and 7, rel_tol that stops at once, guard off on a valid mesh (stops after
     one iteration): the host's iterations and points."""
     p, groups, free = mesh("mixed_quad_tri")
-    u, _ = gu.untangle_global(p, groups, free, polish_iter=0)
-    en, st = gu._Energy(u, groups, free), gu._State(u, free)
+    u, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
+    en, st = FoldoverEnergy(u, groups, free), State(u, free)
     v0 = st.pack(st.x, st.y)
     cases = [
         {"max_it": 0, "guard": True},
@@ -295,8 +300,8 @@ def test_max_it_and_every_stop_rule_match(solver):
         {"max_it": 50, "guard": False},
     ]
     for kw in cases:
-        a = gu._lbfgs(en, st, v0, gu.EPS_MIN, **kw)
-        b = solver(en, st, v0, gu.EPS_MIN, **kw)
+        a = lbfgs(en, st, v0, EPS_MIN, **kw)
+        b = solver(en, st, v0, EPS_MIN, **kw)
         assert a[1] == b[1] and np.array_equal(a[0], b[0]), kw
 
 
@@ -304,12 +309,12 @@ def test_lift_from_an_invalid_point_restarts_and_stops_like_the_host(solver):
     """The lift energy at a point with an inverted corner: infinite energy, no gradient, so
     the direction is no descent even after the restart: one iteration, the start point."""
     p, groups, free = mesh("quad_hole")
-    en, st = gu._LiftEnergy(p, groups, free), gu._State(p, free)
+    en, st = LiftEnergy(p, groups, free), State(p, free)
     en.qc = 0.3
     v0 = st.pack(st.x, st.y)
     assert en.n_inverted(st.x, st.y) > 0
-    a = gu._lbfgs(en, st, v0, gu.EPS_MIN, max_it=20, guard=True)
-    b = solver(en, st, v0, gu.EPS_MIN, max_it=20, guard=True)
+    a = lbfgs(en, st, v0, EPS_MIN, max_it=20, guard=True)
+    b = solver(en, st, v0, EPS_MIN, max_it=20, guard=True)
     assert a[1] == b[1] == 1 and np.array_equal(a[0], b[0]) and np.array_equal(b[0], v0)
 
 
@@ -360,8 +365,9 @@ def test_big_ngon_and_single_free_node(solver, what):
 def test_powered_energy_falls_back_to_the_host_solver(solver):
     """polish_power != 1 is not in the kernels: the host solver runs, same result."""
     p, groups, free = mesh("quad_hole")
-    a, ia = gu.untangle_global(p, groups, free, polish_iter=40, polish_power=2.0)
-    b, ib = gu.untangle_global(p, groups, free, polish_iter=40, polish_power=2.0, lbfgs=solver)
+    a, ia = untangle_global(p, groups, free, GlobalOptions(polish_iter=40, polish_power=2.0))
+    options = GlobalOptions(polish_iter=40, polish_power=2.0, solver=solver)
+    b, ib = untangle_global(p, groups, free, options)
     assert np.array_equal(a, b) and ia["iterations"] == ib["iterations"] > 0
 
 
@@ -371,8 +377,8 @@ def test_tables_beyond_32_bit_indices_fall_back_to_the_host(solver, monkeypatch)
     p, groups, free = mesh("quad_hole")
     monkeypatch.setattr(lp, "INDEX_LIMIT", 64)
     solver.release()
-    a = gu.untangle_global(p, groups, free, polish_iter=40)
-    b = gu.untangle_global(p, groups, free, polish_iter=40, lbfgs=solver)
+    a = untangle_global(p, groups, free, GlobalOptions(polish_iter=40))
+    b = untangle_global(p, groups, free, GlobalOptions(polish_iter=40, solver=solver))
     assert np.array_equal(a[0], b[0]) and a[1]["iterations"] == b[1]["iterations"] > 0
     assert solver._last is None
 
@@ -382,7 +388,7 @@ def test_release_forgets_tables_and_factory_caches_per_setting(device):
     s = lp.device_solver(small_corners=0)
     assert lp.device_solver(small_corners=0) is s
     assert lp.device_solver(lanes=8, small_corners=0) is not s
-    gu.untangle_global(p, groups, free, polish_iter=10, lbfgs=s)
+    untangle_global(p, groups, free, GlobalOptions(polish_iter=10, solver=s))
     assert s._last is not None
     s.release()
     assert s._last is None
@@ -395,19 +401,20 @@ def test_small_problems_go_to_the_small_solver_same_result(device):
     is the single-work-item kernel); above, the parallel kernels; the host's bits either
     way."""
     p, groups, free = mesh("mixed_quad_tri")
-    n_corners = gu._Energy(p, groups, free).i0.size
+    n_corners = FoldoverEnergy(p, groups, free).i0.size
     calls = []
 
     def small(*args, **kw):
         calls.append(args[0].i0.size)
-        return gu._lbfgs(*args, **kw)
+        return lbfgs(*args, **kw)
 
     s = lp.ParallelLbfgs(small=small, small_corners=n_corners)  # the whole mesh: parallel
-    a = gu.untangle_global(p, groups, free, polish_iter=30)
-    b = gu.untangle_global(p, groups, free, polish_iter=30, lbfgs=s)
+    a = untangle_global(p, groups, free, GlobalOptions(polish_iter=30))
+    b = untangle_global(p, groups, free, GlobalOptions(polish_iter=30, solver=s))
     assert np.array_equal(a[0], b[0]) and not calls and s._last is not None
-    la = gu.lift_min_quality(a[0], groups, free, rounds=4)
-    lb = gu.lift_min_quality(a[0], groups, free, rounds=4, lbfgs=s)  # sub-meshes: the small
+    la = lift_min_quality(a[0], groups, free, GlobalOptions(lift_rounds=4))
+    # the lift's sub-meshes are small: the single-work-item kernel solves them
+    lb = lift_min_quality(a[0], groups, free, GlobalOptions(lift_rounds=4, solver=s))
     assert np.array_equal(la[0], lb[0]) and calls and max(calls) < n_corners
     if eo._runtime().is_cpu:
         factory = lp.device_solver()

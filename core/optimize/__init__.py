@@ -4,11 +4,15 @@ Where things live (NumPy and OpenCL twins side by side):
 
 - mesh tables, corner triangles, reference sizes: `reference.py` (uploaded by the solvers).
 - foldover-free energy f, g, chi (Garanzha et al.): `energy.FoldoverEnergy`;
-  OpenCL: `solver_opencl.cl` `fold_value_grad`.
+  OpenCL: `solver_parallel.cl` (`fold_*` kernels), `solver_opencl.cl` `fold_value_grad`.
 - lift energy (mean ratio + floor + barrier): `energy.LiftEnergy`;
-  OpenCL: `solver_opencl.cl` `lift_value`, `lift_grad`.
-- L-BFGS (two-loop, Armijo backtracking, validity guard): `solver.lbfgs`;
-  OpenCL: `solver_opencl.OpenCLLbfgs` (kernel `lbfgs_run`).
+  OpenCL: `solver_parallel.cl` (`lift_*` kernels), `solver_opencl.cl` `lift_value`, `lift_grad`.
+- L-BFGS (two-loop, Armijo backtracking, validity guard): `solver.lbfgs`; OpenCL:
+  `solver_parallel.ParallelLbfgs` (many work-items: per-corner energy kernels, per-node
+  gathers, NumPy's pairwise sums as fixed-order block reductions; `solver_parallel.cl`) and,
+  for small problems on CPU devices, `solver_opencl.OpenCLLbfgs` (one work-item runs the whole
+  solve; `solver_opencl.cl`, whose `fold_value_grad` / `lift_value` / `lift_grad` are the
+  energies written out).
 - active sub-mesh (rings around seed elements): `submesh.active_submesh`.
 - stage drivers (eps continuation and polish, the lift): `stages.untangle_global`,
   `stages.lift_min_quality`; what they are handed: `options.GlobalOptions`.

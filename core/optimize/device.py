@@ -10,12 +10,13 @@ __all__ = ["solver_for"]
 
 
 def solver_for(backend_name: str) -> Solver | None:
-    """The device solver when the run's engine is OpenCL and its device is a CPU (a single
-    work-item kernel: `solver_opencl.device_solver` gives none elsewhere); None = NumPy.
-    A kernel that does not build warns once and leaves NumPy, which gives the same result."""
+    """The device solver when the run's engine is OpenCL (`solver_parallel.device_solver`:
+    many work-items, and on a CPU device the single-work-item kernel for small problems);
+    None = NumPy. Kernels that do not build warn once and leave NumPy, which gives the same
+    result."""
     if not backend_name.startswith("opencl"):
         return None
-    from .solver_opencl import device_solver
+    from .solver_parallel import device_solver
 
     try:
         return device_solver()

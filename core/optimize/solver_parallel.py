@@ -1,11 +1,11 @@
 """The global stage's L-BFGS as many-work-item OpenCL kernels, bit-identical to the host.
 
-`ParallelLbfgs` is a drop-in for `global_untangle._lbfgs` (same arguments, same result to
+`ParallelLbfgs` is a drop-in for `solver.lbfgs` (same arguments, same result to
 the last bit) that scales with the mesh and suits GPUs: energy terms and corner gradients
 run one work-item per corner (along a locality-preserving sweep), the gradient is a
 per-node gather in np.bincount's order, vector updates are elementwise, and every dot
 product and energy sum is NumPy's pairwise summation split into fixed leaves and chunks
-(core/lbfgs_parallel.cl), so neither the work-group size nor the number of lanes per leaf
+(solver_parallel.cl), so neither the work-group size nor the number of lanes per leaf
 changes a bit. The solver's scalars stay on the device; the host enqueues an iteration's
 kernels and reads back one 64-byte status block per line-search trial (one per iteration
 when the first step is accepted). Tables are uploaded once per energy and kernel arguments
@@ -20,16 +20,17 @@ from pathlib import Path
 
 import numpy as np
 
-from . import global_untangle as gu
-from .engine_opencl import _runtime, bincount_csr
+from ..engine_opencl import _runtime, bincount_csr
+from .energy import FoldoverEnergy, LiftEnergy
+from .solver import LBFGS_MEMORY, State, lbfgs, stops
 
 __all__ = ["KERNEL_FILE", "ParallelLbfgs", "device_solver", "reduction_plan"]
 
-KERNEL_FILE = Path(__file__).with_name("lbfgs_parallel.cl")
+KERNEL_FILE = Path(__file__).with_name("solver_parallel.cl")
 CHUNK = 8192  # NumPy's reduction buffer (np.getbufsize())
 BLOCK = 128  # NumPy's pairwise base block
 LOCAL_SIZE = 64  # work-group size (any value gives the same bits; 64 was fastest on pocl)
-TRIALS = 40  # line-search halvings, as in _lbfgs
+TRIALS = 40  # line-search halvings, as in solver.lbfgs
 INDEX_LIMIT = 2**31  # the kernels' indices are 32-bit: larger tables use the host solver
 # Below this many energy corners the single-work-item kernel beats the parallel kernels on
 # the pocl CPU device (~35 launches and a read per iteration, ~0.15 ms; crossover measured
@@ -51,7 +52,7 @@ def device_solver(
     settings; RuntimeError when there is no device or the kernels do not build.
 
     On a CPU device, problems with fewer than `small_corners` energy corners (None:
-    SMALL_CORNERS) go to the single-work-item kernel (core/lbfgs_opencl.py), faster there;
+    SMALL_CORNERS) go to the single-work-item kernel (solver_opencl.py), faster there;
     elsewhere every problem runs in parallel. Either way the result is the host's."""
     rt = _runtime()
     if small_corners is None:
@@ -61,7 +62,7 @@ def device_solver(
     if solver is None:
         small = None
         if small_corners > 0:
-            from .lbfgs_opencl import OpenCLLbfgs
+            from .solver_opencl import OpenCLLbfgs
 
             small = OpenCLLbfgs()
         solver = ParallelLbfgs(lanes, local_size, small=small, small_corners=small_corners)
@@ -167,8 +168,8 @@ class _Plan:
 class _Tables:
     """One energy's arrays on the device, and the solver's kernels bound to them."""
 
-    def __init__(self, solver: ParallelLbfgs, en: gu._Energy, st: gu._State):
-        self.lift = lift = isinstance(en, gu._LiftEnergy)
+    def __init__(self, solver: ParallelLbfgs, en: FoldoverEnergy, st: State):
+        self.lift = lift = isinstance(en, LiftEnergy)
         nn, nc, nf = en.n_nodes, en.i0.size, st.nf
         n2 = 2 * nf
         ne = en.n_elem if lift else 0
@@ -211,7 +212,7 @@ class _Tables:
         if lift:
             self.plans.append(_Plan(solver, ne, 1))
         ints += [p.ints for p in self.plans]
-        sizes = [6 * nc, (gu.LBFGS_MEMORY + 1) * n2, 2 * nn]  # the largest offsets used
+        sizes = [6 * nc, (LBFGS_MEMORY + 1) * n2, 2 * nn]  # the largest offsets used
         top = max([int(a.max()) for a in ints if a.size] + sizes)
         if top >= INDEX_LIMIT:
             raise ValueError("mesh too large for the parallel solver's 32-bit indices")
@@ -231,7 +232,7 @@ class _Tables:
         xy[zpos, 0], xy[zpos, 1] = st.x, st.y
         self.Z = buf(xy.ravel())  # node (x, y) pairs in Z order; the free ones: trial points
         self.v, self.g, self.q, self.gt = (empty(8 * n2) for _ in range(4))
-        ring = 8 * n2 * (gu.LBFGS_MEMORY + 1)  # M pairs and the candidate's spare slot
+        ring = 8 * n2 * (LBFGS_MEMORY + 1)  # M pairs and the candidate's spare slot
         self.hs, self.hy = empty(ring), empty(ring)
         self.GS = empty(16 * self.n_slots)
 
@@ -241,7 +242,7 @@ class _Tables:
         i32 = np.int32
         (pv, pc, *pe), (dv, dc, *de) = self.PI, self.PD
         vec = (S, pv, dv)
-        for h in range(gu.LBFGS_MEMORY):
+        for h in range(LBFGS_MEMORY):
             k["loop1"][h].set_args(*vec, self.q, self.g, self.hs, self.hy, i32(h))
             k["loop2"][h].set_args(*vec, self.q, self.g, self.hs, self.hy, i32(h))
             k["finish_alpha"][h].set_args(*vec, i32(h))
@@ -278,7 +279,7 @@ class _Tables:
 
 
 class ParallelLbfgs:
-    """`_lbfgs` for `untangle_global` / `lift_min_quality`, run by many-work-item kernels.
+    """`solver.lbfgs` for `untangle_global` / `lift_min_quality`, run by many-work-item kernels.
 
     lanes: work-items per leaf of 128 terms in the reductions (1: one work-item sums a leaf,
     best on CPUs; 8: one per partial sum, more parallelism for GPUs; None: 1 on CPU devices,
@@ -303,16 +304,16 @@ class ParallelLbfgs:
             raise ValueError("lanes must be 1, 2, 4 or 8")
         self.local_size = local_size
         prg = rt.build(
-            f"lbfgs_parallel M={gu.LBFGS_MEMORY} LANES={self.lanes}",
+            f"lbfgs_parallel M={LBFGS_MEMORY} LANES={self.lanes}",
             KERNEL_FILE.read_text(),
-            [f"-DM={gu.LBFGS_MEMORY}", f"-DLANES={self.lanes}"],
+            [f"-DM={LBFGS_MEMORY}", f"-DLANES={self.lanes}"],
             what="parallel L-BFGS kernels",
         )
 
         def kern(name: str):
             return self.cl.Kernel(prg, name)
 
-        m = gu.LBFGS_MEMORY
+        m = LBFGS_MEMORY
         self._k: dict = {name: [kern(name) for _ in range(m)]
                          for name in ("loop1", "loop2", "finish_alpha", "finish_coef")}
         self._k["trial_point"], self._k["place"] = kern("trial_point"), kern("trial_point")
@@ -331,7 +332,7 @@ class ParallelLbfgs:
         self._S_host = np.zeros(s_len)
         self.S = self._empty(8 * s_len)
         self._rb = np.zeros(8)
-        self._last: tuple[gu._Energy, gu._State, _Tables] | None = None
+        self._last: tuple[FoldoverEnergy, State, _Tables] | None = None
 
     def release(self) -> None:
         """Forget the uploaded tables (and the energy they came from): end of a run."""
@@ -349,7 +350,7 @@ class ParallelLbfgs:
     def _empty(self, nbytes: int):
         return self.cl.Buffer(self.ctx, self.cl.mem_flags.READ_WRITE, max(int(nbytes), 8))
 
-    def _tables_for(self, en: gu._Energy, st: gu._State) -> _Tables:
+    def _tables_for(self, en: FoldoverEnergy, st: State) -> _Tables:
         """The device tables of (en, st), with the kernels bound to them."""
         if self._last is None or self._last[0] is not en or self._last[1] is not st:
             self._last = None  # free the old tables first
@@ -440,8 +441,8 @@ class ParallelLbfgs:
 
     def __call__(
         self,
-        en: gu._Energy,
-        st: gu._State,
+        en: FoldoverEnergy,
+        st: State,
         v0: np.ndarray,
         eps: float,
         *,
@@ -452,13 +453,13 @@ class ParallelLbfgs:
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
         if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernels: the host's
-            return gu._lbfgs(en, st, v0, eps, **kw)
+            return lbfgs(en, st, v0, eps, **kw)
         if en.i0.size < self.small_corners:
             return self.small(en, st, v0, eps, **kw)
         try:
             tb = self._tables_for(en, st)
         except ValueError:  # indices beyond 32 bits: the host solver, same result
-            return gu._lbfgs(en, st, v0, eps, **kw)
+            return lbfgs(en, st, v0, eps, **kw)
         cl, queue = self.cl, self.queue
         s = self._S_host
         s[:] = 0.0
@@ -476,7 +477,7 @@ class ParallelLbfgs:
         e_hist = [float(self._rb[_ET])]
         it, pairs = 0, 0  # pairs: the most the device may hold
         trial = False  # the current point is the accepted trial in Z (not yet in v)
-        m = gu.LBFGS_MEMORY
+        m = LBFGS_MEMORY
         # The foldover-free energy's gradient terms cost a third of a trial and serve only
         # the accepted one: computed with the first trial while first trials get accepted
         # (one pass), else in a pass of their own after the accepted trial. Bits unchanged.
@@ -513,7 +514,7 @@ class ParallelLbfgs:
             e_hist.append(e)
             if len(e_hist) > 5 and e_hist[-6] - e <= rel_tol * abs(e_hist[-6]):
                 break
-            if tick is not None and it % en.tick_every == 0 and gu.stops(tick(it)):
+            if tick is not None and it % en.tick_every == 0 and stops(tick(it)):
                 break
             if it < max_it:
                 self._accept(tb, grad)

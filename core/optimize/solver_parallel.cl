@@ -1,6 +1,6 @@
-// The global stage's L-BFGS (core/global_untangle.py: _lbfgs with _Energy or _LiftEnergy)
+// The global stage's L-BFGS (core/optimize/solver.py: lbfgs with FoldoverEnergy or LiftEnergy)
 // as many-work-item float64 kernels, bit-identical to the host solver on any work-group
-// size, lane count and device. The host (core/lbfgs_parallel.py) enqueues the kernels of an
+// size, lane count and device. The host (solver_parallel.py) enqueues the kernels of an
 // iteration and reads back one small status block per line-search trial; every scalar of
 // the solver (step, slope, alphas, ring state) lives in the device buffer S.
 //
@@ -53,7 +53,7 @@
 #define SLOTS (M + 1)  // ring slots: M pairs and a spare for the candidate pair
 #define LPW (8 / LANES)  // leaf partial sums per work-item
 #define PPL ((LANES == 1) ? 1 : 16)  // partials per leaf and sum: the sum, or 8 lanes + 8 tails
-#define THETA 0.0625  // global_untangle.THETA
+#define THETA 0.0625  // energy.THETA
 #define PENALTY 1000.0  // LIFT_PENALTY
 #define BARRIER 0.01  // LIFT_BARRIER
 #define CHUNK 8192  // NumPy's reduction buffer size
