@@ -36,11 +36,13 @@ class DaskError(Exception):
 
 
 def install_hint() -> str:
-    """How to install Dask for the Python this Blender runs."""
-    return ("install it for Blender's Python: blender -b --python-expr \"import subprocess, "
-            "sys; subprocess.check_call([sys.executable, '-m', 'pip', 'install', "
-            "'dask[distributed]'])\" (or pip install --target DIR and add DIR to the "
-            "preferences' script directories; see docs/batch.md)")
+    """How to install Dask for the Python this Blender runs: pip into Blender's user
+    ``scripts/modules`` folder, which Blender puts on sys.path (it ignores PYTHONPATH)."""
+    return ("install them for Blender's Python: blender -b --python-expr \"import bpy, "
+            "subprocess, sys; subprocess.check_call([sys.executable, '-m', 'pip', 'install', "
+            "'--target', bpy.utils.user_resource('SCRIPTS', path='modules', create=True), "
+            "'dask[distributed]'])\" (a Linux distribution's Blender: its python3-dask and "
+            "python3-distributed packages; see docs/batch.md)")
 
 
 def require() -> Any:

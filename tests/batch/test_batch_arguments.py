@@ -138,7 +138,7 @@ def test_dask_addresses(address, parsed):
 
 @pytest.mark.parametrize("address", ["local:0", "local:x", " "])
 def test_bad_dask_addresses_are_one_line_errors(address):
-    with pytest.raises(dask_pool.DaskError, match="^eegt: --dask"):
+    with pytest.raises(dask_pool.DaskError, match=r"^eegt: --dask"):
         dask_pool.parse_address(address)
 
 
@@ -149,4 +149,5 @@ def test_missing_dask_says_how_to_install_it(monkeypatch):
         dask_pool.require()
     msg = str(err.value)
     assert "\n" not in msg and "--dask needs the dask and distributed packages" in msg
-    assert "pip', 'install', 'dask[distributed]'" in msg
+    assert "'pip', 'install', '--target', bpy.utils.user_resource('SCRIPTS', path='modules'" in msg
+    assert "'dask[distributed]'" in msg and "python3-distributed" in msg

@@ -56,7 +56,8 @@ def one_error_line(capfd) -> str:
      "eegt: --timeout must be a positive number of seconds (got 0)"),
     (["{m}", "-o", "{t}/out", "--suffix", "a/b"],
      "eegt: --suffix 'a/b' must not contain a path separator"),
-    (["{m}", "--skip-existing"], "eegt: --skip-existing needs -o OUTDIR (outputs to compare or name)"),
+    (["{m}", "--skip-existing"],
+     "eegt: --skip-existing needs -o OUTDIR (outputs to compare or name)"),
     (["{m}/quad_hole.obj", "{m}/sub/tilted_plane.obj", "{t}/x/quad_hole.obj", "-o", "{t}/out"],
      "eegt: '{m}/quad_hole.obj' and '{t}/x/quad_hole.obj' would both write "
      "'{t}/out/quad_hole.obj' (use --suffix, or inputs from one folder)"),
