@@ -18,7 +18,7 @@ from .inputs import FORMATS, has_magic
 # dest -> its flag; every flag that only a batch has
 BATCH_FLAGS = {"jobs": "--jobs", "timeout": "--timeout", "skip_existing": "--skip-existing",
                "recursive": "--recursive", "suffix": "--suffix", "format": "--format",
-               "dask": "--dask"}
+               "dask": "--dask", "files_per_worker": "--files-per-worker"}
 # single-file flags a batch sets itself for each worker
 PER_FILE = ("input", "output", "report", "help")
 
@@ -40,6 +40,10 @@ def add_batch_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("batch (many inputs, an output folder, or any flag below)")
     g.add_argument("-j", "--jobs", type=int, default=None, metavar="N",
                    help="worker processes, each a separate blender -b (default: one per core)")
+    g.add_argument("--files-per-worker", type=int, default=None, metavar="K",
+                   help="files one worker Blender runs in turn before a fresh one replaces it "
+                        "(default 1: a fresh Blender per file; more saves its start-up, a "
+                        "crash or timeout still ends only the current file)")
     g.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="seconds per file before its worker is killed (reported 'timeout')")
     g.add_argument("--skip-existing", action="store_true",

@@ -2,9 +2,11 @@
 """The same per-file tasks on a Dask distributed cluster (``--dask ADDRESS``), or on a
 ``LocalCluster`` of N worker processes (``--dask local:N``).
 
-Each task runs ``batch.worker.run_task`` on a Dask worker: the single-file command in that
-machine's Blender, on inputs and outputs every worker sees (shared storage). Dask workers are
-plain Python processes without this extension, so the worker module is uploaded to them.
+Each task runs ``batch.worker.run_chunk`` on a Dask worker: the single-file command in that
+machine's Blender (for one file, or for ``--files-per-worker`` files in one Blender), on
+inputs and outputs every worker sees (shared storage). Dask workers are plain Python
+processes without this extension, so the worker module is uploaded to them.
+
 Dask is optional: it is imported only here, and its absence is a one-line error.
 """
 
@@ -108,9 +110,9 @@ def connect(address: str, default_workers: int) -> tuple[Any, Any]:
                         ) from None
 
 
-def ship_worker(client: Any) -> Callable[[dict[str, Any]], Result]:
+def ship_worker(client: Any) -> Callable[..., list[Result]]:
     """Send ``batch/worker.py`` to the scheduler and every worker (those joining later
-    too) as the module ``eegt_batch_worker``, and return its ``run_task`` loaded here from
+    too) as the module ``eegt_batch_worker``, and return its ``run_chunk`` loaded here from
     the same file: a task then names its function by that module, which every worker can
     import (this package cannot be imported outside Blender)."""
     folder = tempfile.mkdtemp(prefix="eegt-dask-")
@@ -125,36 +127,40 @@ def ship_worker(client: Any) -> Callable[[dict[str, Any]], Result]:
         client.upload_file(path)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
-    return module.run_task
+    return module.run_chunk
 
 
 def run_dask(client: Any, tasks: Sequence[dict[str, Any]],
              on_result: Callable[[Result], None], stop: Callable[[], bool],
-             tick: Callable[[], None] | None = None) -> bool:
-    """Submit every task (largest input first), hand each result to `on_result` as it
-    completes; when `stop()` turns true, cancel what is left (reported cancelled). Returns
-    whether it was stopped."""
+             tick: Callable[[], None] | None = None, per_worker: int = 1) -> bool:
+    """Submit the tasks (largest input first; `per_worker` files per Dask task, run by one
+    Blender), hand each file's result to `on_result` as its task completes; when `stop()`
+    turns true, cancel what is left (reported cancelled). Returns whether it was stopped."""
     from distributed import as_completed
 
-    run_task = ship_worker(client)
+    run_chunk = ship_worker(client)
     ordered = by_size(tasks)
+    chunks = [ordered[i:i + per_worker] for i in range(0, len(ordered), per_worker)]
     run_id = uuid.uuid4().hex[:8]
     futures = {}
-    for rank, task in enumerate(ordered):
-        fut = client.submit(run_task, task, key=f"eegt-{run_id}-{task['index']}",
-                            pure=False, priority=len(ordered) - rank)
-        futures[fut.key] = (fut, task)
+    for rank, chunk in enumerate(chunks):
+        fut = client.submit(run_chunk, chunk, per_worker, pure=False,
+                            key=f"eegt-{run_id}-{chunk[0]['index']}",
+                            priority=len(chunks) - rank)
+        futures[fut.key] = (fut, chunk)
     pending = as_completed([f for f, _ in futures.values()])
     left = dict(futures)
     while left:
         if stop():
             client.cancel([f for f, _ in left.values()])
-            for _, task in left.values():
-                on_result(cancelled(task, "interrupted before its result came back"))
+            for _, chunk in left.values():
+                for task in chunk:
+                    on_result(cancelled(task, "interrupted before its result came back"))
             return True
         for fut in pending.next_batch(block=False):
-            _, task = left.pop(fut.key)
-            on_result(_outcome(fut, task))
+            _, chunk = left.pop(fut.key)
+            for res in _outcome(fut, chunk):
+                on_result(res)
         if tick is not None:
             tick()
         if left:
@@ -162,8 +168,8 @@ def run_dask(client: Any, tasks: Sequence[dict[str, Any]],
     return False
 
 
-def _outcome(fut: Any, task: dict[str, Any]) -> Result:
-    """A finished future's result, or an error result saying why the task itself failed
+def _outcome(fut: Any, chunk: list[dict[str, Any]]) -> list[Result]:
+    """A finished future's results, or error results saying why the task itself failed
     (a worker lost, a task that could not be sent)."""
     if fut.status == "finished":
         return fut.result()
@@ -171,6 +177,9 @@ def _outcome(fut: Any, task: dict[str, Any]) -> Result:
         exc = fut.exception()
     except Exception as err:  # cancelled futures raise here
         exc = err
-    res = cancelled(task, f"the Dask task failed: {exc!r}"[:500])
-    res.update(status="error", exit_code=1)
-    return res
+    results = []
+    for task in chunk:
+        res = cancelled(task, f"the Dask task failed: {exc!r}"[:500])
+        res.update(status="error", exit_code=1)
+        results.append(res)
+    return results

@@ -75,6 +75,7 @@ def file_entry(result: dict[str, Any]) -> dict[str, Any]:
         "before": combine([o.get("before") for o in objects], faces),
         "after": combine([o.get("after") for o in objects], faces),
         "backend": ",".join(backends), "host": result.get("host", ""),
+        "pid": result.get("pid"),
         "message": result.get("message", ""), "objects": objects,
         "skipped_objects": rep.get("skipped", []), "log": result.get("log", ""),
     }

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import os
 import platform
 import signal
@@ -27,7 +28,7 @@ from typing import Any
 
 import bpy
 
-from ..batch import arguments, dask_pool, inputs, pool, summary
+from ..batch import arguments, dask_pool, inputs, pool, summary, worker
 from . import cli, report
 
 DEFAULT_REPORT = "eegt_report.json"
@@ -43,7 +44,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def is_batch(argv: list[str]) -> bool:
-    """Whether this command line is a batch (help shows the batch flags too)."""
+    """Whether this command line is a batch (help shows the batch flags too), or a batch's
+    worker Blender serving files."""
+    if argv[:1] == [worker.SERVE_FLAG]:
+        return True
     if arguments.batch_flag_in(argv) or "-h" in argv or "--help" in argv:
         return True
     try:
@@ -72,6 +76,8 @@ def _usage(message: str) -> cli.UsageError:
 def _check_flags(ns: argparse.Namespace) -> None:
     if ns.jobs is not None and ns.jobs < 1:
         raise _usage(f"eegt: --jobs must be at least 1 (got {ns.jobs})")
+    if ns.files_per_worker is not None and ns.files_per_worker < 1:
+        raise _usage(f"eegt: --files-per-worker must be at least 1 (got {ns.files_per_worker})")
     if ns.timeout is not None and not ns.timeout > 0:
         raise _usage(f"eegt: --timeout must be a positive number of seconds (got {ns.timeout:g})")
     if os.sep in ns.suffix or "/" in ns.suffix:
@@ -239,8 +245,32 @@ class _Console:
             sys.stdout.flush()
 
 
+def serve(lines: Any = None) -> int:
+    """A batch's worker Blender (``--files-per-worker``): run the single-file command for
+    every command line read from stdin (one JSON list a line) until it closes. Each run puts
+    its report in place last, which tells the batch the file is done; when a run could not
+    write its report, this writes a short one, and exits when even that fails."""
+    for line in sys.stdin if lines is None else lines:
+        try:
+            argv = json.loads(line)
+        except ValueError:
+            continue
+        code, rep = cli.run([str(a) for a in argv])
+        path = argv[argv.index("--report") + 1] if "--report" in argv else None
+        if path and not os.path.exists(path):
+            try:
+                with open(path, "w", encoding="utf-8") as fh:
+                    json.dump({"exit_code": code, "error": rep.get("error"), "objects": [],
+                               "written": False}, fh)
+            except OSError:
+                return code or cli.EXIT_INTERNAL
+    return cli.EXIT_OK
+
+
 def run(argv: list[str]) -> int:
     """Parse, plan, run every file, write the reports; the batch's exit code."""
+    if argv[:1] == [worker.SERVE_FLAG]:
+        return serve()
     t0 = time.monotonic()
     started = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
     parser = build_parser()
@@ -275,11 +305,12 @@ def run(argv: list[str]) -> int:
     with _Stopper() as stop:
         try:
             if ns.dask is not None and p.tasks:
-                interrupted = _run_dask(ns.dask, p, on_result, stop, console)
+                interrupted = _run_dask(ns.dask, p, on_result, stop, console,
+                                        ns.files_per_worker or 1)
             elif p.tasks:
                 _remove_stale(p)
                 interrupted = pool.run_local(p.tasks, p.jobs, p.blender, on_result, stop,
-                                             console.tick)
+                                             console.tick, ns.files_per_worker or 1)
         except dask_pool.DaskError as exc:
             console.close()
             print(str(exc), file=sys.stderr, flush=True)
@@ -291,6 +322,7 @@ def run(argv: list[str]) -> int:
             "blender_version": bpy.app.version_string, "python": platform.python_version(),
             "argv": list(argv), "started": started, "seconds": round(time.monotonic() - t0, 3),
             "mode": "dask" if ns.dask else "local", "jobs": None if ns.dask else p.jobs,
+            "files_per_worker": ns.files_per_worker or 1,
             "dask": ns.dask, "timeout": ns.timeout, "outdir": p.outdir,
             "interrupted": interrupted, "counts": summary.counts(files), "exit_code": code,
             "files": files}
@@ -326,14 +358,16 @@ def _remove_stale(p: _Plan) -> None:
               "an interrupted run", flush=True)
 
 
-def _run_dask(address: str, p: _Plan, on_result: Any, stop: Any, console: _Console) -> bool:
+def _run_dask(address: str, p: _Plan, on_result: Any, stop: Any, console: _Console,
+              per_worker: int) -> bool:
     with dask_pool.plain_main():
         client, cluster = dask_pool.connect(address, pool.default_jobs())
         try:
             n = len(client.scheduler_info().get("workers", {}))
             print(f"eegt: Dask cluster {client.scheduler.address}: {n} worker"
                   f"{'s' * (n != 1)}", flush=True)
-            return dask_pool.run_dask(client, p.tasks, on_result, stop, console.tick)
+            return dask_pool.run_dask(client, p.tasks, on_result, stop, console.tick,
+                                      per_worker)
         finally:
             client.close()
             if cluster is not None:

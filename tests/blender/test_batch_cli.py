@@ -50,6 +50,8 @@ def one_error_line(capfd) -> str:
     (["{m}", "--recursive", "-o", "{t}/one.obj"],
      "eegt: -o {t}/one.obj names one file but 2 inputs matched: give an output folder"),
     (["{m}", "-o", "{t}/out", "--jobs", "0"], "eegt: --jobs must be at least 1 (got 0)"),
+    (["{m}", "-o", "{t}/out", "--files-per-worker", "0"],
+     "eegt: --files-per-worker must be at least 1 (got 0)"),
     (["{m}", "-o", "{t}/out", "--format", "fbx"],
      "blender -b -c eegt: error: argument --format: invalid choice: 'fbx' (choose from ..."),
     (["{m}", "-o", "{t}/out", "--timeout", "0"],
@@ -198,3 +200,23 @@ def test_dask_local_cluster_tasks_report_a_machine_without_blender(bpy, ext, tmp
                                 f"executable file on {f['host']}")
     assert (out / "sub").is_dir()  # the task made the output folder on its worker
     assert "Dask cluster tcp://127.0.0.1:" in capfd.readouterr().out
+
+
+def test_served_files_match_fresh_runs_and_each_leaves_its_report(bpy, ext, tmp_path):
+    """A worker Blender serving several files in turn (--files-per-worker) writes what a
+    fresh single-file run writes, byte for byte, and a report for each, also for a file it
+    cannot read."""
+    worker = ext.batch.worker
+    tasks = [{"index": i, "input": str(DATA / f"{m}.obj"), "output": str(tmp_path / f"{m}.obj"),
+              "args": ["--max-smooth-iterations=40"]}
+             for i, m in enumerate(["polygon_voronoi", "quad_hole", "no_such_mesh"])]
+    lines = [json.dumps(worker.file_args(t, str(tmp_path / f"{t['index']}.json"))) + "\n"
+             for t in tasks]
+    assert batch(ext).serve(["not json\n", *lines]) == 0
+    reports = [json.loads((tmp_path / f"{i}.json").read_text()) for i in range(3)]
+    assert [r["exit_code"] for r in reports] == [0, 0, 2]
+    assert "no such file" in reports[2]["error"]
+    for t in tasks[:2]:
+        fresh = tmp_path / "fresh.obj"
+        assert cli(ext).execute([t["input"], "-o", str(fresh), "--quiet", *t["args"]]) == 0
+        assert fresh.read_bytes() == open(t["output"], "rb").read()

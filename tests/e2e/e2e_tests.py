@@ -435,6 +435,48 @@ def t_batch_folder_glob_failures():
             "1 unreadable, 1 timeout; exit 1")
 
 
+@test
+def t_batch_files_per_worker():
+    """--files-per-worker 3: one Blender runs three files in turn; outputs byte-identical to
+    single-file runs; a hang in a served file kills only that Blender, and the next file
+    gets a fresh one."""
+    base = fresh_dir(f"{OUT}/batch5")
+    src, outdir = f"{base}/in", f"{base}/out"
+    for m in ("two_holes_twist", "polygon_voronoi", "tilted_plane", "quad_hole"):
+        copy(m, f"{src}/{m}.obj")
+    with open(f"{src}/garbage.blend", "wb") as fh:
+        fh.write(b"this is not a blend file\x00\x01" * 40)
+    fifo, empty = f"{base}/hang.obj", f"{base}/empty.obj"
+    os.mkfifo(fifo)
+    open(empty, "w").close()
+    # largest first, ties in the order given: Blender A runs twist, voronoi, tilted;
+    # B runs quad_hole, garbage and hangs on the FIFO (killed); C runs empty.obj
+    t0 = time.time()
+    rc, out = blender(["-b", "-c", "eegt", src, fifo, empty, "-o", outdir, "--jobs", "1",
+                       "--files-per-worker", "3", "--timeout", "8", *BATCH_FLAGS],
+                      timeout=240, log="batch_files_per_worker")
+    secs = time.time() - t0
+    os.remove(fifo)
+    check(rc == 1, f"exit code {rc}, expected 1: {tail(out)}")
+    rep, _ = batch_report(f"{outdir}/eegt_report.json")
+    got = {os.path.basename(f["input"]): (f["status"], f["exit_code"]) for f in rep["files"]}
+    check(got == {"two_holes_twist.obj": ("failed", 3), "polygon_voronoi.obj": ("ok", 0),
+                  "tilted_plane.obj": ("ok", 0), "quad_hole.obj": ("ok", 0),
+                  "garbage.blend": ("error", 2), "hang.obj": ("timeout", None),
+                  "empty.obj": ("error", 2)}, f"statuses {got}")
+    pid = {os.path.splitext(os.path.basename(f["input"]))[0]: f["pid"] for f in rep["files"]}
+    a, b = pid["two_holes_twist"], pid["quad_hole"]
+    check(pid["polygon_voronoi"] == pid["tilted_plane"] == a and
+          pid["garbage"] == pid["hang"] == b and len({a, b, pid["empty"]}) == 3,
+          f"worker Blenders (pids) per file: {pid}")
+    check(rep["files_per_worker"] == 3, f"report files_per_worker {rep['files_per_worker']}")
+    for m in ("polygon_voronoi", "tilted_plane", "quad_hole"):
+        check(same_bytes(f"{outdir}/{m}.obj", single_output(m)),
+              f"{m}: served output differs from the single-file run")
+    check(not hidden_files(outdir), f"temporary files left: {hidden_files(outdir)}")
+    return f"7 files in {secs:.1f} s by 3 Blenders; the hang killed one, exit 1"
+
+
 def _count_outputs(folder):
     return len([n for n in os.listdir(folder) if n.endswith(".obj")]) if \
         os.path.isdir(folder) else 0
@@ -541,24 +583,29 @@ def t_batch_dask_local2():
     for m in meshes:
         copy(m, f"{base}/in/{m}.obj")
     outdir = f"{base}/out"
-    t0 = time.time()
-    rc, out = blender(["-b", "-c", "eegt", f"{base}/in/*.obj", "-o", outdir, "--dask", "local:2",
-                       *BATCH_FLAGS], timeout=240, log="batch_dask")
-    secs = time.time() - t0
-    check(rc == 3, f"exit code {rc}, expected 3 (two_holes_twist fails): {tail(out)}")
-    check("Dask cluster tcp://" in out and ": 2 workers" in out,
-          f"no 2-worker cluster: {tail(out)}")
-    rep, rows = batch_report(f"{outdir}/eegt_report.json")
-    status = {os.path.basename(f["input"]): f["status"] for f in rep["files"]}
-    check(status == {f"{m}.obj": "ok" for m in meshes[:3]} | {"two_holes_twist.obj": "failed"},
-          f"statuses {status}")
-    check(rep["mode"] == "dask" and all(f["host"] for f in rep["files"]) and len(rows) == 4,
-          f"report mode {rep['mode']}")
-    for m in meshes[:3]:
-        check(same_bytes(f"{outdir}/{m}.obj", single_output(m)),
-              f"{m}: Dask output differs from the single-file run")
-    check(not hidden_files(outdir), f"temporary files left: {hidden_files(outdir)}")
-    return f"4 files on 2 Dask workers in {secs:.1f} s, 3 bit-identical outputs, exit 3"
+    secs = []
+    for per_worker in ("1", "2"):  # a fresh Blender per file; two files per Blender
+        outdir = f"{base}/out{per_worker}"
+        t0 = time.time()
+        rc, out = blender(["-b", "-c", "eegt", f"{base}/in/*.obj", "-o", outdir, "--dask",
+                           "local:2", "--files-per-worker", per_worker, *BATCH_FLAGS],
+                          timeout=240, log=f"batch_dask_{per_worker}")
+        secs.append(time.time() - t0)
+        check(rc == 3, f"exit code {rc}, expected 3 (two_holes_twist fails): {tail(out)}")
+        check("Dask cluster tcp://" in out and ": 2 workers" in out,
+              f"no 2-worker cluster: {tail(out)}")
+        rep, rows = batch_report(f"{outdir}/eegt_report.json")
+        status = {os.path.basename(f["input"]): f["status"] for f in rep["files"]}
+        check(status == {f"{m}.obj": "ok" for m in meshes[:3]} |
+              {"two_holes_twist.obj": "failed"}, f"statuses {status}")
+        check(rep["mode"] == "dask" and all(f["host"] for f in rep["files"]) and len(rows) == 4,
+              f"report mode {rep['mode']}")
+        for m in meshes[:3]:
+            check(same_bytes(f"{outdir}/{m}.obj", single_output(m)),
+                  f"{m}: Dask output differs from the single-file run")
+        check(not hidden_files(outdir), f"temporary files left: {hidden_files(outdir)}")
+    return (f"4 files on 2 Dask workers in {secs[0]:.1f} s (a Blender per file) and "
+            f"{secs[1]:.1f} s (2 per Blender), 3 bit-identical outputs, exit 3")
 
 
 @test
