@@ -139,8 +139,8 @@ def run_dask(client: Any, tasks: Sequence[dict[str, Any]],
     from distributed import as_completed
 
     run_chunk = ship_worker(client)
-    ordered = by_size(tasks)
-    chunks = [ordered[i:i + per_worker] for i in range(0, len(ordered), per_worker)]
+    workers = len(client.scheduler_info().get("workers", {}))
+    chunks = chunked(by_size(tasks), per_worker, workers)
     run_id = uuid.uuid4().hex[:8]
     futures = {}
     for rank, chunk in enumerate(chunks):
@@ -166,6 +166,17 @@ def run_dask(client: Any, tasks: Sequence[dict[str, Any]],
         if left:
             time.sleep(POLL)
     return False
+
+
+def chunked(ordered: list[dict[str, Any]], per_worker: int, workers: int
+            ) -> list[list[dict[str, Any]]]:
+    """Tasks (largest first) dealt round-robin into chunks of at most `per_worker`, at
+    least one chunk per worker while there are files enough (a chunk runs in one Blender,
+    one file after the other, so small chunks keep every worker busy)."""
+    if per_worker <= 1 or not ordered:
+        return [[t] for t in ordered]
+    n = max(-(-len(ordered) // per_worker), min(max(workers, 1), len(ordered)))
+    return [ordered[i::n] for i in range(n)]
 
 
 def _outcome(fut: Any, chunk: list[dict[str, Any]]) -> list[Result]:

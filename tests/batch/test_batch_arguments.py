@@ -151,3 +151,13 @@ def test_missing_dask_says_how_to_install_it(monkeypatch):
     assert "\n" not in msg and "--dask needs the dask and distributed packages" in msg
     assert "'pip', 'install', '--target', bpy.utils.user_resource('SCRIPTS', path='modules'" in msg
     assert "'dask[distributed]'" in msg and "python3-distributed" in msg
+
+
+def test_dask_chunks_deal_files_round_robin_one_chunk_per_worker_at_least():
+    tasks = [{"index": i} for i in range(10)]
+    assert dask_pool.chunked(tasks, 1, 2) == [[t] for t in tasks]
+    chunks = dask_pool.chunked(tasks, 20, 2)  # 10 files, 2 workers: 2 chunks of 5
+    assert [[t["index"] for t in c] for c in chunks] == [[0, 2, 4, 6, 8], [1, 3, 5, 7, 9]]
+    chunks = dask_pool.chunked(tasks, 3, 2)  # at most 3 per chunk: 4 chunks
+    assert [[t["index"] for t in c] for c in chunks] == [[0, 4, 8], [1, 5, 9], [2, 6], [3, 7]]
+    assert [len(c) for c in dask_pool.chunked(tasks[:1], 5, 4)] == [1]
