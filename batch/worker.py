@@ -196,7 +196,8 @@ def _from_exit(task: Task, code: int, elapsed: float, pid: int, log: str,
         why = " (out of memory?)" if -code == signal.SIGKILL else ""
         return _result(task, status="crashed",
                        message=f"Blender was killed by {_signal_name(-code)}{why}", **kw)
-    if NO_COMMAND in log:
+    if NO_COMMAND in log:  # a set-up problem, like a missing Blender: exit code 2
+        kw["exit_code"] = 2
         msg = (f"the eegt_blender extension is not installed or not enabled for {blender} "
                f"on {socket.gethostname()}")
     else:

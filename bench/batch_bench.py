@@ -12,6 +12,7 @@ hold of the root's lock:
 
     python3 -m bench.batch_bench prepare --files 200     # extension, meshes, start-up cost
     python3 -m bench.batch_bench mode loop               # ... jobs1, jobs2, dask2, jobs2_k
+    python3 -m bench.batch_bench memory                  # peak memory of one worker
     python3 -m bench.batch_bench table
 """
 
@@ -150,6 +151,30 @@ def mode(name: str) -> None:
           f"{load0[0]:.2f} -> {load1[0]:.2f}")
 
 
+def memory(sizes: list[int]) -> None:
+    """Peak resident memory of one worker's Blender: idle (start, parse, quit) and running
+    the single-file command on generated meshes of these sizes (what --jobs N multiplies)."""
+    rows = []
+    probe = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], "
+             "stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL); "
+             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
+    cases = [("idle: `blender -b -c eegt --help`", ["--help"])]
+    for n in sizes:
+        path = f"{WORK}/mem_{n}.obj"
+        pts, fs = jittered_square(n, jitter=0.45, seed=7)
+        write_obj(path, pts, fs.indices.reshape(-1, 3))
+        cases.append((f"{fs.n_faces} triangles", [path, "-o", f"{WORK}/mem_out.obj"]))
+    for label, args in cases:
+        t = time.perf_counter()
+        p = run([sys.executable, "-c", probe, "blender", "-b", "-c", "eegt", *args])
+        rows.append({"case": label, "peak_mb": int(p.stdout.split()[-1]) / 1024,
+                     "seconds": time.perf_counter() - t})
+    with open(f"{RESULTS}/memory.json", "w") as fh:
+        json.dump(rows, fh, indent=1)
+    for r in rows:
+        print(f"{r['case']}: {r['peak_mb']:.0f} MB peak, {r['seconds']:.1f} s")
+
+
 def table() -> None:
     with open(f"{RESULTS}/prepare.json") as fh:
         info = json.load(fh)
@@ -182,6 +207,12 @@ def table() -> None:
         per_file = ref["wall_s"] / n
         print(f"Shell loop: {per_file:.2f} s per file, of which ~{start:.2f} s "
               f"({100 * start / per_file:.0f} %) is the start-up every file pays")
+    if os.path.exists(f"{RESULTS}/memory.json"):
+        with open(f"{RESULTS}/memory.json") as fh:
+            mem = json.load(fh)
+        print("\n| one worker Blender | peak memory (MB) | wall (s) |\n|---|---|---|")
+        for r in mem:
+            print(f"| {r['case']} | {r['peak_mb']:.0f} | {r['seconds']:.1f} |")
     bad = [k for k, r in rows.items() if r["exit"] != 0 or r["failed"] or r["outputs"] != n]
     if bad:
         print(f"\nWARNING: modes with failures or missing outputs: {bad}")
@@ -197,12 +228,16 @@ def main() -> int:
     pp.add_argument("--startups", type=int, default=7)
     mp = sub.add_parser("mode")
     mp.add_argument("name", choices=list(MODES))
+    me = sub.add_parser("memory")
+    me.add_argument("--sizes", type=int, nargs="+", default=[50_000, 250_000, 1_000_000])
     sub.add_parser("table")
     a = ap.parse_args()
     if a.step == "prepare":
         prepare(a.files, a.min_faces, a.max_faces, a.startups)
     elif a.step == "mode":
         mode(a.name)
+    elif a.step == "memory":
+        memory(a.sizes)
     else:
         table()
     return 0

@@ -10,4 +10,5 @@ for m in ${BATCH_BENCH_MODES:-loop jobs1 jobs2 dask2 jobs1_k jobs2_k dask2_k}; d
     uptime
     step mode "$m"
 done
+step memory
 step table

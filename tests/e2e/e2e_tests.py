@@ -608,6 +608,76 @@ def t_batch_dask_local2():
             f"{secs[1]:.1f} s (2 per Blender), 3 bit-identical outputs, exit 3")
 
 
+def _dask_cli(args, home, log):
+    """Start `dask ARGS...` (a scheduler or a worker) with HOME as its user folder."""
+    e = dict(os.environ, HOME=home, BLENDER_USER_RESOURCES=f"{home}/blender")
+    fh = open(f"{ART}/{log}.log", "w")
+    return subprocess.Popen(["dask", *args], env=e, stdout=fh, stderr=subprocess.STDOUT,
+                            start_new_session=True), fh
+
+
+def _stop(procs):
+    for p, fh in procs:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGTERM)
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+        fh.close()
+
+
+@test
+def t_batch_dask_scheduler_and_worker():
+    """--dask tcp://ADDRESS on a cluster started as the README says (`dask scheduler`,
+    `dask worker ADDRESS`): a worker whose Blender lacks the extension gets a clear per-file
+    error; a worker with it runs the files, outputs byte-identical to single-file runs."""
+    base = fresh_dir(f"{OUT}/batch6")
+    for m in ("quad_hole", "tilted_plane"):
+        copy(m, f"{base}/in/{m}.obj")
+    sched_file = f"{base}/scheduler.json"
+    procs = [_dask_cli(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                        "--scheduler-file", sched_file],
+                       HOME, "dask_scheduler")]
+    try:
+        t0 = time.time()
+        while not os.path.exists(sched_file):
+            check(procs[0][0].poll() is None and time.time() - t0 < 60,
+                  "dask scheduler did not start (see dask_scheduler.log)")
+            time.sleep(0.2)
+        time.sleep(0.2)
+        with open(sched_file) as fh:
+            address = json.load(fh)["address"]
+        results = []
+        for label, home in (("no extension", fresh_dir(f"{base}/bare_home")), ("installed", HOME)):
+            worker = _dask_cli(["worker", address, "--nthreads", "1", "--no-nanny",
+                                "--no-dashboard"], home, f"dask_worker_{label[:2]}")
+            try:
+                outdir = f"{base}/out_{label[:2]}"
+                rc, _ = blender(["-b", "-c", "eegt", f"{base}/in/*.obj", "-o", outdir,
+                                 "--dask", address, *BATCH_FLAGS], timeout=180,
+                                  log=f"batch_dask_remote_{label[:2]}")
+                rep, _ = batch_report(f"{outdir}/eegt_report.json")
+                results.append((label, rc, rep))
+            finally:
+                _stop([worker])
+        (_, rc0, rep0), (_, rc1, rep1) = results
+        msgs = {f["message"] for f in rep0["files"]}
+        check(rc0 == 2 and rep0["counts"]["error"] == 2 and len(msgs) == 1 and
+              next(iter(msgs)).startswith("the eegt_blender extension is not installed or not "
+                                          "enabled for "), f"bare worker: rc={rc0}, {msgs}")
+        check(rc1 == 0 and rep1["counts"]["ok"] == 2 and rep1["dask"] == address,
+              f"worker with the extension: rc={rc1}, counts {rep1['counts']}")
+        for m in ("quad_hole", "tilted_plane"):
+            check(same_bytes(f"{base}/out_in/{m}.obj", single_output(m)),
+                  f"{m}: output differs from the single-file run")
+        return (f"scheduler {address}: bare worker -> per-file 'extension not installed' "
+                "errors (exit 2); worker with it -> 2 ok, byte-identical")
+    finally:
+        _stop(procs)
+
+
 @test
 def t_batch_format_suffix_and_bad_arguments():
     """--format ply --suffix _fixed over a glob; bad batch arguments: exit 2, one line."""
