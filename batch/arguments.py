@@ -88,34 +88,60 @@ def _given(value: Any) -> bool:
     return value is not None and value is not False and value != ""
 
 
-def passthrough(parser: argparse.ArgumentParser, ns: argparse.Namespace) -> list[str]:
-    """The single-file flags set in `ns` (anything not at its default) as command-line
-    tokens, so that the single-file parser reads them back to the same values; batch flags
-    and the per-file ones (input, output, report) are left out."""
+class _Unset:
+    """Marks a flag absent from the command line in the raw parse (copies are itself)."""
+
+    def __copy__(self) -> _Unset:
+        return self
+
+    def __deepcopy__(self, memo: Any) -> _Unset:
+        return self
+
+
+UNSET = _Unset()
+_LISTS = (argparse._AppendAction, argparse._AppendConstAction, argparse._CountAction)
+
+
+def passthrough(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """The single-file flags given in `argv`, as the text they were given in (so a flag
+    whose type parses its text is handed on exactly), for the single-file parser of every
+    worker; batch flags and the per-file ones (input, output, report) are left out. `argv`
+    must already parse with `parser`."""
+    saved = [(a, a.type, a.choices, a.default) for a in parser._actions]
+    try:
+        for a in parser._actions:  # read every value as its raw text
+            a.type, a.choices = None, None
+            if a.option_strings:
+                a.default = None if isinstance(a, _LISTS) else UNSET
+        raw = parser.parse_intermixed_args(argv)
+    finally:
+        for a, type_, choices, default in saved:
+            a.type, a.choices, a.default = type_, choices, default
     out: list[str] = []
     for a in parser._actions:
         if not a.option_strings or a.dest in PER_FILE or a.dest in BATCH_FLAGS:
             continue
-        value = getattr(ns, a.dest, a.default)
-        if value == a.default:
+        value = getattr(raw, a.dest, UNSET)
+        if value is UNSET or value is None:
             continue
         longs = [s for s in a.option_strings if s.startswith("--")]
-        flag = longs[0] if longs else a.option_strings[0]
-        out += _tokens(a, flag, value)
+        out += _tokens(a, longs[0] if longs else a.option_strings[0], value)
     return out
 
 
 def _tokens(a: argparse.Action, flag: str, value: Any) -> list[str]:
     if isinstance(a, argparse.BooleanOptionalAction):
         return [flag if value else "--no-" + flag[2:]]
-    if isinstance(a, argparse._StoreTrueAction | argparse._StoreFalseAction):
+    if isinstance(a, argparse._StoreConstAction):  # store_true / store_false too
         return [flag]
-    if isinstance(a, argparse._StoreConstAction):
-        return [flag]
+    if isinstance(a, argparse._CountAction):
+        return [flag] * int(value)
+    if isinstance(a, argparse._AppendConstAction):
+        return [flag] * len(value)
     if isinstance(a, argparse._AppendAction):
         return [f"{flag}={v}" for v in value]
     if isinstance(a, argparse._StoreAction) and a.nargs in (None, "?"):
-        return [f"{flag}={value}"]
+        return [flag] if value is a.const and a.nargs == "?" else [f"{flag}={value}"]
     if isinstance(a, argparse._StoreAction):
         return [flag, *(str(v) for v in value)]
     raise TypeError(f"eegt: cannot hand the flag {flag} ({type(a).__name__}) on to workers")

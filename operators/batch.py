@@ -111,7 +111,7 @@ def _output_kind(ns: argparse.Namespace) -> tuple[str | None, str | None]:
     return None, out
 
 
-def plan(ns: argparse.Namespace, parser: argparse.ArgumentParser) -> _Plan:
+def plan(ns: argparse.Namespace, parser: argparse.ArgumentParser, argv: list[str]) -> _Plan:
     """Check everything and decide every file's fate; raises UsageError (exit 2)."""
     _check_flags(ns)
     outdir, outfile = _output_kind(ns)
@@ -145,7 +145,7 @@ def plan(ns: argparse.Namespace, parser: argparse.ArgumentParser) -> _Plan:
     if p.report:
         cli._check_writable(p.report, "report")
         cli._check_writable(summary.csv_path_for(p.report), "report")
-    args = arguments.passthrough(parser, ns)
+    args = arguments.passthrough(parser, argv)
     for i, (src, out) in enumerate(zip(sources, outputs, strict=True)):
         entry = None
         if src.problem:
@@ -276,7 +276,7 @@ def run(argv: list[str]) -> int:
     parser = build_parser()
     try:
         ns = parser.parse_intermixed_args(argv)  # inputs may come after flags too
-        p = plan(ns, parser)
+        p = plan(ns, parser, argv)
     except cli.UsageError as exc:
         if str(exc):
             print(str(exc), file=sys.stdout if exc.code == cli.EXIT_OK else sys.stderr,

@@ -23,6 +23,8 @@ def single_parser():
     p.add_argument("--global-stage", dest="global_stage", default=None,
                    action=argparse.BooleanOptionalAction)
     p.add_argument("--quiet", action="store_true")
+    p.add_argument("--names", type=lambda t: tuple(t.split(",")), default=())
+    p.add_argument("-v", "--verbose", action="count")
     return p
 
 
@@ -37,24 +39,29 @@ def test_batch_parser_takes_many_inputs_between_flags():
     assert ns.input == ["a.obj", "b.obj"] and ns.jobs == 2 and ns.output == "out"
 
 
-def test_passthrough_round_trips_every_single_file_flag():
-    argv = ["x.obj", "--object", "A", "--object=-B", "--backend", "opencl", "--a", "0.1",
+def test_passthrough_hands_on_every_single_file_flag_as_given():
+    argv = ["x.obj", "--object", "A", "--object=-B", "--backend", "opencl", "--a", "1e-1",
             "--max-iterations", "7", "--no-global-stage", "--quiet", "-o", "out",
-            "--report", "r.json", "--jobs", "3", "--timeout", "9.5", "--suffix", "_f"]
+            "--report", "r.json", "--jobs", "3", "--timeout", "9.5", "--suffix", "_f",
+            "--names", "p,q", "-vv", "y.obj"]
     bp = batch_parser()
     ns = bp.parse_intermixed_args(argv)
-    tokens = arguments.passthrough(bp, ns)
-    assert tokens == ["--object=A", "--object=-B", "--backend=opencl", "--a=0.1",
-                      "--max-iterations=7", "--no-global-stage", "--quiet"]
+    tokens = arguments.passthrough(bp, argv)
+    assert tokens == ["--object=A", "--object=-B", "--backend=opencl", "--a=1e-1",
+                      "--max-iterations=7", "--no-global-stage", "--quiet", "--names=p,q",
+                      "--verbose", "--verbose"]
     back = single_parser().parse_args(["in.obj", *tokens])
-    for dest in ("object", "backend", "a", "max_iterations", "global_stage", "quiet"):
+    for dest in ("object", "backend", "a", "max_iterations", "global_stage", "quiet", "names",
+                 "verbose"):
         assert getattr(back, dest) == getattr(ns, dest), dest
     assert back.output is None and back.report is None  # set per file by the batch
+    # the parser's types are back: a second parse converts again
+    assert bp.parse_intermixed_args(argv).a == 0.1 and ns.names == ("p", "q")
 
 
-def test_passthrough_leaves_defaults_out():
+def test_passthrough_leaves_flags_not_given_out():
     bp = batch_parser()
-    assert arguments.passthrough(bp, bp.parse_intermixed_args(["a.obj", "b.obj"])) == []
+    assert arguments.passthrough(bp, ["a.obj", "b.obj", "--jobs", "2"]) == []
 
 
 @pytest.mark.parametrize("argv", [["a.obj", "--jobs", "0"], ["a.obj", "-j2"], ["a.obj", "--ti=3"],
