@@ -3,10 +3,11 @@
 
 A command line is a batch when it has many inputs, a folder or a glob pattern, an output
 folder, or a batch flag (``--jobs``, ``--timeout``, ``--skip-existing``, ``--recursive``,
-``--suffix``, ``--format``, ``--dask``); otherwise the single-file command runs as it always
-did. Every file of a batch is run by that single-file command in its own ``blender -b``
-(this Blender's binary), at most ``--jobs`` at once or as tasks on a Dask cluster, so that a
-crash, a hang or a memory blow-up in one file cannot take the others down. Everything that
+``--suffix``, ``--format``, ``--files-per-worker``, ``--dask``); otherwise the single-file
+command runs as it always did. Every file of a batch is run by that single-file command in
+its own ``blender -b`` (this Blender's binary; with ``--files-per-worker K`` one Blender runs
+K files in turn, see ``serve``), at most ``--jobs`` at once or as tasks on a Dask cluster, so
+that a crash, a hang or a memory blow-up in one file cannot take the others down. Everything that
 can be checked before starting is (bad flags, no inputs, an output folder that is a file,
 ``-o FILE`` for many inputs, two inputs writing one output, Dask missing): one line on
 stderr, exit 2, nothing started. Ctrl+C (or SIGTERM) kills the running workers, removes
