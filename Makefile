@@ -6,7 +6,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: venv test lint test-core test-blender test-compat e2e demo build bench bench-paper clean
+.PHONY: venv test lint test-core test-blender test-compat e2e demo build bench bench-paper bench-batch clean
 
 venv: $(STAMP)
 
@@ -60,6 +60,11 @@ bench: $(STAMP)
 # rewrites the README's results block and docs/results.md. Robustness: bench.robustness.
 bench-paper: $(STAMP)
 	$(PY) -m bench.paper_tables --readme
+
+# Many files through the eegt command in the e2e root's Blender (root needed; ~40 min for
+# 200 files on 2 cores): shell loop vs --jobs vs --dask, start-up and memory per worker.
+bench-batch:
+	bash bench/batch_bench.sh
 
 # Real Blender 4.3 in a Debian 13 chroot (root needed; cached in .e2e-root/): tests/e2e/.
 e2e:

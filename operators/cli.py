@@ -1,6 +1,10 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """``blender -b -c eegt INPUT ...``: the batch command for pipelines.
 
+This module is the single-file command; many files in one command (folders, glob patterns,
+an output folder, worker processes, Dask) are ``operators/batch.py``, which runs this
+command once per file.
+
 Exit codes: 0 every mesh valid at the end, 3 some mesh could not be untangled or was
 refused (the others are still processed and written), 2 bad arguments, unreadable input,
 input with no faces to work on, or output that could not be saved, 1 internal error.
@@ -492,8 +496,14 @@ def _commit(ns: argparse.Namespace | None, rep: dict[str, Any], code: int,
 
 
 def execute(argv: list[str]) -> int:
-    """The registered command handler: the process exit code."""
-    return run(list(argv))[0]
+    """The registered command handler: the process exit code. Many inputs, a folder, a
+    glob pattern, an output folder or a batch flag make it a batch (operators/batch.py),
+    whose workers run this single-file command."""
+    from . import batch
+    argv = list(argv)
+    if batch.is_batch(argv):
+        return batch.run(argv)
+    return run(argv)[0]
 
 
 _handle: Any = None

@@ -5,9 +5,11 @@ $E2E_WORK/home. The repository is mounted at /work. Each test asserts real numbe
 codes, inverted counts computed by meshcheck.py, exact vertex equality); the last line printed
 is "N passed, M failed". E2E_ONLY=name1,name2 runs a subset (after the packaging tests).
 """
+import csv
 import glob
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -314,6 +316,390 @@ def t_python_expr_on_blend():
     check(c["same_topology"] and c["out"]["n_inverted"] == 0 and c["in"]["n_inverted"] > 0,
           f"result: {c['out']}")
     return f"FINISHED, inverted {c['in']['n_inverted']} -> 0"
+
+
+# ---------------------------------------------------------------- batch ------------------
+# Many files in one command: every file in its own `blender -b -c eegt` worker. The flags make
+# two_holes_twist fail (the paper's untangling alone cannot undo its twist) while the others
+# untangle in a few iterations; a FIFO input blocks Blender's reader forever (a real hang).
+BATCH_FLAGS = ["--untangle", "eegt", "--max-untangle-iterations", "50"]
+_single_outputs = {}
+
+
+def single_output(mesh):
+    """The single-file command's output for tests/data/MESH.obj with BATCH_FLAGS (once)."""
+    if mesh not in _single_outputs:
+        out = f"{OUT}/single_{mesh}.obj"
+        rc, text = blender(["-b", "-c", "eegt", f"{DATA}/{mesh}.obj", "-o", out, *BATCH_FLAGS],
+                           timeout=120, log=f"batch_single_{mesh}")
+        check(rc == 0 and os.path.isfile(out), f"single-file run of {mesh}: rc={rc}: {tail(text)}")
+        _single_outputs[mesh] = out
+    return _single_outputs[mesh]
+
+
+def same_bytes(a, b):
+    with open(a, "rb") as fa, open(b, "rb") as fb:
+        return fa.read() == fb.read()
+
+
+def same_geometry_bytes(a, b):
+    """Byte-identical OBJ files but for the object's name (named after the input file)."""
+    def body(path):
+        with open(path, "rb") as fh:
+            return [ln for ln in fh.read().splitlines() if not ln.startswith(b"o ")]
+    return body(a) == body(b)
+
+
+def fresh_dir(path):
+    subprocess.run(["rm", "-rf", path], check=True)
+    os.makedirs(path)
+    return path
+
+
+def copy(mesh, dest):
+    os.makedirs(os.path.dirname(dest), exist_ok=True)
+    with open(f"{DATA}/{mesh}.obj", "rb") as src, open(dest, "wb") as dst:
+        dst.write(src.read())
+
+
+def hidden_files(folder):
+    return [os.path.join(d, n) for d, _, names in os.walk(folder) for n in names
+            if n.startswith(".")]
+
+
+def batch_report(path):
+    with open(path) as fh:
+        rep = json.load(fh)
+    with open(os.path.splitext(path)[0] + ".csv") as fh:
+        rows = list(csv.DictReader(fh))
+    return rep, rows
+
+
+@test
+def t_batch_folder_glob_failures():
+    """Folder (--recursive) + glob + explicit inputs with one unreadable file, one that cannot
+    be untangled and one that hangs (--timeout): statuses, exit code, outputs bit-identical to
+    single-file runs, the JSON and CSV reports, no temporary file left."""
+    base = fresh_dir(f"{OUT}/batch1")
+    a, b, outdir = f"{base}/a", f"{base}/b", f"{base}/out"
+    copy("quad_hole", f"{a}/quad_hole.obj")
+    copy("tilted_plane", f"{a}/sub/tilted_plane.obj")
+    copy("two_holes_twist", f"{a}/two_holes_twist.obj")
+    copy("polygon_voronoi", f"{b}/polygon_voronoi.obj")
+    with open(f"{a}/garbage.blend", "wb") as fh:
+        fh.write(b"this is not a blend file\x00\x01" * 40)
+    fifo = f"{base}/hang.obj"
+    os.mkfifo(fifo)
+    rep_path = f"{base}/report.json"
+    t0 = time.time()
+    rc, out = blender(["-b", "-c", "eegt", a, f"{b}/*.obj", fifo, "--recursive", "-o", outdir,
+                       "--jobs", "2", "--timeout", "12", "--report", rep_path, *BATCH_FLAGS],
+                      timeout=240, log="batch_folder_glob")
+    secs = time.time() - t0
+    os.remove(fifo)
+    check(rc == 1, f"exit code {rc}, expected 1 (a timeout is the worst): {tail(out)}")
+    check("Traceback" not in out, "a traceback was printed")
+    rep, rows = batch_report(rep_path)
+    got = {os.path.relpath(f["input"], base): f for f in rep["files"]}
+    want = {"a/garbage.blend": "error", "a/quad_hole.obj": "ok",
+            "a/two_holes_twist.obj": "failed", "a/sub/tilted_plane.obj": "ok",
+            "b/polygon_voronoi.obj": "ok", "hang.obj": "timeout"}
+    check({k: v["status"] for k, v in got.items()} == want,
+          f"statuses {({k: v['status'] for k, v in got.items()})}")
+    check([r["status"] for r in rows] == [f["status"] for f in rep["files"]] and len(rows) == 6,
+          f"CSV rows {[r['status'] for r in rows]}")
+    check(got["a/garbage.blend"]["exit_code"] == 2 and "garbage.blend" in
+          got["a/garbage.blend"]["message"], f"garbage: {got['a/garbage.blend']}")
+    check(got["a/two_holes_twist.obj"]["exit_code"] == 3 and
+          got["a/two_holes_twist.obj"]["after"]["n_inverted"] > 0, "two_holes_twist not failed")
+    check("timed out after 12 s" in got["hang.obj"]["message"], f"hang: {got['hang.obj']}")
+    check(rep["exit_code"] == 1 and rep["counts"]["ok"] == 3 and rep["jobs"] == 2,
+          f"report exit_code {rep['exit_code']}, counts {rep['counts']}")
+    # outputs keep the relative paths; failed/unreadable/hung ones as the command decides
+    expect = {"quad_hole.obj", "sub/tilted_plane.obj", "polygon_voronoi.obj",
+              "two_holes_twist.obj"}
+    found = {os.path.relpath(os.path.join(d, n), outdir) for d, _, names in os.walk(outdir)
+             for n in names if n.endswith(".obj")}
+    check(found == expect, f"outputs {sorted(found)}")
+    check(not hidden_files(outdir), f"temporary files left: {hidden_files(outdir)}")
+    for rel, mesh in (("quad_hole.obj", "quad_hole"), ("polygon_voronoi.obj", "polygon_voronoi"),
+                      ("sub/tilted_plane.obj", "tilted_plane")):
+        check(same_bytes(f"{outdir}/{rel}", single_output(mesh)),
+              f"{rel} differs from the single-file run")
+        s = meshcheck.stats(*meshcheck.read_obj(f"{outdir}/{rel}"))
+        e = got[os.path.relpath(next(f["input"] for f in rep["files"]
+                                     if f["input"].endswith(rel)), base)]
+        check(s["n_inverted"] == 0 and e["after"]["n_inverted"] == 0 and
+              e["before"]["n_inverted"] > 0, f"{rel}: {s['n_inverted']} inverted, entry {e}")
+    return (f"6 files in {secs:.1f} s: 3 ok (bit-identical to single runs), 1 failed, "
+            "1 unreadable, 1 timeout; exit 1")
+
+
+@test
+def t_batch_files_per_worker():
+    """--files-per-worker 3: one Blender runs three files in turn; outputs byte-identical to
+    single-file runs; a hang in a served file kills only that Blender, and the next file
+    gets a fresh one."""
+    base = fresh_dir(f"{OUT}/batch5")
+    src, outdir = f"{base}/in", f"{base}/out"
+    for m in ("two_holes_twist", "polygon_voronoi", "tilted_plane", "quad_hole"):
+        copy(m, f"{src}/{m}.obj")
+    with open(f"{src}/garbage.blend", "wb") as fh:
+        fh.write(b"this is not a blend file\x00\x01" * 40)
+    fifo, empty = f"{base}/hang.obj", f"{base}/empty.obj"
+    os.mkfifo(fifo)
+    open(empty, "w").close()
+    # largest first, ties in the order given: Blender A runs twist, voronoi, tilted;
+    # B runs quad_hole, garbage and hangs on the FIFO (killed); C runs empty.obj
+    t0 = time.time()
+    rc, out = blender(["-b", "-c", "eegt", src, fifo, empty, "-o", outdir, "--jobs", "1",
+                       "--files-per-worker", "3", "--timeout", "8", *BATCH_FLAGS],
+                      timeout=240, log="batch_files_per_worker")
+    secs = time.time() - t0
+    os.remove(fifo)
+    check(rc == 1, f"exit code {rc}, expected 1: {tail(out)}")
+    rep, _ = batch_report(f"{outdir}/eegt_report.json")
+    got = {os.path.basename(f["input"]): (f["status"], f["exit_code"]) for f in rep["files"]}
+    check(got == {"two_holes_twist.obj": ("failed", 3), "polygon_voronoi.obj": ("ok", 0),
+                  "tilted_plane.obj": ("ok", 0), "quad_hole.obj": ("ok", 0),
+                  "garbage.blend": ("error", 2), "hang.obj": ("timeout", None),
+                  "empty.obj": ("error", 2)}, f"statuses {got}")
+    pid = {os.path.splitext(os.path.basename(f["input"]))[0]: f["pid"] for f in rep["files"]}
+    a, b = pid["two_holes_twist"], pid["quad_hole"]
+    check(pid["polygon_voronoi"] == pid["tilted_plane"] == a and
+          pid["garbage"] == pid["hang"] == b and len({a, b, pid["empty"]}) == 3,
+          f"worker Blenders (pids) per file: {pid}")
+    check(rep["files_per_worker"] == 3, f"report files_per_worker {rep['files_per_worker']}")
+    for m in ("polygon_voronoi", "tilted_plane", "quad_hole"):
+        check(same_bytes(f"{outdir}/{m}.obj", single_output(m)),
+              f"{m}: served output differs from the single-file run")
+    check(not hidden_files(outdir), f"temporary files left: {hidden_files(outdir)}")
+    return f"7 files in {secs:.1f} s by 3 Blenders; the hang killed one, exit 1"
+
+
+def _count_outputs(folder):
+    return len([n for n in os.listdir(folder) if n.endswith(".obj")]) if \
+        os.path.isdir(folder) else 0
+
+
+def _start_batch(args, log):
+    e = dict(os.environ, HOME=HOME, BLENDER_USER_RESOURCES=f"{HOME}/blender")
+    fh = open(f"{ART}/{log}.log", "w")
+    return subprocess.Popen(["blender", "-b", "-c", "eegt", *args], env=e, stdout=fh,
+                            stderr=subprocess.STDOUT), fh
+
+
+def _wait_outputs(proc, folder, n, limit=120):
+    t0 = time.time()
+    while _count_outputs(folder) < n:
+        check(proc.poll() is None, f"batch ended (rc {proc.returncode}) before {n} outputs")
+        check(time.time() - t0 < limit, f"fewer than {n} outputs after {limit} s")
+        time.sleep(0.1)
+
+
+def _workers_of(folder):
+    """Processes whose command line names `folder` (the batch's workers)."""
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as fh:
+                if folder.encode() in fh.read():
+                    found.append(int(pid))
+        except OSError:
+            pass
+    return found
+
+
+@test
+def t_batch_interrupt_and_resume():
+    """Ctrl+C (SIGINT) midway: exit 130, report written, only whole outputs, no temporary
+    file; --skip-existing then does only what is left. A hard kill of the batch (SIGKILL)
+    takes its workers with it, and the re-run finishes the rest."""
+    base = fresh_dir(f"{OUT}/batch2")
+    src, outdir = f"{base}/in", f"{base}/out"
+    for i in range(5):
+        copy("polygon_voronoi", f"{src}/m{i}.obj")
+    proc, fh = _start_batch([src, "-o", outdir, "--jobs", "1", *BATCH_FLAGS], "batch_sigint")
+    try:
+        _wait_outputs(proc, outdir, 2)
+        proc.send_signal(signal.SIGINT)
+        rc = proc.wait(timeout=60)
+    finally:
+        proc.kill()
+        fh.close()
+    check(rc == 130, f"exit code {rc} after SIGINT, expected 130")
+    rep, _ = batch_report(f"{outdir}/eegt_report.json")
+    done = _count_outputs(outdir)
+    check(rep["interrupted"] and rep["counts"]["ok"] == done and
+          rep["counts"]["cancelled"] == 5 - done and 2 <= done < 5,
+          f"report counts {rep['counts']}, {done} outputs")
+    check(not hidden_files(outdir), f"temporary files left: {hidden_files(outdir)}")
+    reference = single_output("polygon_voronoi")
+    for n in os.listdir(outdir):
+        if n.endswith(".obj"):
+            check(same_geometry_bytes(f"{outdir}/{n}", reference),
+                  f"{n} is not a whole, right output")
+    rc, out = blender(["-b", "-c", "eegt", src, "-o", outdir, "--jobs", "2", "--skip-existing",
+                       *BATCH_FLAGS], timeout=180, log="batch_resume")
+    rep, _ = batch_report(f"{outdir}/eegt_report.json")
+    check(rc == 0 and rep["counts"]["skipped"] == done and rep["counts"]["ok"] == 5 - done,
+          f"resume: rc={rc}, counts {rep['counts']}: {tail(out)}")
+    check(_count_outputs(outdir) == 5 and
+          all(same_geometry_bytes(f"{outdir}/m{i}.obj", reference) for i in range(5)),
+          "resumed outputs differ")
+    # SIGKILL: no chance to clean up; the workers must die with the batch (no orphans)
+    outdir2 = f"{base}/out2"
+    proc, fh = _start_batch([src, "-o", outdir2, "--jobs", "2", *BATCH_FLAGS], "batch_sigkill")
+    try:
+        _wait_outputs(proc, outdir2, 1)
+        check(_workers_of(outdir2), "no worker process seen while the batch ran")
+        proc.kill()
+        proc.wait(timeout=30)
+    finally:
+        proc.kill()
+        fh.close()
+    t0 = time.time()
+    while _workers_of(outdir2) and time.time() - t0 < 10:
+        time.sleep(0.1)
+    check(not _workers_of(outdir2), f"workers outlived the killed batch: {_workers_of(outdir2)}")
+    left = _count_outputs(outdir2)
+    rc, out = blender(["-b", "-c", "eegt", src, "-o", outdir2, "--jobs", "2", "--skip-existing",
+                       *BATCH_FLAGS], timeout=180, log="batch_resume_after_kill")
+    rep, _ = batch_report(f"{outdir2}/eegt_report.json")
+    check(rc == 0 and rep["counts"]["skipped"] == left and _count_outputs(outdir2) == 5 and
+          not hidden_files(outdir2), f"after SIGKILL: rc={rc}, counts {rep['counts']}, "
+                                     f"hidden {hidden_files(outdir2)}")
+    return (f"SIGINT after {done}/5: exit 130, resumed {5 - done}; SIGKILL after {left}/5: "
+            f"no worker left, resumed {5 - left}")
+
+
+@test
+def t_batch_dask_local2():
+    """--dask local:2: a real LocalCluster in Blender's Python; outputs bit-identical to the
+    single-file runs, per-file stats and the worker host in the report; a failed file gives
+    exit 3."""
+    base = fresh_dir(f"{OUT}/batch3")
+    meshes = ["quad_hole", "tilted_plane", "polygon_voronoi", "two_holes_twist"]
+    for m in meshes:
+        copy(m, f"{base}/in/{m}.obj")
+    outdir = f"{base}/out"
+    secs = []
+    for per_worker in ("1", "2"):  # a fresh Blender per file; two files per Blender
+        outdir = f"{base}/out{per_worker}"
+        t0 = time.time()
+        rc, out = blender(["-b", "-c", "eegt", f"{base}/in/*.obj", "-o", outdir, "--dask",
+                           "local:2", "--files-per-worker", per_worker, *BATCH_FLAGS],
+                          timeout=240, log=f"batch_dask_{per_worker}")
+        secs.append(time.time() - t0)
+        check(rc == 3, f"exit code {rc}, expected 3 (two_holes_twist fails): {tail(out)}")
+        check("Dask cluster tcp://" in out and ": 2 workers" in out,
+              f"no 2-worker cluster: {tail(out)}")
+        rep, rows = batch_report(f"{outdir}/eegt_report.json")
+        status = {os.path.basename(f["input"]): f["status"] for f in rep["files"]}
+        check(status == {f"{m}.obj": "ok" for m in meshes[:3]} |
+              {"two_holes_twist.obj": "failed"}, f"statuses {status}")
+        check(rep["mode"] == "dask" and all(f["host"] for f in rep["files"]) and len(rows) == 4,
+              f"report mode {rep['mode']}")
+        for m in meshes[:3]:
+            check(same_bytes(f"{outdir}/{m}.obj", single_output(m)),
+                  f"{m}: Dask output differs from the single-file run")
+        check(not hidden_files(outdir), f"temporary files left: {hidden_files(outdir)}")
+    return (f"4 files on 2 Dask workers in {secs[0]:.1f} s (a Blender per file) and "
+            f"{secs[1]:.1f} s (2 per Blender), 3 bit-identical outputs, exit 3")
+
+
+def _dask_cli(args, home, log):
+    """Start `dask ARGS...` (a scheduler or a worker) with HOME as its user folder."""
+    e = dict(os.environ, HOME=home, BLENDER_USER_RESOURCES=f"{home}/blender")
+    fh = open(f"{ART}/{log}.log", "w")
+    return subprocess.Popen(["dask", *args], env=e, stdout=fh, stderr=subprocess.STDOUT,
+                            start_new_session=True), fh
+
+
+def _stop(procs):
+    for p, fh in procs:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGTERM)
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+        fh.close()
+
+
+@test
+def t_batch_dask_scheduler_and_worker():
+    """--dask tcp://ADDRESS on a cluster started as the README says (`dask scheduler`,
+    `dask worker ADDRESS`): a worker whose Blender lacks the extension gets a clear per-file
+    error; a worker with it runs the files, outputs byte-identical to single-file runs."""
+    base = fresh_dir(f"{OUT}/batch6")
+    for m in ("quad_hole", "tilted_plane"):
+        copy(m, f"{base}/in/{m}.obj")
+    sched_file = f"{base}/scheduler.json"
+    procs = [_dask_cli(["scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                        "--scheduler-file", sched_file],
+                       HOME, "dask_scheduler")]
+    try:
+        t0 = time.time()
+        while not os.path.exists(sched_file):
+            check(procs[0][0].poll() is None and time.time() - t0 < 60,
+                  "dask scheduler did not start (see dask_scheduler.log)")
+            time.sleep(0.2)
+        time.sleep(0.2)
+        with open(sched_file) as fh:
+            address = json.load(fh)["address"]
+        results = []
+        for label, home in (("no extension", fresh_dir(f"{base}/bare_home")), ("installed", HOME)):
+            worker = _dask_cli(["worker", address, "--nthreads", "1", "--no-nanny",
+                                "--no-dashboard"], home, f"dask_worker_{label[:2]}")
+            try:
+                outdir = f"{base}/out_{label[:2]}"
+                rc, _ = blender(["-b", "-c", "eegt", f"{base}/in/*.obj", "-o", outdir,
+                                 "--dask", address, *BATCH_FLAGS], timeout=180,
+                                  log=f"batch_dask_remote_{label[:2]}")
+                rep, _ = batch_report(f"{outdir}/eegt_report.json")
+                results.append((label, rc, rep))
+            finally:
+                _stop([worker])
+        (_, rc0, rep0), (_, rc1, rep1) = results
+        msgs = {f["message"] for f in rep0["files"]}
+        check(rc0 == 2 and rep0["counts"]["error"] == 2 and len(msgs) == 1 and
+              next(iter(msgs)).startswith("the eegt_blender extension is not installed or not "
+                                          "enabled for "), f"bare worker: rc={rc0}, {msgs}")
+        check(rc1 == 0 and rep1["counts"]["ok"] == 2 and rep1["dask"] == address,
+              f"worker with the extension: rc={rc1}, counts {rep1['counts']}")
+        for m in ("quad_hole", "tilted_plane"):
+            check(same_bytes(f"{base}/out_in/{m}.obj", single_output(m)),
+                  f"{m}: output differs from the single-file run")
+        return (f"scheduler {address}: bare worker -> per-file 'extension not installed' "
+                "errors (exit 2); worker with it -> 2 ok, byte-identical")
+    finally:
+        _stop(procs)
+
+
+@test
+def t_batch_format_suffix_and_bad_arguments():
+    """--format ply --suffix _fixed over a glob; bad batch arguments: exit 2, one line."""
+    base = fresh_dir(f"{OUT}/batch4")
+    copy("quad_hole", f"{base}/in/quad_hole.obj")
+    copy("tilted_plane", f"{base}/in/tilted_plane.obj")
+    rc, out = blender(["-b", "-c", "eegt", f"{base}/in/*.obj", "-o", f"{base}/out", "--format",
+                       "ply", "--suffix", "_fixed", "--jobs", "2"], timeout=180,
+                      log="batch_format")
+    check(rc == 0, f"exit code {rc}: {tail(out)}")
+    for m in ("quad_hole", "tilted_plane"):
+        with open(f"{base}/out/{m}_fixed.ply", "rb") as fh:
+            check(fh.read(4) == b"ply\n", f"{m}_fixed.ply is not a PLY file")
+    bad = [([f"{base}/in/*.obj", "-o", f"{base}/one.obj"], "names one file but 2 inputs"),
+           ([f"{base}/in", "-o", f"{base}/out", "--jobs", "0"], "--jobs must be at least 1"),
+           ([f"{base}/none/*.obj", "-o", f"{base}/out"], "eegt: no input files:")]
+    for args, needle in bad:
+        rc, out = blender(["-b", "-c", "eegt", *args], timeout=60, log="batch_bad")
+        lines = [ln for ln in out.splitlines() if ln.startswith(("eegt", "blender -b"))]
+        check(rc == 2 and len(lines) == 1 and needle in lines[0] and "Traceback" not in out,
+              f"{args[-2:]}: rc={rc}: {tail(out)}")
+    return "PLY outputs with suffix; 3 bad batches exit 2 with one line"
 
 
 # ---------------------------------------------------------------- OpenCL -----------------

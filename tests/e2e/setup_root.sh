@@ -8,7 +8,7 @@ set -euo pipefail
 R=${1:?usage: setup_root.sh ROOTDIR}
 MIRROR=${E2E_MIRROR:-http://deb.debian.org/debian}
 PKGS="blender python3-numpy xvfb xauth libgl1-mesa-dri mesa-utils imagemagick xdotool
-python3-pyopencl pocl-opencl-icd"
+python3-pyopencl pocl-opencl-icd python3-dask python3-distributed"
 PKGS=$(echo $PKGS)   # one line
 STAMP="$R/.eegt-ready"
 
