@@ -1,0 +1,313 @@
+"""Untangle and smooth the selected faces of a UV map, island by island.
+
+Each island that has selected faces and something free to move is one run of the core
+(``untangle_and_smooth``) on its selected faces: the island's border (seams, mesh borders),
+the border of the selection, every UV vertex also used by an unselected face and the pinned
+UV vertices stay where they are. A mirrored island is reflected (u -> -u, exact) before the
+run and back after it, so the core always sees counterclockwise faces. Results are rounded to
+the UV map's storage type and an island is only changed when its rounded result is better
+than its input (``accept``), so a run never makes an island worse.
+
+Measures reported for the selection: flipped faces (inverted in their island's orientation:
+negative or zero area, a reflex or crossed corner), overlapping faces (share area with
+another face of the same island, ``uv_overlap``) and the distortion against the targets (the
+mean ratio of each face against its target shape: 1 = similar to its 3D face).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .params import EEGTParams
+from .pipeline import untangle_and_smooth
+from .quality import Stats, quality, stats_of
+from .topology import free_nodes
+from .uv_layout import UVLayout, island_faces, signed_face_areas
+from .uv_overlap import overlapping_faces
+
+__all__ = [
+    "IslandRun",
+    "UVMeasures",
+    "UVResult",
+    "flipped_faces",
+    "measure",
+    "untangle_uv",
+]
+
+Accept = Callable[[Stats, Stats], bool]
+
+
+def _targets_kw(targets: np.ndarray | None) -> dict[str, Any]:
+    """Keyword for the core's per-face targets (none: regular polygons)."""
+    return {} if targets is None else {"targets": targets}
+
+
+@dataclass(frozen=True)
+class UVMeasures:
+    """What a UV artist asks of a set of faces."""
+
+    n_faces: int
+    flipped: int  # signed area against the island's orientation (or zero)
+    inverted: int  # no valid shape in the island's orientation: flipped or a reflex corner
+    overlapping: int  # share area with another face of their island
+    distortion_mean: float  # mean ratio against the targets (flipped count as 0)
+    distortion_worst: float  # the lowest one
+    zero_area: int = 0  # faces of islands with no area (side unknown: not measured)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"n_faces": self.n_faces, "flipped": self.flipped, "inverted": self.inverted,
+                "overlapping": self.overlapping,
+                "distortion_mean": self.distortion_mean,
+                "distortion_worst": self.distortion_worst, "zero_area": self.zero_area}
+
+
+def measure(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
+            targets: np.ndarray | None = None, side: np.ndarray | None = None) -> UVMeasures:
+    """Measures of the faces in the bool mask ``faces`` at UV vertex ``points`` (as stored,
+    unmirrored). ``targets``: (C, 2) rows in ``layout.faces`` corner order, or None."""
+    side = layout.orientation() if side is None else side
+    faces = np.asarray(faces, dtype=bool)
+    zero = faces & (side[layout.island] == 0)
+    chosen = faces & ~zero
+    ids = np.flatnonzero(chosen)
+    if ids.size == 0:
+        return UVMeasures(0, 0, 0, 0, 0.0, 0.0, int(zero.sum()))
+    p = _oriented(points, layout, side)
+    sub, nodes, rows = island_faces(layout.faces, ids)
+    q = quality(p[nodes], sub, **_targets_kw(None if targets is None else targets[rows]))
+    s = stats_of([q])
+    isl = np.unique(layout.island[ids])
+    around = np.isin(layout.island, isl)  # overlaps with unselected faces of those islands too
+    over = overlapping_faces(p, layout.faces, layout.island, faces=around)
+    flipped = int(np.count_nonzero(signed_face_areas(p[nodes], sub) <= 0.0))
+    return UVMeasures(int(ids.size), flipped, int(s.n_inverted),
+                      int(np.count_nonzero(over & chosen)), float(s.q_avg), float(s.q_min),
+                      int(zero.sum()))
+
+
+def flipped_faces(layout: UVLayout, points: np.ndarray, side: np.ndarray | None = None,
+                  corners: bool = False) -> np.ndarray:
+    """(F,) bool: faces whose signed area is zero or against their island's orientation;
+    with ``corners`` also those with a reflex or crossed corner (the inverted faces the core
+    removes). Islands without area have none."""
+    side = layout.orientation() if side is None else side
+    p = _oriented(points, layout, side)
+    bad = signed_face_areas(p, layout.faces) <= 0.0
+    if corners:
+        bad |= quality(p, layout.faces) <= 0.0
+    return bad & (side[layout.island] != 0)
+
+
+def _oriented(points: np.ndarray, layout: UVLayout, side: np.ndarray) -> np.ndarray:
+    p = np.array(points, dtype=np.float64)
+    p[side[layout.node_island] < 0, 0] *= -1.0
+    return p
+
+
+@dataclass
+class IslandRun:
+    """One island's run."""
+
+    island: int
+    n_faces: int
+    mirrored: bool
+    status: str  # valid | untangled | failed | error | skipped
+    message: str = ""
+    n_free: int = 0
+    before: Stats | None = None
+    after: Stats | None = None
+    changed: bool = False
+    untangle_iterations: int = 0
+    smooth_iterations: int = 0
+    global_iterations: int = 0
+    n_frozen: int = 0
+    n_target_fallback: int = 0
+    seconds: float = 0.0
+
+
+@dataclass
+class UVResult:
+    """Outcome of ``untangle_uv``: the UV vertex positions to store and what happened."""
+
+    points: np.ndarray  # (V, 2) float64 holding values of the storage type
+    moved: np.ndarray  # (V,) bool: UV vertices whose stored value changes
+    status: str  # valid | untangled | failed | cancelled
+    islands: list[IslandRun] = field(default_factory=list)
+    seconds: float = 0.0
+    backend: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n_free(self) -> int:
+        return sum(r.n_free for r in self.islands)
+
+    @property
+    def n_target_fallback(self) -> int:
+        return sum(r.n_target_fallback for r in self.islands)
+
+    @property
+    def iterations(self) -> tuple[int, int, int]:
+        """(untangle, global, smooth) iterations summed over the islands."""
+        return (sum(r.untangle_iterations for r in self.islands),
+                sum(r.global_iterations for r in self.islands),
+                sum(r.smooth_iterations for r in self.islands))
+
+
+def _strictly_better(after: Stats, before: Stats) -> bool:
+    return after.better_than(before)
+
+
+def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None = None,
+                targets: np.ndarray | None = None, params: EEGTParams | None = None,
+                backend: str = "numpy", progress: Callable[[int, str, Any], Any] | None = None,
+                store: type = np.float32, accept: Accept = _strictly_better) -> UVResult:
+    """Untangle and smooth the ``selected`` faces (bool (F,)) of a welded UV map.
+
+    ``fixed``: (V,) extra UV vertices that must not move (pins). ``targets``: (C, 2) target
+    corner rows in ``layout.faces`` order, or None for regular polygons. Results are rounded
+    to ``store`` and an island changes only when ``accept(rounded stats, input stats)``.
+    ValueError (one line) when nothing can move: no face selected, only islands without
+    area, or every selected UV vertex fixed.
+    """
+    t0 = time.perf_counter()
+    selected = np.asarray(selected, dtype=bool)
+    if selected.shape != (layout.faces.n_faces,):
+        raise ValueError(f"selected must be a ({layout.faces.n_faces},) bool array")
+    if not selected.any():
+        raise ValueError("no UV faces selected")
+    side = layout.orientation()
+    keep = np.zeros(layout.n_nodes, dtype=bool) if fixed is None else np.array(fixed, bool)
+    keep[layout.faces.indices[np.repeat(~selected, layout.faces.counts)]] = True
+    work = _oriented(layout.points, layout, side)
+    out = layout.points.copy()
+    moved = np.zeros(layout.n_nodes, dtype=bool)
+    runs: list[IslandRun] = []
+    sel_ids = np.flatnonzero(selected)
+    order = np.argsort(layout.island[sel_ids], kind="stable")
+    sel_ids = sel_ids[order]
+    isl_of = layout.island[sel_ids]
+    cut = np.flatnonzero(np.diff(isl_of)) + 1
+    groups = np.split(sel_ids, cut)
+    backend_name = ""
+    status_cancel = False
+    for k, ids in enumerate(groups):
+        isl = int(layout.island[ids[0]])
+        run = IslandRun(isl, int(ids.size), bool(side[isl] < 0), "skipped")
+        runs.append(run)
+        if side[isl] == 0:
+            run.message = "no UV area (collapsed to a point or a line): unwrap it first"
+            continue
+        sub, nodes, rows = island_faces(layout.faces, ids)
+        pin = keep[nodes]
+        try:
+            free = free_nodes(nodes.size, sub, pin)
+        except ValueError as exc:
+            run.status, run.message = "error", _line(exc)
+            continue
+        run.n_free = int(free.sum())
+        tk = None if targets is None else targets[rows]
+        if run.n_free == 0:
+            q = quality(work[nodes], sub, **_targets_kw(tk))
+            run.before = run.after = stats_of([q])
+            run.message = "every UV vertex is fixed (island border, pins, selection border)"
+            continue
+        label = f"island {k + 1}/{len(groups)}"
+
+        def relay(it: int, phase: str, stats: Any, _label: str = label) -> Any:
+            return progress(it, f"{_label} {phase}", stats)
+
+        try:
+            res = untangle_and_smooth(work[nodes], sub, fixed=pin, params=params,
+                                      backend=backend, progress=relay if progress else None,
+                                      **_targets_kw(tk))
+        except ValueError as exc:
+            run.status, run.message = "error", _line(exc)
+            continue
+        backend_name = backend_name or str(res.backend)
+        run.status, run.message = str(res.status), str(res.message)
+        run.before, run.after = res.before, res.before
+        run.untangle_iterations = int(res.untangle_iterations)
+        run.smooth_iterations = int(res.smooth_iterations)
+        run.global_iterations = int(getattr(res, "global_iterations", 0))
+        run.n_frozen = int(getattr(res, "n_frozen", 0))
+        run.n_target_fallback = int(getattr(res, "n_target_fallback", 0))
+        run.seconds = float(res.seconds)
+        if res.status == "cancelled":
+            status_cancel = True
+            break
+        rounded = np.asarray(res.points).astype(store).astype(np.float64)
+        rounded[~free] = work[nodes][~free]
+        change = np.any(rounded != work[nodes], axis=1)
+        if not change.any():
+            continue
+        after = stats_of([quality(rounded, sub, **_targets_kw(tk))])
+        if not accept(after, res.before):
+            run.message += "; no improvement once stored: island unchanged"
+            if res.status == "untangled":  # the stored result would keep a flipped face
+                run.status = "failed"
+            continue
+        run.after, run.changed = after, True
+        back = rounded.copy()
+        if side[isl] < 0:
+            back[:, 0] *= -1.0
+        out[nodes[change]] = back[change]
+        moved[nodes[change]] = True
+    result = UVResult(out, moved, "cancelled", runs, time.perf_counter() - t0,
+                      backend_name or backend)
+    if status_cancel:
+        result.points, result.moved = layout.points.copy(), np.zeros_like(moved)
+        return result
+    if not any(r.n_free for r in runs):
+        reasons = {r.message for r in runs if r.message}
+        raise ValueError("nothing to move: " + "; ".join(sorted(reasons))
+                         if reasons else "nothing to move")
+    result.status = _overall(runs)
+    result.notes = _notes(runs)
+    return result
+
+
+def _line(exc: Exception) -> str:
+    text = str(exc)
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _overall(runs: list[IslandRun]) -> str:
+    """failed when an island that could move ends with a movable flipped face or errs;
+    untangled when some island had flipped faces; else valid."""
+    active = [r for r in runs if r.n_free or r.status == "error"]
+    if any(r.status in ("failed", "error") for r in active):
+        return "failed"
+    if any(r.before is not None and r.before.n_inverted > r.n_frozen for r in active):
+        return "untangled"
+    return "valid"
+
+
+def _notes(runs: list[IslandRun]) -> list[str]:
+    """One note per kind of island problem (counts, not one line per island)."""
+    notes = []
+    skipped = [r for r in runs if r.status == "skipped" and r.n_free == 0 and r.before is None]
+    if skipped:
+        notes.append(f"{len(skipped)} island(s) without UV area skipped (unwrap them first)")
+    for r in runs:
+        if r.status == "error":
+            notes.append(f"island {r.island}: {r.message}")
+        elif r.status == "failed":
+            n = (r.after or r.before).n_inverted if (r.after or r.before) else 0
+            notes.append(f"island {r.island}: {n} flipped faces remain")
+    frozen = sum(r.n_frozen for r in runs)
+    if frozen:
+        notes.append(f"{frozen} faces are flipped with every corner fixed (border or pins): "
+                     "they cannot change")
+    mirrored = sum(1 for r in runs if r.mirrored)
+    if mirrored:
+        notes.append(f"{mirrored} mirrored island(s)")
+    fallback = sum(r.n_target_fallback for r in runs)
+    if fallback:
+        notes.append(f"{fallback} faces with a concave or degenerate 3D shape used the "
+                     "regular polygon as target")
+    return notes
