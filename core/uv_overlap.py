@@ -18,7 +18,7 @@ from .faces import FaceSet
 __all__ = ["candidate_pairs", "face_triangles", "overlapping_faces", "triangles_overlap"]
 
 _CHUNK = 1 << 20  # pairs per narrow-phase batch (memory bound)
-_MAX_CELLS = 16  # a box over more grid cells than this is tested against every box
+_MAX_CELLS = 64  # a box over more grid cells than this is tested against every box
 
 
 def face_triangles(points: np.ndarray, fs: FaceSet) -> tuple[np.ndarray, np.ndarray]:
@@ -53,24 +53,13 @@ def _area2(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.nda
             - (p[b, 1] - p[a, 1]) * (p[c, 0] - p[a, 0]))
 
 
-def _pairs_within_groups(items: np.ndarray, starts: np.ndarray,
-                         sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Every pair (i < j by position) inside each run items[start:start + size]."""
-    n = int(sizes.sum())
-    if n == 0:
-        return np.empty(0, np.int64), np.empty(0, np.int64)
-    pos = np.arange(n) - np.repeat(np.cumsum(sizes) - sizes, sizes)  # position in its run
-    later = np.repeat(sizes, sizes) - 1 - pos  # partners after it
-    first = np.repeat(np.arange(n), later)
-    step = np.arange(int(later.sum())) - np.repeat(np.cumsum(later) - later, later) + 1
-    idx = np.repeat(starts, sizes) + pos
-    return items[idx[first]], items[idx[first] + step]
-
-
 def candidate_pairs(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """(P, 2) index pairs i < j of boxes [lo, hi] (each (T, 2)) that overlap with positive
-    extent on both axes, each pair once: a uniform grid of cells about the median box size;
-    boxes spanning many cells are compared with every box instead."""
+    extent on both axes, each pair once: a uniform grid of cells about the median box size
+    (a pair is taken in the one cell holding the low corner of the boxes' intersection);
+    boxes spanning many cells are compared with every box instead. Inside a cell the boxes
+    are swept along x, so a dense cluster of small boxes costs its overlaps, not its
+    square."""
     t = lo.shape[0]
     if t < 2:
         return np.empty((0, 2), np.int64)
@@ -92,30 +81,40 @@ def candidate_pairs(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     cx = c0[owner, 0] + k % w
     cy = c0[owner, 1] + k // w
     ny = int(c1[:, 1].max()) + 1
-    key = cx * ny + cy
-    order = np.argsort(key, kind="stable")
-    key, owner = key[order], owner[order]
-    run = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
-    sizes = np.diff(np.concatenate([run, [key.size]]))
-    a, b = _pairs_within_groups(owner, run, sizes)
-    found = [np.stack([a, b], axis=1)]
-    # big boxes against everything, a block of them at a time
+    # within a cell, sweep along x: an entry pairs with the later entries (sorted by their
+    # box's low x) that start before its box ends. Lows and highs as ranks among the lows
+    # (exact), so one integer key orders (cell, low x)
+    lows = np.sort(lo[:, 0])
+    r_lo = np.searchsorted(lows, lo[:, 0], side="left")
+    r_hi = np.searchsorted(lows, hi[:, 0], side="left")
+    cellkey = cx * ny + cy
+    sweep = cellkey * (t + 1) + r_lo[owner]
+    order = np.argsort(sweep, kind="stable")
+    owner, cx, cy, sweep = owner[order], cx[order], cy[order], sweep[order]
+    stop = np.searchsorted(sweep, cellkey[order] * (t + 1) + r_hi[owner], side="left")
+    later = np.maximum(stop - np.arange(owner.size) - 1, 0)
+    first = np.repeat(np.arange(owner.size), later)
+    second = first + 1 + (np.arange(int(later.sum())) - np.repeat(np.cumsum(later) - later,
+                                                                  later))
+    a, b = owner[first], owner[second]
+    home = (cx[first] == np.maximum(c0[a, 0], c0[b, 0])) & (
+        cy[first] == np.maximum(c0[a, 1], c0[b, 1]))
+    found = [np.stack([a[home], b[home]], axis=1)]
+    # big boxes against everything, a block of them at a time (big-big pairs once)
     bigs = np.flatnonzero(big)
     block = max(1, _CHUNK // t)
     for s in range(0, bigs.size, block):
         rows = bigs[s:s + block]
         hit = ((lo[rows, None, 0] < hi[None, :, 0]) & (lo[None, :, 0] < hi[rows, None, 0])
                & (lo[rows, None, 1] < hi[None, :, 1]) & (lo[None, :, 1] < hi[rows, None, 1]))
-        r, c = np.nonzero(hit)
-        found.append(np.stack([rows[r], c], axis=1))
-    pairs = np.concatenate(found)
-    pairs = np.sort(pairs, axis=1)
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    pairs = np.unique(pairs[:, 0] * t + pairs[:, 1])
-    i, j = pairs // t, pairs % t
-    keep = ((lo[i, 0] < hi[j, 0]) & (lo[j, 0] < hi[i, 0])
+        rr, c = np.nonzero(hit)
+        once = ~big[c] | (rows[rr] < c)
+        found.append(np.stack([rows[rr[once]], c[once]], axis=1))
+    pairs = np.sort(np.concatenate(found), axis=1)
+    i, j = pairs[:, 0], pairs[:, 1]
+    keep = ((i != j) & (lo[i, 0] < hi[j, 0]) & (lo[j, 0] < hi[i, 0])
             & (lo[i, 1] < hi[j, 1]) & (lo[j, 1] < hi[i, 1]))
-    return np.stack([i[keep], j[keep]], axis=1)
+    return pairs[keep]
 
 
 def triangles_overlap(p: np.ndarray, ta: np.ndarray, tb: np.ndarray,
@@ -124,21 +123,24 @@ def triangles_overlap(p: np.ndarray, ta: np.ndarray, tb: np.ndarray,
     direction of either separates them (separating-axis test). Projections that overlap by
     at most ``rel_tol`` times the axis length and the coordinates' magnitude count as
     touching (shared edges and corners project to identical values)."""
-    A = p[ta]  # (P, 3, 2)
-    B = p[tb]
     scale = max(float(np.abs(p).max()), np.finfo(float).tiny) if p.size else 1.0
-    ok = np.ones(ta.shape[0], dtype=bool)
-    for tri in (A, B):
+    ax, ay = p[ta, 0], p[ta, 1]  # (P, 3)
+    bx, by = p[tb, 0], p[tb, 1]
+    alive = np.arange(ta.shape[0])  # pairs no axis has separated yet
+    for ex, ey in ((ax, ay), (bx, by)):
         for k in range(3):
-            e = tri[:, (k + 1) % 3] - tri[:, k]
-            axis = np.stack([e[:, 1], -e[:, 0]], axis=1)  # (P, 2) edge normal
-            pa = np.einsum("pkd,pd->pk", A, axis)
-            pb = np.einsum("pkd,pd->pk", B, axis)
+            if alive.size == 0:
+                break
+            nx = ey[alive, (k + 1) % 3] - ey[alive, k]  # edge normal (dy, -dx)
+            ny = ex[alive, k] - ex[alive, (k + 1) % 3]
+            pa = ax[alive] * nx[:, None] + ay[alive] * ny[:, None]
+            pb = bx[alive] * nx[:, None] + by[alive] * ny[:, None]
             depth = np.minimum(pa.max(axis=1), pb.max(axis=1)) - np.maximum(pa.min(axis=1),
                                                                             pb.min(axis=1))
-            length = np.sqrt((axis * axis).sum(axis=1))
-            ok &= depth > rel_tol * length * scale
-    return ok
+            alive = alive[depth > rel_tol * np.sqrt(nx * nx + ny * ny) * scale]
+    out = np.zeros(ta.shape[0], dtype=bool)
+    out[alive] = True
+    return out
 
 
 def overlapping_faces(points: np.ndarray, fs: FaceSet, island: np.ndarray,
