@@ -214,7 +214,8 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         if run.n_free == 0:
             q = quality(work[nodes], sub, **_targets_kw(tk))
             run.before = run.after = stats_of([q])
-            run.message = "every UV vertex is fixed (island border, pins, selection border)"
+            run.message = ("every UV vertex is fixed (on an island border, pinned or on the "
+                           "border of the selection: grow the selection, Select > More)")
             continue
         label = f"island {k + 1}/{len(groups)}"
 
