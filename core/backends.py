@@ -12,6 +12,7 @@ import numpy as np
 from .engine_numpy import NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
+from .targets import Targets
 
 __all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine"]
 
@@ -39,9 +40,15 @@ def _device_is_cpu() -> bool:
 
 
 def make_engine(
-    backend: str, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams
+    backend: str,
+    points: np.ndarray,
+    faces: FaceSet,
+    free: np.ndarray,
+    params: EEGTParams,
+    targets: Targets | None = None,
 ):
-    """Build the engine for `backend`; returns (engine, name actually used)."""
+    """Build the engine for `backend`; returns (engine, name actually used). `targets`:
+    per-face target shapes prepared for `faces` (None: regular polygons)."""
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend in ("opencl", "auto"):
@@ -49,10 +56,10 @@ def make_engine(
         if cls is not None and backend == "auto" and faces.n_faces < AUTO_ENGINE_MIN_FACES:
             # the global stage's device solver runs on CPU devices only (one work-item)
             name = HYBRID if _device_is_cpu() else SMALL_ON_GPU
-            return NumpyEngine(points, faces, free, params), name
+            return NumpyEngine(points, faces, free, params, targets), name
         if cls is not None:
             try:
-                return cls(points, faces, free, params), cls.name
+                return cls(points, faces, free, params, targets), cls.name
             except RuntimeError as exc:  # device refused the kernels: fall back, say why
                 why = f"OpenCL backend failed ({exc}); using NumPy"
         name = "numpy"
@@ -61,5 +68,6 @@ def make_engine(
             import warnings
 
             warnings.warn(why, RuntimeWarning, stacklevel=3)
-        return NumpyEngine(points, faces, free, params), f"{name} ({why})" if why else name
-    return NumpyEngine(points, faces, free, params), "numpy"
+        engine = NumpyEngine(points, faces, free, params, targets)
+        return engine, f"{name} ({why})" if why else name
+    return NumpyEngine(points, faces, free, params, targets), "numpy"

@@ -15,6 +15,7 @@ from .faces import FaceSet
 from .fpmath import power
 from .params import EEGTParams
 from .quality import Stats, group_quality, stats_of
+from .targets import Targets
 from .transform import _edge_sum, group_transform_delta
 
 __all__ = ["NumpyEngine"]
@@ -59,15 +60,23 @@ class NumpyEngine:
 
     name = "numpy"
 
-    def __init__(self, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams):
-        self._setup(points, faces, free, params, None)
+    def __init__(
+        self,
+        points: np.ndarray,
+        faces: FaceSet,
+        free: np.ndarray,
+        params: EEGTParams,
+        targets: Targets | None = None,
+    ):
+        """`targets`: per-face target shapes prepared for `faces` (None: regular polygons)."""
+        self._setup(points, faces, free, params, None, targets)
 
     def restarted(self, points: np.ndarray) -> NumpyEngine:
         """A fresh engine for the same run at new positions whose fixed nodes are where they
         are here: it shares the nearest-boundary search (its queries are exact, whatever
         element centroids it was refined for) instead of building another one."""
         engine = NumpyEngine.__new__(NumpyEngine)
-        engine._setup(points, self.faces, self.free, self.params, self._distance)
+        engine._setup(points, self.faces, self.free, self.params, self._distance, self.targets)
         return engine
 
     @property
@@ -75,17 +84,20 @@ class NumpyEngine:
         """The quadtree over the fixed nodes (refined for the first engine's centroids)."""
         return self._distance.tree
 
-    def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest) -> None:
+    def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest, targets) -> None:
         """State at `points`; `nearest`: distances to these fixed nodes (None: set them up)."""
         self.params = params
         self.faces = faces
+        self.targets = targets
+        # per group: its GroupTargets, or None (the paper's regular polygon)
+        self.group_targets = [None] * len(faces.groups) if targets is None else targets.groups
         self.x = np.ascontiguousarray(points[:, 0], dtype=np.float64).copy()
         self.y = np.ascontiguousarray(points[:, 1], dtype=np.float64).copy()
         self.n_nodes = self.x.size
         self.free = np.ascontiguousarray(free, dtype=bool)
         self.groups = faces.groups
         self.corner_nodes = np.concatenate([g.nodes.ravel() for g in self.groups])
-        self.q = [group_quality(*self._gather(g)) for g in self.groups]
+        self.q = self._quality_all()
         self.lbar, min_edge = self._edge_lengths()
         centroids = self._centroids()
         if nearest is None:
@@ -134,7 +146,10 @@ class NumpyEngine:
         self.inv_d_pow = np.split(f, np.cumsum([g.size for g in self.groups])[:-1])
 
     def _quality_all(self) -> list[np.ndarray]:
-        return [group_quality(*self._gather(g)) for g in self.groups]
+        return [
+            group_quality(*self._gather(g), None if t is None else t.corners)
+            for g, t in zip(self.groups, self.group_targets)
+        ]
 
     # -- the iteration -------------------------------------------------------------------
     def stats(self) -> Stats:
@@ -145,9 +160,9 @@ class NumpyEngine:
         """Weighted mean of the transformed-corner moves at every free node (eq. 18)."""
         p = self.params
         wx, wy, ww = [], [], []
-        for g, q, f in zip(self.groups, self.q, self.inv_d_pow):
+        for g, q, f, t in zip(self.groups, self.q, self.inv_d_pow, self.group_targets):
             X, Y = self._gather(g)
-            DX, DY = group_transform_delta(X, Y, p.a * (1.0 - q), p.scaling)
+            DX, DY = group_transform_delta(X, Y, p.a * (1.0 - q), p.scaling, t)
             # q may round to 1 + 1 ulp on a regular face: 1 - q < 0 gives NaN for eta not integer
             gq = np.where(q > 0, power(np.maximum(1.0 - q, 0.0), p.eta), p.inverted_weight)
             w = f * gq

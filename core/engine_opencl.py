@@ -32,6 +32,7 @@ from .engine_numpy import _DIST_FLOOR, NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
 from .quality import Stats, corner_constants
+from .targets import Targets
 from .transform import stretch_radius
 
 __all__ = ["ENV_DEVICE", "OpenCLEngine", "available", "list_devices", "select_device"]
@@ -306,7 +307,14 @@ class OpenCLEngine:
 
     name = "opencl"
 
-    def __init__(self, points: np.ndarray, faces: FaceSet, free: np.ndarray, params: EEGTParams):
+    def __init__(
+        self,
+        points: np.ndarray,
+        faces: FaceSet,
+        free: np.ndarray,
+        params: EEGTParams,
+        targets: Targets | None = None,
+    ):
         rt = _runtime()
         cl = rt.cl
         self.cl, self.rt, self.queue = cl, rt, rt.queue
@@ -315,7 +323,8 @@ class OpenCLEngine:
         self.faces = faces
         self.iteration = 0
         # The reference engine builds the initial state: lbar, quadtree, q, distance weights.
-        ref = NumpyEngine(points, faces, free, params)
+        ref = NumpyEngine(points, faces, free, params, targets)
+        self.targets = targets
         self.lbar = ref.lbar
         self.n_nodes = n = ref.n_nodes
         groups = faces.groups
@@ -390,7 +399,7 @@ class OpenCLEngine:
         self.n_rows = sum(plan.n_blocks for plan in self._plans)
         self.part = empty(32 * self.n_rows)
         self._host_part = np.zeros((self.n_rows, 4), dtype=np.float64)
-        self._setup_kernels(groups, params)
+        self._setup_kernels(groups, params, ref.group_targets)
         self._stats = ref.stats()
         del ref
 
@@ -402,8 +411,9 @@ class OpenCLEngine:
             yield g, fo
             fo += g.size
 
-    def _setup_kernels(self, groups, params: EEGTParams) -> None:
-        """Kernel objects with their arguments bound, per arity group."""
+    def _setup_kernels(self, groups, params: EEGTParams, group_targets) -> None:
+        """Kernel objects with their arguments bound, per arity group; a group with targets
+        (a GroupTargets) runs the generic *_tgt kernels with its (6, n, F) target array."""
         mf = self.cl.mem_flags
 
         def kernel(name: str):  # a fresh kernel object: its arguments are this run's
@@ -413,8 +423,17 @@ class OpenCLEngine:
         co = ro = 0
         two_sqrt3 = np.float64(2.0 * np.sqrt(3.0))
         area = np.int32(params.scaling == "area")
-        for g, fo in self._fo(groups):
+        for (g, fo), tg in zip(self._fo(groups), group_targets):
             suf = {3: "tri", 4: "quad"}.get(g.n, "ngon")
+            extra: tuple = ()
+            if tg is not None:
+                suf = {3: "tgt_tri", 4: "tgt_quad"}.get(g.n, "tgt")
+                fields = (tg.x, tg.y, tg.kx, tg.ky, tg.cos_a, tg.inv_sin)
+                extra = (self.cl.Buffer(
+                    self.rt.ctx,
+                    mf.READ_ONLY | mf.COPY_HOST_PTR,
+                    hostbuf=np.ascontiguousarray(np.stack(fields), dtype=np.float64),
+                ),)
             cos_a, inv_sin = corner_constants(g.n)
             nodes = self.cl.Buffer(
                 self.rt.ctx,
@@ -438,7 +457,8 @@ class OpenCLEngine:
             )
             kq = kernel(f"quality_{suf}")
             kq.set_args(
-                *gargs, self.P, self.q, two_sqrt3, self.part, np.int32(ro), bounds, np.int32(rows)
+                *gargs, self.P, self.q, two_sqrt3, self.part, np.int32(ro), bounds, np.int32(rows),
+                *extra,
             )
             moves = []
             for refresh in (0, 1):  # plain move, and move with the distance refresh fused
@@ -460,13 +480,15 @@ class OpenCLEngine:
                     self.bxy,
                     self.cxy,
                     *self.tree_args,
+                    *extra,
                 )
                 moves.append(km)
-            kk = kernel(f"mark_{suf}")
+            kk = kernel("mark_ngon" if tg is not None else f"mark_{suf}")
             kk.set_args(*gargs, self.q, self.flag)
             gs = _roundup(g.size, _WG)
             self._group_calls.append(
-                ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes, bounds)
+                ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes, bounds,
+                 *extra)
             )
             ro += rows
             co += g.n * g.size

@@ -9,6 +9,10 @@
 // Parameters are kernel arguments (one build per device serves every parameter set); the
 // pow modes say how core.fpmath.power evaluates x ** c and x ** eta (0 exp(e log x), 1 square,
 // 2 identity, 3 ones, 4 sqrt, 5 reciprocal: NumPy's exact fast paths for those exponents).
+// Per-face targets (core/targets.py): the *_tgt kernels read a group's (6, n, F) target
+// array tg (fields x, y, c_n K_x, c_n K_y, cos_a, inv_sin; corner k of face j of field m is
+// tg[(m * n + k) * F + j]) and take the general formulas for every arity (triangles written
+// out with scalars, quads and n-gons by the generic functions).
 
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
@@ -253,25 +257,76 @@ static inline double mean_ratio(const int n, const double *X, const double *Y,
     return ok ? mean_axis0(n, QK, F) : 0.0;
 }
 
+// Mean ratio of one face against its target (quality.py: _target_quality): corner k's
+// cos_a = tg[(4 n + k) F + j], inv_sin = tg[(5 n + k) F + j].
+static inline double target_ratio(const int n, const double *X, const double *Y,
+                                  __global const double *tg, const int F, const int j)
+{
+    double EX[MAXN], EY[MAXN], QK[MAXN];
+    for (int k = 0; k < n; ++k) {
+        const int k1 = (k + 1 == n) ? 0 : k + 1;
+        EX[k] = X[k1] - X[k];
+        EY[k] = Y[k1] - Y[k];
+    }
+    int ok = 1;
+    for (int k = 0; k < n; ++k) {
+        const int km = (k == 0) ? n - 1 : k - 1;
+        const double PX = EX[km], PY = EY[km];
+        const double ca = tg[(4 * n + k) * F + j], ci = tg[(5 * n + k) * F + j];
+        const double det = PX * EY[k] - PY * EX[k];
+        const double e1sq = EX[k] * EX[k] + EY[k] * EY[k];
+        const double mx = (-PX - ca * EX[k]) * ci;
+        const double my = (-PY - ca * EY[k]) * ci;
+        const double fro = (e1sq + mx * mx) + my * my;
+        ok = ok && det > 0.0 && fro > 0.0;
+        QK[k] = det > 0.0 ? ((2.0 * ci) * det) / fro : 0.0;
+    }
+    return ok ? mean_axis0(n, QK, F) : 0.0;
+}
+
+#define NO_TARGET ((__global const double *)0)
+
 // p^s - p for every corner of one face (transform.py: group_transform_delta), times w.
+// tg: the group's targets (transform.py: _target_stretch), or NO_TARGET (the paper's stretch).
 static inline void transform_moves(const int n, const int R, const double *X, const double *Y,
                                    const double lam, const double w, const int area,
                                    __global double2 *cmove, const int co, const int F,
-                                   const int j)
+                                   const int j, __global const double *tg)
 {
     double NX[MAXN], NY[MAXN], SX[MAXN], SY[MAXN], L[MAXN];
-    for (int k = 0; k < n; ++k) {
-        double nx = 0.0, ny = 0.0;
-        for (int r = 1; r <= R; ++r) {
-            const int kp = (k + r) % n;
-            const int km = (k - r + n) % n;
-            nx = nx + (Y[kp] - Y[km]);
-            ny = ny + (X[km] - X[kp]);
+    if (tg) {  // c_n cof(M) t_k, c_n M = P_centred (c_n K) summed corner by corner
+        const double CX0 = mean_axis0(n, X, F);
+        const double CY0 = mean_axis0(n, Y, F);
+        double m00 = 0.0, m01 = 0.0, m10 = 0.0, m11 = 0.0;
+        for (int k = 0; k < n; ++k) {
+            const double xh = X[k] - CX0, yh = Y[k] - CY0;
+            const double kx = tg[(2 * n + k) * F + j], ky = tg[(3 * n + k) * F + j];
+            m00 = m00 + xh * kx;
+            m01 = m01 + xh * ky;
+            m10 = m10 + yh * kx;
+            m11 = m11 + yh * ky;
         }
-        NX[k] = nx * lam;  // lambda n_k
-        NY[k] = ny * lam;
-        SX[k] = X[k] + NX[k];
-        SY[k] = Y[k] + NY[k];
+        for (int k = 0; k < n; ++k) {
+            const double tx = tg[k * F + j], ty = tg[(n + k) * F + j];
+            NX[k] = (m11 * tx - m10 * ty) * lam;
+            NY[k] = (m00 * ty - m01 * tx) * lam;
+            SX[k] = X[k] + NX[k];
+            SY[k] = Y[k] + NY[k];
+        }
+    } else {
+        for (int k = 0; k < n; ++k) {
+            double nx = 0.0, ny = 0.0;
+            for (int r = 1; r <= R; ++r) {
+                const int kp = (k + r) % n;
+                const int km = (k - r + n) % n;
+                nx = nx + (Y[kp] - Y[km]);
+                ny = ny + (X[km] - X[kp]);
+            }
+            NX[k] = nx * lam;  // lambda n_k
+            NY[k] = ny * lam;
+            SX[k] = X[k] + NX[k];
+            SY[k] = Y[k] + NY[k];
+        }
     }
     double before, after;
     if (area) {  // sqrt of the absolute shoelace area
@@ -473,11 +528,14 @@ static inline double nearest_d(const double qx, const double qy,
 // m - m % 8 faces once m >= 8, a fixed tree of them, then the rest in order), so the host
 // can finish q.sum() in NumPy's order. The partial sums rotate through r0..r7 (face t adds
 // to r0, then r0 moves to r7), which keeps them in registers. QUALITY_BODY(j) defines v.
-#define QUALITY_KERNEL(SUF, QUALITY_BODY)                                                    \
+#define QUALITY_KERNEL(SUF, QUALITY_BODY) QUALITY_KERNEL_X(SUF, QUALITY_BODY, )
+// EXTRA: more kernel arguments (a leading comma), or nothing
+#define QUALITY_KERNEL_X(SUF, QUALITY_BODY, EXTRA)                                           \
     __kernel void quality_##SUF(GROUP_ARGS, __global const double2 *restrict P,              \
                                 __global double *restrict q, const double two_sqrt3,         \
                                 __global double4 *restrict part, const int ro,               \
-                                __global const int *restrict bounds, const int n_blocks)     \
+                                __global const int *restrict bounds, const int n_blocks      \
+                                EXTRA)                                                       \
     {                                                                                        \
         const int g = get_global_id(0);                                                      \
         if (g >= n_blocks) return;                                                           \
@@ -535,6 +593,40 @@ QUALITY_KERNEL(tri, QUALITY_TRI)
 QUALITY_KERNEL(quad, QUALITY_QUAD)
 QUALITY_KERNEL(ngon, QUALITY_NGON)
 
+// per-face targets: one generic kernel for every arity (the group's target array last)
+#define TGT_ARG , __global const double *restrict tgt
+#define TARGET_QUALITY(NN)                                                                   \
+    double X[MAXN], Y[MAXN];                                                                 \
+    load_face(NN, nodes, F, j, P, X, Y);                                                     \
+    const double v = target_ratio(NN, X, Y, tgt, F, j);
+#define QUALITY_TGT(j) TARGET_QUALITY(n)
+#define QUALITY_TGT_QUAD(j) TARGET_QUALITY(4)
+// target_ratio for n = 3 with scalars (the generic code is several times slower on pocl);
+// the mean of three q_k >= 0 is ((q0 + q1) + q2) / 3 for any F (pairwise for F == 1 adds
+// them in order too, from -0.0, then to 0.0: the same value for non-negative terms)
+#define TGT_TRI_CORNER(K, PX, PY, EX, EY)                                                    \
+    const double ca##K = tgt[(12 + K) * F + j], ci##K = tgt[(15 + K) * F + j];             \
+    const double det##K = (PX) * (EY) - (PY) * (EX);                                         \
+    const double e1sq##K = (EX) * (EX) + (EY) * (EY);                                        \
+    const double mx##K = (-(PX) - ca##K * (EX)) * ci##K;                                     \
+    const double my##K = (-(PY) - ca##K * (EY)) * ci##K;                                     \
+    const double fro##K = (e1sq##K + mx##K * mx##K) + my##K * my##K;                         \
+    const double q##K = det##K > 0.0 ? ((2.0 * ci##K) * det##K) / fro##K : 0.0;
+#define QUALITY_TGT_TRI(j)                                                                   \
+    TRI_LOAD(j)                                                                              \
+    const double e0x = p1.x - p0.x, e0y = p1.y - p0.y;                                       \
+    const double e1x = p2.x - p1.x, e1y = p2.y - p1.y;                                       \
+    const double e2x = p0.x - p2.x, e2y = p0.y - p2.y;                                       \
+    TGT_TRI_CORNER(0, e2x, e2y, e0x, e0y)                                                    \
+    TGT_TRI_CORNER(1, e0x, e0y, e1x, e1y)                                                    \
+    TGT_TRI_CORNER(2, e1x, e1y, e2x, e2y)                                                    \
+    const int ok = det0 > 0.0 && fro0 > 0.0 && det1 > 0.0 && fro1 > 0.0 && det2 > 0.0 &&     \
+                   fro2 > 0.0;                                                               \
+    const double v = ok ? ((q0 + q1) + q2) / 3.0 : 0.0;
+QUALITY_KERNEL_X(tgt, QUALITY_TGT, TGT_ARG)
+QUALITY_KERNEL_X(tgt_tri, QUALITY_TGT_TRI, TGT_ARG)
+QUALITY_KERNEL_X(tgt_quad, QUALITY_TGT_QUAD, TGT_ARG)
+
 #define MOVE_ARGS                                                                            \
     GROUP_ARGS, __global const double2 *restrict P, __global const double *restrict q,      \
         __global double *restrict fdist, __global double2 *restrict cmove,                   \
@@ -562,8 +654,10 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
 
 // move_SUF: plain; move_SUF_d: the distance refresh first (separate builds of the body,
 // so the plain one carries none of the search code)
-#define MOVE_KERNEL(NAME, NN, RF)                                                            \
-    __kernel void NAME(MOVE_ARGS)                                                            \
+#define MOVE_KERNEL(NAME, NN, RF) MOVE_KERNEL_X(NAME, NN, RF, , NO_TARGET)
+// EXTRA: more kernel arguments (a leading comma) or nothing; TG: the target array or NO_TARGET
+#define MOVE_KERNEL_X(NAME, NN, RF, EXTRA, TG)                                               \
+    __kernel void NAME(MOVE_ARGS EXTRA)                                                      \
     {                                                                                        \
         const int refresh = RF;                                                              \
         const int j = get_global_id(0);                                                      \
@@ -571,7 +665,7 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
         double X[MAXN], Y[MAXN];                                                             \
         load_face(NN, nodes, F, j, P, X, Y);                                                 \
         MOVE_WEIGHT(mean_axis0(NN, X, F), mean_axis0(NN, Y, F))                                          \
-        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j);                         \
+        transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j, TG);                     \
     }
 #define MAKE_KERNELS(SUF, NN)                                                                \
     MOVE_KERNEL(move_##SUF, NN, 0)                                                           \
@@ -591,12 +685,44 @@ QUALITY_KERNEL(ngon, QUALITY_NGON)
 MAKE_KERNELS(quad, 4)
 MAKE_KERNELS(ngon, n)
 MARK_KERNEL(tri, 3)
+MOVE_KERNEL_X(move_tgt, n, 0, TGT_ARG, tgt)
+MOVE_KERNEL_X(move_tgt_d, n, 1, TGT_ARG, tgt)
+MOVE_KERNEL_X(move_tgt_quad, 4, 0, TGT_ARG, tgt)
+MOVE_KERNEL_X(move_tgt_quad_d, 4, 1, TGT_ARG, tgt)
 
 // transform_moves for n = 3 (R = 1), scalar: lambda n_k, p^s - p for corner k.
 #define TRI_EDGE_LEN(AX, AY, BX, BY) SQRT(((BX) - (AX)) * ((BX) - (AX)) + ((BY) - (AY)) * ((BY) - (AY)))
 #define TRI_CROSS(AX, AY, BX, BY) ((AX) * (BY) - (BX) * (AY))
-#define MOVE_TRI_KERNEL(NAME, RF)                                                            \
-__kernel void NAME(MOVE_ARGS)                                                                \
+// corner k: kp = k + 1, km = k - 1 (mod 3); nx = 0 + (Y[kp] - Y[km]), ny = 0 + (X[km] - X[kp])
+#define TRI_PAPER_STRETCH                                                                    \
+    const double NX0 = (0.0 + (Y1 - Y2)) * lam, NY0 = (0.0 + (X2 - X1)) * lam;               \
+    const double NX1 = (0.0 + (Y2 - Y0)) * lam, NY1 = (0.0 + (X0 - X2)) * lam;               \
+    const double NX2 = (0.0 + (Y0 - Y1)) * lam, NY2 = (0.0 + (X1 - X0)) * lam;
+// transform_moves' target stretch for n = 3: c_n M = sum_k (p_k - c) (c_n K_k), then
+// lambda c_n cof(M) t_k
+#define TGT_TRI_M(K)                                                                         \
+    const double xh##K = X##K - CX, yh##K = Y##K - CY;                                       \
+    const double kx##K = tgt[(6 + K) * F + j], ky##K = tgt[(9 + K) * F + j];                \
+    m00 = m00 + xh##K * kx##K;                                                               \
+    m01 = m01 + xh##K * ky##K;                                                               \
+    m10 = m10 + yh##K * kx##K;                                                               \
+    m11 = m11 + yh##K * ky##K;
+#define TGT_TRI_N(K)                                                                         \
+    const double tx##K = tgt[K * F + j], ty##K = tgt[(3 + K) * F + j];                      \
+    const double NX##K = (m11 * tx##K - m10 * ty##K) * lam;                                  \
+    const double NY##K = (m00 * ty##K - m01 * tx##K) * lam;
+#define TRI_TARGET_STRETCH                                                                   \
+    double m00 = 0.0, m01 = 0.0, m10 = 0.0, m11 = 0.0;                                       \
+    TGT_TRI_M(0)                                                                             \
+    TGT_TRI_M(1)                                                                             \
+    TGT_TRI_M(2)                                                                             \
+    TGT_TRI_N(0)                                                                             \
+    TGT_TRI_N(1)                                                                             \
+    TGT_TRI_N(2)
+#define MOVE_TRI_KERNEL(NAME, RF) MOVE_TRI_KERNEL_X(NAME, RF, , TRI_PAPER_STRETCH)
+// EXTRA: more kernel arguments (a leading comma) or nothing; STRETCH defines NX0 .. NY2
+#define MOVE_TRI_KERNEL_X(NAME, RF, EXTRA, STRETCH)                                          \
+__kernel void NAME(MOVE_ARGS EXTRA)                                                          \
 {                                                                                            \
     const int refresh = RF;                                                                  \
     const int j = get_global_id(0);                                                          \
@@ -606,10 +732,7 @@ __kernel void NAME(MOVE_ARGS)                                                   
     const double CX = ((X0 + X1) + X2) / 3.0;                                                \
     const double CY = ((Y0 + Y1) + Y2) / 3.0;                                                \
     MOVE_WEIGHT(CX, CY)                                                                      \
-    /* corner k: kp = k + 1, km = k - 1 (mod 3); nx = 0 + (Y[kp] - Y[km]), ny = 0 + (X[km] - X[kp]) */ \
-    const double NX0 = (0.0 + (Y1 - Y2)) * lam, NY0 = (0.0 + (X2 - X1)) * lam;               \
-    const double NX1 = (0.0 + (Y2 - Y0)) * lam, NY1 = (0.0 + (X0 - X2)) * lam;               \
-    const double NX2 = (0.0 + (Y0 - Y1)) * lam, NY2 = (0.0 + (X1 - X0)) * lam;               \
+    STRETCH                                                                                  \
     const double SX0 = X0 + NX0, SX1 = X1 + NX1, SX2 = X2 + NX2;                             \
     const double SY0 = Y0 + NY0, SY1 = Y1 + NY1, SY2 = Y2 + NY2;                             \
     double before, after;                                                                    \
@@ -640,6 +763,8 @@ __kernel void NAME(MOVE_ARGS)                                                   
 }
 MOVE_TRI_KERNEL(move_tri, 0)
 MOVE_TRI_KERNEL(move_tri_d, 1)
+MOVE_TRI_KERNEL_X(move_tgt_tri, 0, TGT_ARG, TRI_TARGET_STRETCH)
+MOVE_TRI_KERNEL_X(move_tgt_tri_d, 1, TGT_ARG, TRI_TARGET_STRETCH)
 
 // Stitching (eq. 18) as a gather: node i sums its incident corners in the order NumPy's
 // bincount meets them (CSR rows built on the host), then moves by sum(w d) / sum(w).

@@ -15,6 +15,7 @@ from .faces import FaceSet, as_faceset
 from .global_untangle import stops
 from .params import EEGTParams
 from .quality import Stats, _check_points, mesh_stats
+from .targets import Targets, prepare_targets, target_fallback_note
 from .topology import free_nodes
 
 __all__ = ["Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
@@ -40,6 +41,7 @@ class EEGTResult:
     moved: np.ndarray  # (N,) bool: nodes the run was allowed to move
     global_iterations: int = 0  # optimization iterations of the global stage (beyond the paper)
     n_frozen: int = 0  # faces with a non-positive corner of fixed nodes only: never changeable
+    n_target_fallback: int = 0  # faces whose target shape was unusable: regular polygon used
 
     def as_dict(self) -> dict:
         return {
@@ -53,6 +55,7 @@ class EEGTResult:
             "backend": self.backend,
             "message": self.message,
             "frozen_faces": self.n_frozen,
+            "target_fallback_faces": self.n_target_fallback,
         }
 
 
@@ -63,6 +66,7 @@ def untangle_and_smooth(
     params: EEGTParams | None = None,
     backend: str = "numpy",
     progress: Progress | None = None,
+    targets=None,
 ) -> EEGTResult:
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
@@ -76,6 +80,14 @@ def untangle_and_smooth(
     whatever the mesh size); stats are the current iterate's where the stage knows them, else
     the best so far. Returning a falsy value other than None (False, np.False_, 0) or raising
     Cancelled stops the run and returns the input unchanged.
+
+    `targets`: None (every face is pulled towards the regular polygon: the paper), or an
+    (n_corners, 2) array, one 2D target point per face corner in the faces' corner order:
+    each face is pulled towards its target's shape (translation, rotation, uniform scale
+    free), and every quality of the run (best iterate, before/after, never worse than the
+    input) is the mean ratio against the targets. Unusable targets (non-finite, a corner
+    not strictly convex) fall back to the regular polygon (`n_target_fallback`). The global
+    stage (untangle "global", polish, lift) still optimises regular shapes.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
@@ -83,6 +95,7 @@ def untangle_and_smooth(
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
     p = _check_points(points)
     fs = as_faceset(faces, p.shape[0])
+    tg = prepare_targets(targets, fs)
     free = free_nodes(p.shape[0], fs, fixed)
     if not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
@@ -92,18 +105,20 @@ def untangle_and_smooth(
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
     frozen = frozen_faces(_as_given(p, fs, center, scale), fs, free)
-    run = _Run(work, fs, free, params, backend, progress, frozen)
+    run = _Run(work, fs, free, params, backend, progress, frozen, tg)
     try:
         status, message = run.execute()
     except _CancelRun:
         status, message = "cancelled", "cancelled: mesh left unchanged"
-    before = _stats_as_given(p, fs, center, scale)
+    if tg is not None and tg.n_fallback:
+        message += f"; {target_fallback_note(tg.n_fallback)}"
+    before = _stats_as_given(p, fs, center, scale, tg)
     out, after = p.copy(), before
     if status != "cancelled":
         best = run.best_pts if run.best_pts is not None else run.engine.best_points()
         changed = np.any(best != work, axis=1) & free  # fixed rows stay the input's, always
         out[changed] = best[changed] * scale + center
-        after = _stats_as_given(out, fs, center, scale) if changed.any() else before
+        after = _stats_as_given(out, fs, center, scale, tg) if changed.any() else before
         if not (after == before or after.better_than(before)):  # judged in the caller's units
             out, after = p.copy(), before
             status = "failed" if before.n_inverted > run.n_frozen else "valid"
@@ -122,6 +137,7 @@ def untangle_and_smooth(
         free,
         run.n_global,
         int(frozen.sum()),
+        0 if tg is None else tg.n_fallback,
     )
 
 
@@ -152,9 +168,11 @@ def _as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> n
     return (p - center) / scale
 
 
-def _stats_as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> Stats:
+def _stats_as_given(
+    p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float, targets: Targets | None = None
+) -> Stats:
     """Stats of the points as the caller has them (what `mesh_stats` of the result says)."""
-    return mesh_stats(_as_given(p, fs, center, scale), fs)
+    return mesh_stats(_as_given(p, fs, center, scale), fs, targets)
 
 
 def _check_orientation(p: np.ndarray, fs: FaceSet) -> None:
@@ -220,12 +238,14 @@ def _device_lbfgs(backend_name: str):
 class _Run:
     """One run of the pipeline: EEGT phases on an engine, the global stage on the host."""
 
-    def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress, frozen):
+    def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress, frozen,
+                 targets: Targets | None = None):
         self.p, self.fs, self.free, self.params = p, fs, free, params
         self.frozen = frozen
         self.n_frozen = int(frozen.sum())  # inverted faces no move can change
         self.backend, self.progress = backend, progress
-        self.engine, self.backend_name = make_engine(backend, p, fs, free, params)
+        self.targets = targets
+        self.engine, self.backend_name = make_engine(backend, p, fs, free, params, targets)
         self.before = self.best = self.engine.stats()
         self.best_pts: np.ndarray | None = None  # None: the engine's best buffer holds it
         self.engine.save_best()
@@ -342,7 +362,9 @@ class _Run:
         if isinstance(self.engine, NumpyEngine):  # same mesh, same fixed nodes: reuse set-up
             self.engine = self.engine.restarted(pts)
         else:
-            self.engine, _ = make_engine(self.backend, pts, self.fs, self.free, self.params)
+            self.engine, _ = make_engine(
+                self.backend, pts, self.fs, self.free, self.params, self.targets
+            )
         current = self.engine.stats()
         if current.better_than(self.best):
             self.best, self.best_pts = current, None

@@ -23,6 +23,7 @@ def untangle_and_smooth_3d(
     progress: Progress | None = None,
     tol: float = 1e-5,
     project: bool = False,
+    targets=None,
 ) -> EEGTResult:
     """Like untangle_and_smooth for (N, 3) points on a plane; result points are (N, 3).
 
@@ -33,6 +34,8 @@ def untangle_and_smooth_3d(
     ``PlaneFrame.fit``) and every free node ends on it: the optimised ones at their result,
     the others at their orthogonal projection. Like the 2D core, it works in centred
     coordinates scaled by a power of two, so units from 1e-300 to 1e300 give the same result.
+    ``targets`` are per-corner 2D target shapes, passed through as they are (intrinsic 2D
+    shapes, see untangle_and_smooth).
     """
     original = _check_points(points3d, 3)
     fs = as_faceset(faces, original.shape[0])
@@ -42,7 +45,7 @@ def untangle_and_smooth_3d(
     work = (original - center) / scale
     frame = PlaneFrame.fit(work, faces, tol=tol, project=project, fixed=fixed)
     flat = frame.to_2d(work)
-    res = untangle_and_smooth(flat, faces, fixed, params, backend, progress)
+    res = untangle_and_smooth(flat, faces, fixed, params, backend, progress, targets)
     out = original.copy()
     if res.status != "cancelled":
         moved = res.moved & np.any(res.points != flat, axis=1)

@@ -2,7 +2,8 @@
 
 For corner k of an n-gon, J_k = [p_{k+1} - p_k, p_{k-1} - p_k] and M_k = J_k W_n^{-1}, with
 W_n the same corner of the regular n-gon; q_k = 2 det(M_k) / |M_k|_F^2 and q(E) = mean_k q_k,
-or 0 when any det(J_k) <= 0 (inverted, reflex corner, degenerate).
+or 0 when any det(J_k) <= 0 (inverted, reflex corner, degenerate). With per-face targets
+(core.targets) W_k is the target's corner instead: quality 1 = similar to the target.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 
 from .faces import as_faceset
 from .fpmath import regular_corner
+from .targets import prepare_targets
 
 __all__ = ["Stats", "group_quality", "mesh_stats", "quality", "stats_of"]
 
@@ -45,11 +47,19 @@ def corner_constants(n: int) -> tuple[float, float]:
     return cos_a, 1.0 / sin_a
 
 
-def group_quality(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
-    """Mean ratio of each face of one arity group; X, Y are (n, F) corner coordinates."""
+def group_quality(
+    X: np.ndarray, Y: np.ndarray, corners: tuple[np.ndarray, np.ndarray] | None = None
+) -> np.ndarray:
+    """Mean ratio of each face of one arity group; X, Y are (n, F) corner coordinates.
+
+    `corners`: None (the regular n-gon) or per-corner target factors (cos_a, inv_sin), (n, F)
+    arrays (`GroupTargets.corners`): W_k = Q_k U_k with U_k proportional to
+    [[1, cos_a], [0, 1 / inv_sin]]; every arity then takes the general corner formula."""
     n = X.shape[0]
     EX = np.roll(X, -1, axis=0) - X  # edge k: p_{k+1} - p_k
     EY = np.roll(Y, -1, axis=0) - Y
+    if corners is not None:
+        return _target_quality(EX, EY, *corners)
     if n == 3:
         two_area = EX[0] * EY[1] - EY[0] * EX[1]
         ssq = (EX * EX + EY * EY).sum(axis=0)
@@ -77,6 +87,23 @@ def group_quality(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     return np.where(ok, qk.mean(axis=0), 0.0)
 
 
+def _target_quality(
+    EX: np.ndarray, EY: np.ndarray, cos_a: np.ndarray, inv_sin: np.ndarray
+) -> np.ndarray:
+    """group_quality's n >= 5 corner formula with per-corner constants, for every arity."""
+    PX = np.roll(EX, 1, axis=0)  # E_{k-1}
+    PY = np.roll(EY, 1, axis=0)
+    det = PX * EY - PY * EX
+    e1sq = EX * EX + EY * EY
+    mx = (-PX - cos_a * EX) * inv_sin
+    my = (-PY - cos_a * EY) * inv_sin
+    fro = e1sq + mx * mx + my * my
+    ok = (det > 0).all(axis=0) & (fro > 0).all(axis=0)
+    qk = np.zeros_like(det)
+    np.divide((2.0 * inv_sin) * det, fro, out=qk, where=det > 0)
+    return np.where(ok, qk.mean(axis=0), 0.0)
+
+
 def stats_of(qs: list[np.ndarray]) -> Stats:
     """Stats over the per-group quality arrays (inverted faces count as 0)."""
     total = sum(q.size for q in qs)
@@ -101,17 +128,23 @@ def _check_points(points, dim: int = 2) -> np.ndarray:
     return p
 
 
-def quality(points, faces) -> np.ndarray:
-    """(F,) mean ratio per face in the given face order, 0 for inverted faces."""
+def quality(points, faces, targets=None) -> np.ndarray:
+    """(F,) mean ratio per face in the given face order, 0 for inverted faces.
+
+    `targets`: None (against the regular polygon), or an (n_corners, 2) array of per-corner
+    target points in the faces' corner order (or a prepared core.targets.Targets): the mean
+    ratio against each face's target shape (1 = similar to it)."""
     p = _check_points(points)
     fs = as_faceset(faces, p.shape[0])
+    tg = prepare_targets(targets, fs)
     out = np.empty(fs.n_faces)
-    for g in fs.groups:
-        out[g.ids] = group_quality(p[g.nodes, 0], p[g.nodes, 1])
+    for i, g in enumerate(fs.groups):
+        corners = None if tg is None else tg.groups[i].corners
+        out[g.ids] = group_quality(p[g.nodes, 0], p[g.nodes, 1], corners)
     return out
 
 
-def mesh_stats(points, faces) -> Stats:
-    """n_inverted, q_min, q_avg of a mesh."""
-    q = quality(points, faces)
+def mesh_stats(points, faces, targets=None) -> Stats:
+    """n_inverted, q_min, q_avg of a mesh (quality against `targets`, as in `quality`)."""
+    q = quality(points, faces, targets)
     return stats_of([q])

@@ -3,6 +3,14 @@
 Stretch: p'_k = p_k + lambda n_k with n_k = sum_{r=1..R} rot(p_{k+r} - p_{k-r}),
 R = ceil((n - 1) / 4), rot(x, y) = (y, -x). Shrink: scale p' about the (preserved) vertex
 centroid so the mean edge length (default) or the absolute area is that of the input.
+
+Towards a target shape (core.targets): with T the face's centred target nodes (2 x n), P its
+centred nodes and M = P T^T (T T^T)^-1 the least-squares affine map target -> face, split M
+into its conformal part S and anti-conformal part A = M - S; the stretch is
+n_k = c_n (S - A) t_k = c_n cof(M) t_k, c_n = sum_{r=1..R} 2 sin(2 pi r / n). For the regular
+target it is the paper's stretch of triangles and quads exactly; for n >= 5 it keeps the
+paper's action on the affine modes only (the others are not stretched: the shrink damps
+them). docs/targets.md derives it.
 """
 
 from __future__ import annotations
@@ -36,6 +44,29 @@ def _stretch(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return NX, NY
 
 
+def _target_stretch(X: np.ndarray, Y: np.ndarray, target) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised stretch vectors c_n cof(M) t_k of every corner towards the group's targets
+    (`target`: a core.targets.GroupTargets), as (n, F) arrays."""
+    n = X.shape[0]
+    CX = X.sum(axis=0)
+    CX /= n
+    CY = Y.sum(axis=0)
+    CY /= n
+    m00, m01 = np.zeros_like(CX), np.zeros_like(CX)
+    m10, m11 = np.zeros_like(CX), np.zeros_like(CX)
+    for k in range(n):  # c_n M = P_centred (c_n K), corner by corner
+        xh = X[k] - CX
+        yh = Y[k] - CY
+        m00 += xh * target.kx[k]
+        m01 += xh * target.ky[k]
+        m10 += yh * target.kx[k]
+        m11 += yh * target.ky[k]
+    # cof(M) = 2 S - M = [[m11, -m10], [-m01, m00]]
+    NX = m11 * target.x - m10 * target.y
+    NY = m00 * target.y - m01 * target.x
+    return NX, NY
+
+
 def _edge_sum(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     """Sum of the edge lengths of every face (n times the mean edge length)."""
     n = X.shape[0]
@@ -55,10 +86,11 @@ def _abs_area(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
 
 
 def group_transform_delta(
-    X: np.ndarray, Y: np.ndarray, lam: np.ndarray, scaling: str = "edge"
+    X: np.ndarray, Y: np.ndarray, lam: np.ndarray, scaling: str = "edge", target=None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(DX, DY) = p^s - p for every corner of an (n, F) group, lam an (F,) array."""
-    NX, NY = _stretch(X, Y)
+    """(DX, DY) = p^s - p for every corner of an (n, F) group, lam an (F,) array; `target`
+    (a core.targets.GroupTargets) stretches towards per-face targets, None as the paper."""
+    NX, NY = _stretch(X, Y) if target is None else _target_stretch(X, Y, target)
     NX *= lam
     NY *= lam  # now lambda n_k
     SX = X + NX
@@ -91,9 +123,16 @@ def group_transform_delta(
     return DX, DY
 
 
-def transform_polygon(points, lam: float, scaling: str = "edge") -> np.ndarray:
-    """One transform of a single polygon given as (n, 2) points; returns the new (n, 2)."""
+def transform_polygon(points, lam: float, scaling: str = "edge", target=None) -> np.ndarray:
+    """One transform of a single polygon given as (n, 2) points; returns the new (n, 2).
+    `target`: None (the paper's transform) or the polygon's (n, 2) target shape."""
     p = np.asarray(points, dtype=np.float64)
     X, Y = p[:, 0:1].copy(), p[:, 1:2].copy()
-    DX, DY = group_transform_delta(X, Y, np.array([lam], dtype=np.float64), scaling)
+    gt = None
+    if target is not None:
+        from .faces import as_faceset
+        from .targets import prepare_targets
+
+        gt = prepare_targets(target, as_faceset([list(range(len(p)))], len(p))).groups[0]
+    DX, DY = group_transform_delta(X, Y, np.array([lam], dtype=np.float64), scaling, gt)
     return np.column_stack([X[:, 0] + DX[:, 0], Y[:, 0] + DY[:, 0]])

@@ -24,6 +24,7 @@ from core.obj_io import read_obj
 from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 from core.planar import untangle_and_smooth_3d
+from core.targets import prepare_targets
 
 eo = pytest.importorskip("core.engine_opencl")
 
@@ -86,10 +87,12 @@ def step_both(p, f, free, params, n_untangle: int, n_smooth: int) -> None:
     assert_close(ref.best_points(), eng.best_points(), scale, "best iterate")
 
 
-def step_exact(p, f, free, params, n_untangle: int, n_smooth: int) -> None:
-    """Step NumPy and OpenCL engines side by side: positions bit-identical every step."""
-    ref = NumpyEngine(p, f, free, params)
-    eng, name = backends.make_engine("opencl", p, f, free, params)
+def step_exact(p, f, free, params, n_untangle: int, n_smooth: int, targets=None) -> None:
+    """Step NumPy and OpenCL engines side by side: positions bit-identical every step.
+    `targets`: per-corner target shapes (raw), or None."""
+    tg = prepare_targets(targets, as_faceset(f, len(p)))
+    ref = NumpyEngine(p, f, free, params, tg)
+    eng, name = backends.make_engine("opencl", p, f, free, params, tg)
     assert name == "opencl", name
     for it in range(n_untangle + n_smooth):
         phase = "untangle" if it < n_untangle else "smooth"
@@ -279,12 +282,14 @@ def fuzz_cases(draw):
     return pts, faces, pinned, draw(params)
 
 
-def run_both(pts, faces, pinned, params):
+def run_both(pts, faces, pinned, params, targets=None):
     """(NumPy result, OpenCL result), or None when both refuse the input alike."""
     out = []
     for backend in ("numpy", "opencl"):
         try:
-            out.append(untangle_and_smooth(pts, faces, pinned, params, backend=backend))
+            out.append(
+                untangle_and_smooth(pts, faces, pinned, params, backend=backend, targets=targets)
+            )
         except ValueError as exc:
             out.append(str(exc))
     ra, rb = out
@@ -695,3 +700,89 @@ def test_kernels_built_once_per_device(device):
     e2, _ = backends.make_engine("opencl", p, f, free, EEGTParams(eta=1.0, scaling="area"))
     assert e1.prg is e2.prg and e1.rt is e2.rt
     assert device in e1.device_name or e1.device_name == device
+
+
+# ---- per-face targets --------------------------------------------------------------------
+
+
+def random_targets(faces, rng, bad: float = 0.05, aspect=(0.2, 3.0)) -> np.ndarray:
+    """Per-corner targets: each face's regular polygon stretched (by a factor in `aspect`),
+    turned, jittered, moved and scaled at random; a fraction `bad` unusable (NaN, or a corner
+    made concave)."""
+    fs = faces if isinstance(faces, FaceSet) else as_faceset(faces, 1 + max(map(max, faces)))
+    out = np.empty((fs.n_corners, 2))
+    for a, b in zip(fs.offsets[:-1], fs.offsets[1:]):
+        n = b - a
+        t = 2 * np.pi * np.arange(n) / n
+        shape = np.column_stack([np.cos(t), rng.uniform(*aspect) * np.sin(t)])
+        shape += 0.05 * rng.standard_normal((n, 2))
+        c, s = np.cos(rng.uniform(0, 7)), np.sin(rng.uniform(0, 7))
+        shape = shape @ np.array([[c, -s], [s, c]]).T
+        out[a:b] = rng.uniform(0.1, 10) * shape + rng.uniform(-5, 5, 2)
+        roll = rng.random()
+        if roll < bad / 2:
+            out[a] = np.nan
+        elif roll < bad:
+            out[a] = out[a:b].mean(axis=0)  # corner a at the centroid: its neighbours cave in
+    return out
+
+
+@pytest.mark.parametrize(
+    "name", ["quad_hole", "tri_two_holes", "mixed_quad_tri", "polygon_voronoi", "two_holes_twist"]
+)
+def test_targets_bit_identical_on_shared_meshes(cpu_device, name):
+    p, f = load2d(name)
+    T = random_targets(f, np.random.default_rng(len(name)))
+    assert 0 < prepare_targets(T, f).n_fallback < f.n_faces
+    step_exact(p, f, free_nodes(len(p), f), EEGTParams(distance_refresh=3), 12, 8, T)
+    step_exact(p, f, free_nodes(len(p), f), EEGTParams(scaling="area", eta=1.7, c=1.3), 6, 4, T)
+
+
+@pytest.mark.parametrize("n", [3, 5, 8, 20, 150])
+def test_targets_one_face_ngon_bit_identical(cpu_device, n):
+    """A lone n-gon (a group of one face: pairwise corner sums; n > 16: its own build; a
+    lone triangle: the scalar triangle kernels) ringed by quads, with targets."""
+    t = 2 * np.pi * np.arange(n) / n
+    rng = np.random.default_rng(n)
+    inner = np.column_stack([np.cos(t), np.sin(t)]) * (1 + 0.2 * rng.uniform(-1, 1, (n, 1)))
+    pts = np.vstack([inner, 2.0 * np.column_stack([np.cos(t), np.sin(t)])])
+    faces = [list(range(n))] + [[i, n + i, n + (i + 1) % n, (i + 1) % n] for i in range(n)]
+    fs = as_faceset(faces, len(pts))
+    T = random_targets(faces, rng, bad=0.0)
+    step_exact(pts, fs, free_nodes(len(pts), fs), EEGTParams(distance_refresh=2), 6, 4, T)
+
+
+@settings(
+    max_examples=40,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+@given(case=fuzz_cases(), seed=st.integers(0, 2**32 - 1))
+def test_fuzz_pipeline_with_targets_bit_identical(cpu_device, case, seed):
+    """Whole runs with random targets (some unusable) on both backends: same bits, counts,
+    stats and fallback count; and a few engine steps bit for bit."""
+    pts, faces, pinned, params = case
+    T = random_targets(faces, np.random.default_rng(seed), bad=0.1)
+    both = run_both(pts, faces, pinned, params, T)
+    if both is None:
+        return
+    ra, rb = both
+    assert_same_run(ra, rb)
+    assert ra.n_target_fallback == rb.n_target_fallback
+    fs = as_faceset(faces, len(pts))
+    step_exact(pts, fs, ra.moved, params, 4, 4, T)
+
+
+def test_targets_pipeline_same_result_on_opencl(device):
+    p, f = load2d("mixed_quad_tri")
+    T = random_targets(f, np.random.default_rng(4), aspect=(0.7, 1.4))
+    params = EEGTParams(untangle="eegt", polish_iterations=0, lift_rounds=0)
+    ra = untangle_and_smooth(p, f, params=params, targets=T, backend="numpy")
+    rb = untangle_and_smooth(p, f, params=params, targets=T, backend="opencl")
+    assert rb.backend == "opencl" and ra.status == rb.status == "untangled"
+    assert (ra.untangle_iterations, ra.smooth_iterations) == (
+        rb.untangle_iterations, rb.smooth_iterations)
+    assert_close(ra.points, rb.points, float(np.ptp(p, axis=0).max()), "targets")
+    assert ra.n_target_fallback == rb.n_target_fallback > 0
