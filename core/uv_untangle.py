@@ -42,11 +42,6 @@ __all__ = [
 Accept = Callable[[Stats, Stats], bool]
 
 
-def _targets_kw(targets: np.ndarray | None) -> dict[str, Any]:
-    """Keyword for the core's per-face targets (none: regular polygons)."""
-    return {} if targets is None else {"targets": targets}
-
-
 @dataclass(frozen=True)
 class UVMeasures:
     """What a UV artist asks of a set of faces."""
@@ -79,7 +74,7 @@ def measure(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
         return UVMeasures(0, 0, 0, 0, 0.0, 0.0, int(zero.sum()))
     p = _oriented(points, layout, side)
     sub, nodes, rows = island_faces(layout.faces, ids)
-    q = quality(p[nodes], sub, **_targets_kw(None if targets is None else targets[rows]))
+    q = quality(p[nodes], sub, targets=None if targets is None else targets[rows])
     s = stats_of([q])
     isl = np.unique(layout.island[ids])
     around = np.isin(layout.island, isl)  # overlaps with unselected faces of those islands too
@@ -212,7 +207,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         run.n_free = int(free.sum())
         tk = None if targets is None else targets[rows]
         if run.n_free == 0:
-            q = quality(work[nodes], sub, **_targets_kw(tk))
+            q = quality(work[nodes], sub, targets=tk)
             run.before = run.after = stats_of([q])
             run.message = ("every UV vertex is fixed (on an island border, pinned or on the "
                            "border of the selection: grow the selection, Select > More)")
@@ -225,7 +220,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         try:
             res = untangle_and_smooth(work[nodes], sub, fixed=pin, params=params,
                                       backend=backend, progress=relay if progress else None,
-                                      **_targets_kw(tk))
+                                      targets=tk)
         except ValueError as exc:
             run.status, run.message = "error", _line(exc)
             continue
@@ -246,7 +241,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         change = np.any(rounded != work[nodes], axis=1)
         if not change.any():
             continue
-        after = stats_of([quality(rounded, sub, **_targets_kw(tk))])
+        after = stats_of([quality(rounded, sub, targets=tk)])
         if not accept(after, res.before):
             run.message += "; no improvement once stored: island unchanged"
             if res.status == "untangled":  # the stored result would keep a flipped face

@@ -18,8 +18,8 @@ import bpy
 import numpy as np
 
 from ..core import EEGTParams, faces_from_csr
+from ..core.targets import face_shapes_2d
 from ..core.uv_layout import UVLayout, weld_uv
-from ..core.uv_targets import face_shapes_2d
 from ..core.uv_untangle import UVMeasures, UVResult, measure, untangle_uv
 from . import mesh_io, runner, uv_mesh
 
@@ -167,8 +167,12 @@ def prepare(obj: bpy.types.Object, uv_name: str | None = None, *, selected_only:
         co = mesh_io.read_positions(me)
         if not np.isfinite(co[topo.corner_verts]).all():
             return _fail(job, "vertices with NaN or infinite coordinates")
-        fs3d = faces_from_csr(topo.loop_start, topo.loop_total, topo.corner_verts)
-        job.targets = face_shapes_2d(co.astype(np.float64), fs3d)
+        try:
+            fs3d = faces_from_csr(topo.loop_start, topo.loop_total, topo.corner_verts,
+                                  len(me.vertices))
+            job.targets = face_shapes_2d(co.astype(np.float64), fs3d)
+        except ValueError as exc:
+            return _fail(job, str(exc).splitlines()[0])
     return job
 
 

@@ -1,4 +1,4 @@
-"""UV welding, islands and their orientation (core.uv_layout), and 3D target shapes."""
+"""UV welding, islands and their orientation (core.uv_layout)."""
 
 from __future__ import annotations
 
@@ -6,9 +6,7 @@ import numpy as np
 import pytest
 from uvdata import grid_uv
 
-from core import faces_from_csr, quality
-from core.uv_layout import components, corner_loops, island_faces, signed_face_areas, weld_uv
-from core.uv_targets import face_shapes_2d
+from core.uv_layout import components, corner_loops, island_faces, weld_uv
 
 
 def test_weld_one_island_shares_every_vertex():
@@ -125,33 +123,3 @@ def test_island_faces_keeps_corner_rows():
     sub, nodes, rows = island_faces(lay.faces, ids)
     assert np.array_equal(nodes[sub.indices], lay.faces.indices[rows])
     assert rows.tolist() == [16, 17, 18, 19, 4, 5, 6, 7, 28, 29, 30, 31]
-
-
-def test_face_shapes_are_the_3d_faces_in_their_plane():
-    rng = np.random.default_rng(2)
-    quad = np.array([[0, 0], [3, 0], [3.5, 1], [0.2, 2]], float)
-    tri = np.array([[0, 0], [1, 0], [0.3, 2]], float)
-    pts2 = np.concatenate([quad, tri])
-    a, _ = np.linalg.qr(rng.normal(size=(3, 3)))  # a random rotation (or reflection) of 3D
-    pts3 = np.concatenate([pts2, np.zeros((7, 1))], axis=1) @ a.T + rng.normal(size=3)
-    fs = faces_from_csr([0, 4], [4, 3], [0, 1, 2, 3, 4, 5, 6])
-    t = face_shapes_2d(pts3, fs)
-    # the same shape: every pairwise distance kept, corners counterclockwise
-    for rows, ref in ((slice(0, 4), quad), (slice(4, 7), tri)):
-        d = np.linalg.norm(t[rows][:, None] - t[rows][None], axis=2)
-        dr = np.linalg.norm(ref[:, None] - ref[None], axis=2)
-        assert np.allclose(d, dr, atol=1e-12)
-    assert (signed_face_areas(t, fs) > 0).all()
-    assert (quality(t, fs) > 0).all()  # no inverted corner either
-    # the reversed face is the same shape seen from the other side: counterclockwise again
-    fs_rev = faces_from_csr([0], [4], [3, 2, 1, 0])
-    rows = faces_from_csr([0], [4], [0, 1, 2, 3])  # target rows are corners, in face order
-    assert signed_face_areas(face_shapes_2d(pts3, fs_rev), rows)[0] == pytest.approx(
-        signed_face_areas(t, fs)[0])
-
-
-def test_face_shapes_nan_for_faces_without_a_plane():
-    pts = np.array([[0, 0, 0], [1, 1, 1], [2, 2, 2], [0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
-    fs = faces_from_csr([0, 3], [3, 3], [0, 1, 2, 3, 4, 5])
-    t = face_shapes_2d(pts, fs)
-    assert np.isnan(t[:3]).all() and np.isfinite(t[3:]).all()

@@ -96,7 +96,7 @@ def test_zero_area_island_skipped_all_zero_refused():
 
 def test_everything_fixed_is_refused():
     g, lay = tangled()
-    with pytest.raises(ValueError, match="nothing to move: every UV vertex is fixed .*grow the selection"):
+    with pytest.raises(ValueError, match=r"nothing to move: every UV vertex is fixed .*grow"):
         untangle_uv(lay, np.ones(g.n_faces, bool), fixed=np.ones(lay.n_nodes, bool))
 
 
