@@ -399,3 +399,56 @@ def test_register_unregister_twice_keeps_uv_tools(bpy, ext):
         addon_utils.enable(MODULE, default_set=True)
         assert hasattr(bpy.types, "UV_OT_eegt_untangle_smooth")
         assert hasattr(bpy.types.Object, "eegt_last_uv_run")
+
+
+def _distortion_3d(ext, obj) -> tuple[float, float]:
+    """(mean, worst) distortion of the active UV map against the 3D faces (all faces)."""
+    job = ext.operators.uv_runner.prepare(obj, targets="3D")
+    m = ext.core.uv_untangle.measure(job.layout, job.layout.points, job.selected, job.targets)
+    return m.distortion_mean, m.distortion_worst
+
+
+def test_3d_targets_give_less_distortion_against_3d_than_regular(bpy, ext):
+    obj = tangled(bpy, "monkey", "jitter", levels=1)
+    uv0 = uv_values(obj)
+    got = {}
+    for shape in ("REGULAR", "3D"):
+        obj.data.attributes["UVMap"].data.foreach_set("vector", uv0.ravel())
+        edit_all(bpy)
+        assert bpy.ops.uv.eegt_untangle_smooth(target_shape=shape) == {"FINISHED"}
+        bpy.ops.object.mode_set(mode="OBJECT")
+        got[shape] = _distortion_3d(ext, obj)
+        assert counts(ext, obj)["INVERTED"] == 0
+    assert got["3D"][0] > got["REGULAR"][0] + 0.01  # mean (measured: 0.882 vs 0.857)
+    assert got["3D"][1] > got["REGULAR"][1] + 0.05  # worst (0.472 vs 0.297)
+    (res,) = ops_uv(ext).LAST_RESULTS
+    assert res.targets == "3D" and "(1 = as in 3D)" in res.line()
+    assert res.after["distortion_mean"] == pytest.approx(got["3D"][0], abs=1e-6)
+
+
+def test_concave_3d_faces_fall_back_to_regular_and_say_so(bpy, ext):
+    me = bpy.data.meshes.new("Dart")
+    # a fan of 6 quads around a middle vertex; in 3D one rim vertex is pulled in, which
+    # makes one quad a concave dart; its UVs are the plain ring
+    ring = np.array([(np.cos(a), np.sin(a), 0.0) for a in np.arange(12) * np.pi / 6])
+    verts = np.concatenate([[(0.0, 0.0, 0.0)], ring])
+    verts[2] *= 0.2  # the tip of quad 0 pulled in: a reflex corner there
+    faces = [(0, 1 + 2 * k, 2 + 2 * k, 1 + (2 * k + 2) % 12) for k in range(6)]
+    me.from_pydata(verts.tolist(), [], faces)
+    uv = me.uv_layers.new(name="UVMap")
+    cv = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", cv)
+    flat = np.concatenate([[(0.0, 0.0)], ring[:, :2]])
+    vals = flat[cv].astype(np.float32)
+    vals[cv == 0] = (0.9, 0.3)  # the middle UV dragged near the rim: faces fold over
+    me.attributes[uv.name].data.foreach_set("vector", vals.ravel())
+    obj = bpy.data.objects.new("Dart", me)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    edit_all(bpy)
+    assert bpy.ops.uv.eegt_untangle_smooth() == {"FINISHED"}
+    (res,) = ops_uv(ext).LAST_RESULTS
+    assert res.before["inverted"] >= 1
+    assert res.target_fallback == 1 and res.after["inverted"] == 0
+    assert "1 faces with a concave or degenerate 3D shape" in res.line()
