@@ -119,26 +119,50 @@ def candidate_pairs(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 def triangles_overlap(p: np.ndarray, ta: np.ndarray, tb: np.ndarray,
                       rel_tol: float = 1e-12) -> np.ndarray:
-    """(P,) whether triangles ta[k] and tb[k] (node triples) share interior area: no edge
-    direction of either separates them (separating-axis test). Projections that overlap by
-    at most ``rel_tol`` times the axis length and the coordinates' magnitude count as
-    touching (shared edges and corners project to identical values)."""
+    """(P,) whether triangles ta[k] and tb[k] (node triples, each of nonzero area) share
+    interior area. Neighbours across an edge overlap exactly when their third corners lie
+    on the same side of that edge; any other pair when no edge direction of either
+    separates them (separating-axis test). Overlaps up to ``rel_tol`` times the
+    coordinates' magnitude count as touching (shared edges and corners project to
+    identical values)."""
     scale = max(float(np.abs(p).max()), np.finfo(float).tiny) if p.size else 1.0
-    ax, ay = p[ta, 0], p[ta, 1]  # (P, 3)
-    bx, by = p[tb, 0], p[tb, 1]
-    alive = np.arange(ta.shape[0])  # pairs no axis has separated yet
-    for ex, ey in ((ax, ay), (bx, by)):
-        for k in range(3):
-            if alive.size == 0:
-                break
-            nx = ey[alive, (k + 1) % 3] - ey[alive, k]  # edge normal (dy, -dx)
-            ny = ex[alive, k] - ex[alive, (k + 1) % 3]
-            pa = ax[alive] * nx[:, None] + ay[alive] * ny[:, None]
-            pb = bx[alive] * nx[:, None] + by[alive] * ny[:, None]
-            depth = np.minimum(pa.max(axis=1), pb.max(axis=1)) - np.maximum(pa.min(axis=1),
-                                                                            pb.min(axis=1))
-            alive = alive[depth > rel_tol * np.sqrt(nx * nx + ny * ny) * scale]
     out = np.zeros(ta.shape[0], dtype=bool)
+    eq = ta[:, :, None] == tb[:, None, :]  # (P, 3, 3): corner i of a is corner j of b
+    shared = eq.sum(axis=(1, 2))
+    out[shared == 3] = True  # the same triangle twice
+    edge = np.flatnonzero(shared == 2)
+    if edge.size:
+        ina, inb = eq[edge].any(axis=2), eq[edge].any(axis=1)
+        rows = np.arange(edge.size)
+        c = ta[edge, np.argmin(ina, axis=1)]  # the corner of a off the shared edge
+        d = tb[edge, np.argmin(inb, axis=1)]
+        ends = np.sort(np.where(ina, ta[edge], -1), axis=1)[:, 1:]  # the shared edge
+        e0, e1 = ends[rows, 0], ends[rows, 1]
+        ex, ey = p[e1, 0] - p[e0, 0], p[e1, 1] - p[e0, 1]
+        sc = ex * (p[c, 1] - p[e0, 1]) - ey * (p[c, 0] - p[e0, 0])
+        sd = ex * (p[d, 1] - p[e0, 1]) - ey * (p[d, 0] - p[e0, 0])
+        tol = rel_tol * np.sqrt(ex * ex + ey * ey) * scale
+        out[edge] = ((sc > tol) & (sd > tol)) | ((sc < -tol) & (sd < -tol))
+    alive = np.flatnonzero(shared < 2)  # pairs no axis has separated yet
+    # corner coordinates as 1D columns: a's x0 x1 x2 y0 y1 y2, then b's (contiguous, fast)
+    cols = [p[t[alive, k], d] for t in (ta, tb) for d in (0, 1) for k in range(3)]
+    for axis in range(6):
+        if alive.size == 0:
+            break
+        own = 0 if axis < 3 else 6  # the triangle whose edge k gives the axis
+        x, y, k = cols[own:own + 3], cols[own + 3:own + 6], axis % 3
+        nx = y[(k + 1) % 3] - y[k]  # edge normal (dy, -dx)
+        ny = x[k] - x[(k + 1) % 3]
+        pa = [cols[i] * nx + cols[3 + i] * ny for i in range(3)]
+        pb = [cols[6 + i] * nx + cols[9 + i] * ny for i in range(3)]
+        hi = np.minimum(np.maximum(np.maximum(pa[0], pa[1]), pa[2]),
+                        np.maximum(np.maximum(pb[0], pb[1]), pb[2]))
+        lo = np.maximum(np.minimum(np.minimum(pa[0], pa[1]), pa[2]),
+                        np.minimum(np.minimum(pb[0], pb[1]), pb[2]))
+        keep = hi - lo > rel_tol * np.sqrt(nx * nx + ny * ny) * scale
+        if not keep.all():
+            alive = alive[keep]
+            cols = [c[keep] for c in cols]
     out[alive] = True
     return out
 

@@ -79,3 +79,31 @@ def test_fold_with_consistent_orientation_is_found():
     p[11] = (0.5, 0.8)
     over = overlapping_faces(p, fs, np.zeros(5, int))
     assert over[0] and over[4]
+
+
+def _sat_reference(a: np.ndarray, b: np.ndarray) -> bool:
+    """Plain separating-axis test of two triangles (3 x 2 arrays), one pair at a time."""
+    for tri in (a, b):
+        for k in range(3):
+            e = tri[(k + 1) % 3] - tri[k]
+            n = np.array([e[1], -e[0]])
+            pa, pb = a @ n, b @ n
+            if min(pa.max(), pb.max()) - max(pa.min(), pb.min()) <= 1e-12 * np.linalg.norm(n):
+                return False
+    return True
+
+
+def test_neighbour_rule_agrees_with_separating_axes():
+    rng = np.random.default_rng(11)
+    g = grid_uv(7)
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, g.uv)
+    p = lay.points + rng.uniform(-0.6, 0.6, lay.points.shape)  # many folds
+    quads = lay.faces.indices.reshape(-1, 4)
+    tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]], quads[:, [1, 2, 3]]])
+    i, j = np.triu_indices(len(tris), 1)
+    shared = (tris[i][:, :, None] == tris[j][:, None, :]).sum(axis=(1, 2))
+    assert (shared == 2).sum() > 100 and (shared == 1).sum() > 100
+    got = triangles_overlap(p, tris[i], tris[j])
+    want = np.array([_sat_reference(p[tris[a]], p[tris[b]]) for a, b in zip(i, j)])
+    assert np.array_equal(got, want)
+    assert 50 < got.sum() < got.size
