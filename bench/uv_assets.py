@@ -7,7 +7,8 @@ surface; each unwrapped with ``bpy.ops.uv.unwrap``. Tangles, all deterministic (
 (b) ``rotate``: the UVs of an inner disc of an island turned by 90-180 degrees (the ring
 around it folds: no local relax undoes that); (c) ``mesh_edit``: 3D vertices moved with
 Correct Face Attributes on (their UVs follow and flip), then moved back with it off, as an
-artist who fixes the mesh but not the UVs does. ``pin_some`` pins a few interior UVs.
+artist who fixes the mesh but not the UVs does. ``pin_some`` pins a few interior UVs away
+from the tangle.
 Every UV vertex moves as one (all its loops together), island borders never move.
 """
 
@@ -172,7 +173,7 @@ def jitter(obj: Any, amount: float = 0.5, seed: int = 0) -> None:
     _set_nodes(obj, lay, p)
 
 
-def rotate(obj: Any, degrees: float = 150.0, radius: float = 0.3, seed: int = 0) -> None:
+def rotate(obj: Any, degrees: float = 150.0, radius: float = 0.2, seed: int = 0) -> None:
     """(b) The interior UV vertices within ``radius`` (a fraction of the largest island's
     size) of a point inside that island turned by ``degrees`` about that point."""
     lay = layout(obj)
@@ -249,13 +250,27 @@ def tangle(bpy: Any, obj: Any, kind: str, seed: int = 0) -> None:
 TANGLES = ("jitter", "rotate", "mesh_edit")
 
 
-def pin_some(obj: Any, fraction: float = 0.01, seed: int = 1) -> np.ndarray:
-    """Pin a few interior UV vertices of valid faces (all their loops); (L,) bool pins."""
+def pin_some(obj: Any, fraction: float = 0.01, seed: int = 1, rings: int = 2) -> np.ndarray:
+    """Pin a few interior UV vertices (all their loops) away from the tangle: none within
+    ``rings`` faces of a flipped, inverted or overlapping face (a pin inside a fold can make
+    it impossible to undo, and an artist pins what is right); (L,) bool pins."""
+    from core.uv_overlap import overlapping_faces
+    from core.uv_untangle import flipped_faces
+
     me = obj.data
     lay = layout(obj)
+    side = lay.orientation()
+    bad = flipped_faces(lay, lay.points, side, corners=True) | overlapping_faces(
+        lay.oriented_points(side), lay.faces, lay.island)
+    face_of = np.repeat(np.arange(lay.faces.n_faces), lay.faces.counts)
+    near = np.zeros(lay.n_nodes, bool)
+    for _ in range(rings + 1):
+        near[lay.faces.indices[bad[face_of]]] = True
+        bad = np.zeros_like(bad)
+        np.logical_or.at(bad, face_of, near[lay.faces.indices])
     rng = np.random.default_rng(seed)
-    free = np.flatnonzero(_interior(lay))
-    chosen = rng.choice(free, max(1, int(fraction * free.size)), replace=False)
+    free = np.flatnonzero(_interior(lay) & ~near)
+    chosen = rng.choice(free, min(free.size, max(1, int(fraction * free.size))), replace=False)
     on = np.zeros(lay.n_nodes, bool)
     on[chosen] = True
     pins = on[lay.loop_node]
