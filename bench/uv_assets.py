@@ -250,10 +250,12 @@ def tangle(bpy: Any, obj: Any, kind: str, seed: int = 0) -> None:
 TANGLES = ("jitter", "rotate", "mesh_edit")
 
 
-def pin_some(obj: Any, fraction: float = 0.01, seed: int = 1, rings: int = 2) -> np.ndarray:
+def pin_some(obj: Any, fraction: float = 0.01, seed: int = 1,
+             rings: int | None = 2) -> np.ndarray:
     """Pin a few interior UV vertices (all their loops) away from the tangle: none within
     ``rings`` faces of a flipped, inverted or overlapping face (a pin inside a fold can make
-    it impossible to undo, and an artist pins what is right); (L,) bool pins."""
+    it impossible to undo, and an artist pins what is right; None: anywhere); (L,) bool
+    pins."""
     from core.uv_overlap import overlapping_faces
     from core.uv_untangle import flipped_faces
 
@@ -264,7 +266,7 @@ def pin_some(obj: Any, fraction: float = 0.01, seed: int = 1, rings: int = 2) ->
         lay.oriented_points(side), lay.faces, lay.island)
     face_of = np.repeat(np.arange(lay.faces.n_faces), lay.faces.counts)
     near = np.zeros(lay.n_nodes, bool)
-    for _ in range(rings + 1):
+    for _ in range(0 if rings is None else rings + 1):
         near[lay.faces.indices[bad[face_of]]] = True
         bad = np.zeros_like(bad)
         np.logical_or.at(bad, face_of, near[lay.faces.indices])

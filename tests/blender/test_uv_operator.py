@@ -138,7 +138,7 @@ def test_seam_sides_move_independently(bpy, ext):
 def test_pins_are_bit_identical(bpy, ext):
     from bench import uv_assets
     obj = tangled(bpy, "sphere", "jitter")
-    pins = uv_assets.pin_some(obj, fraction=0.05)
+    pins = uv_assets.pin_some(obj, fraction=0.05, rings=None)  # inside the tangle too
     assert pins.sum() >= 20
     uv0 = uv_values(obj)
     edit_all(bpy)
