@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from .faces import FaceSet
 from .params import EEGTParams
 from .pipeline import untangle_and_smooth
 from .quality import Stats, quality, stats_of
@@ -36,6 +37,8 @@ __all__ = [
     "UVResult",
     "flipped_faces",
     "measure",
+    "overlaps_around",
+    "tangled_faces",
     "untangle_uv",
 ]
 
@@ -61,10 +64,22 @@ class UVMeasures:
                 "distortion_worst": self.distortion_worst, "zero_area": self.zero_area}
 
 
+def overlaps_around(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
+                    side: np.ndarray | None = None) -> np.ndarray:
+    """(F,) bool: faces of the islands that ``faces`` touch that overlap another face of
+    their island (selected or not), at UV vertex ``points`` (as stored)."""
+    side = layout.orientation() if side is None else side
+    around = np.isin(layout.island, np.unique(layout.island[np.asarray(faces, dtype=bool)]))
+    return overlapping_faces(_oriented(points, layout, side), layout.faces, layout.island,
+                             faces=around)
+
+
 def measure(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
-            targets: np.ndarray | None = None, side: np.ndarray | None = None) -> UVMeasures:
+            targets: np.ndarray | None = None, side: np.ndarray | None = None,
+            overlap: np.ndarray | None = None) -> UVMeasures:
     """Measures of the faces in the bool mask ``faces`` at UV vertex ``points`` (as stored,
-    unmirrored). ``targets``: (C, 2) rows in ``layout.faces`` corner order, or None."""
+    unmirrored). ``targets``: (C, 2) rows in ``layout.faces`` corner order, or None;
+    ``overlap``: ``overlaps_around`` of the same points when already known."""
     side = layout.orientation() if side is None else side
     faces = np.asarray(faces, dtype=bool)
     zero = faces & (side[layout.island] == 0)
@@ -76,9 +91,7 @@ def measure(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
     sub, nodes, rows = island_faces(layout.faces, ids)
     q = quality(p[nodes], sub, targets=None if targets is None else targets[rows])
     s = stats_of([q])
-    isl = np.unique(layout.island[ids])
-    around = np.isin(layout.island, isl)  # overlaps with unselected faces of those islands too
-    over = overlapping_faces(p, layout.faces, layout.island, faces=around)
+    over = overlaps_around(layout, points, faces, side) if overlap is None else overlap
     flipped = int(np.count_nonzero(signed_face_areas(p[nodes], sub) <= 0.0))
     return UVMeasures(int(ids.size), flipped, int(s.n_inverted),
                       int(np.count_nonzero(over & chosen)), float(s.q_avg), float(s.q_min),
@@ -157,17 +170,82 @@ def _strictly_better(after: Stats, before: Stats) -> bool:
     return after.better_than(before)
 
 
+SCOPES = ("tangles", "selection")
+
+
+def tangled_faces(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
+                  side: np.ndarray | None = None,
+                  overlap: np.ndarray | None = None) -> np.ndarray:
+    """(F,) bool: the faces (among the mask ``faces``) that are inverted in their island's
+    orientation or overlap another face of their island (``overlap``: ``overlaps_around``
+    when known): where untangling has to work."""
+    side = layout.orientation() if side is None else side
+    bad = flipped_faces(layout, points, side, corners=True)
+    bad |= overlaps_around(layout, points, faces, side) if overlap is None else overlap
+    return bad & np.asarray(faces, dtype=bool)
+
+
+def _grown(fs_nodes: np.ndarray, face_of: np.ndarray, n_faces: int, seed: np.ndarray,
+           rings: int) -> np.ndarray:
+    """(F,) bool: ``seed`` faces and every face within ``rings`` rings of faces of them
+    (faces sharing a node count as neighbours)."""
+    region = seed.copy()
+    for _ in range(rings):
+        near = np.zeros(int(fs_nodes.max()) + 1, dtype=bool)
+        near[fs_nodes[region[face_of]]] = True
+        grown = np.zeros(n_faces, dtype=bool)
+        np.logical_or.at(grown, face_of, near[fs_nodes])
+        if np.array_equal(grown, region):
+            break
+        region = grown
+    return region
+
+
+def _regions(sub: FaceSet, bad: np.ndarray | None, rings: int) -> list[np.ndarray]:
+    """The face sets to try, smallest first: the tangled faces grown by ``rings``, 4
+    ``rings``, 16 ``rings``, ... rings, then every face (the only one without tangles)."""
+    every = np.ones(sub.n_faces, dtype=bool)
+    if bad is None or not bad.any() or bad.all():
+        return [every]
+    face_of = np.repeat(np.arange(sub.n_faces), sub.counts)
+    out, r = [], rings
+    while True:
+        region = _grown(sub.indices, face_of, sub.n_faces, bad, r)
+        if region.all():
+            break
+        out.append(region)
+        r *= 4
+    return [*out, every]
+
+
+@dataclass
+class _Attempt:
+    """One core run on part of an island, as island coordinates and island stats."""
+
+    points: np.ndarray  # (n, 2) island UV vertices (oriented), storable values
+    after: Stats
+    result: Any
+    free: np.ndarray
+    improved: bool = True  # fewer inverted faces than the attempt before
+
+
 def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None = None,
                 targets: np.ndarray | None = None, params: EEGTParams | None = None,
                 backend: str = "numpy", progress: Callable[[int, str, Any], Any] | None = None,
-                store: type = np.float32, accept: Accept = _strictly_better) -> UVResult:
+                store: type = np.float32, accept: Accept = _strictly_better,
+                scope: str = "tangles", tangled: np.ndarray | None = None,
+                rings: int = 2) -> UVResult:
     """Untangle and smooth the ``selected`` faces (bool (F,)) of a welded UV map.
 
     ``fixed``: (V,) extra UV vertices that must not move (pins). ``targets``: (C, 2) target
-    corner rows in ``layout.faces`` order, or None for regular polygons. Results are rounded
-    to ``store`` and an island changes only when ``accept(rounded stats, input stats)``.
-    ValueError (one line) when nothing can move: no face selected, only islands without
-    area, or every selected UV vertex fixed.
+    corner rows in ``layout.faces`` order, or None for regular polygons. ``scope``:
+    "tangles" (an island with tangled faces, ``tangled_faces`` or the mask ``tangled``, only
+    moves them and the faces within ``rings`` rings of them, the rings doubled until it
+    untangles or the whole selection of the island is in; an island without tangles is
+    smoothed as a whole) or "selection" (every selected face moves). Results are rounded to
+    ``store`` and an island changes only when ``accept(rounded stats, input stats)``, both
+    over its selected faces. ValueError (one line) when nothing can move: no face selected,
+    only islands without area, or every selected UV vertex fixed.
     """
     t0 = time.perf_counter()
     selected = np.asarray(selected, dtype=bool)
@@ -175,21 +253,21 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         raise ValueError(f"selected must be a ({layout.faces.n_faces},) bool array")
     if not selected.any():
         raise ValueError("no UV faces selected")
+    if scope not in SCOPES:
+        raise ValueError(f"scope must be one of {', '.join(SCOPES)}, got {scope!r}")
     side = layout.orientation()
     keep = np.zeros(layout.n_nodes, dtype=bool) if fixed is None else np.array(fixed, bool)
     keep[layout.faces.indices[np.repeat(~selected, layout.faces.counts)]] = True
+    if scope == "tangles" and tangled is None:
+        tangled = tangled_faces(layout, layout.points, selected, side)
     work = _oriented(layout.points, layout, side)
     out = layout.points.copy()
     moved = np.zeros(layout.n_nodes, dtype=bool)
     runs: list[IslandRun] = []
     sel_ids = np.flatnonzero(selected)
-    order = np.argsort(layout.island[sel_ids], kind="stable")
-    sel_ids = sel_ids[order]
-    isl_of = layout.island[sel_ids]
-    cut = np.flatnonzero(np.diff(isl_of)) + 1
-    groups = np.split(sel_ids, cut)
+    sel_ids = sel_ids[np.argsort(layout.island[sel_ids], kind="stable")]
+    groups = np.split(sel_ids, np.flatnonzero(np.diff(layout.island[sel_ids])) + 1)
     backend_name = ""
-    status_cancel = False
     for k, ids in enumerate(groups):
         isl = int(layout.island[ids[0]])
         run = IslandRun(isl, int(ids.size), bool(side[isl] < 0), "skipped")
@@ -198,66 +276,37 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
             run.message = "no UV area (collapsed to a point or a line): unwrap it first"
             continue
         sub, nodes, rows = island_faces(layout.faces, ids)
-        pin = keep[nodes]
-        try:
-            free = free_nodes(nodes.size, sub, pin)
-        except ValueError as exc:
-            run.status, run.message = "error", _line(exc)
-            continue
-        run.n_free = int(free.sum())
         tk = None if targets is None else targets[rows]
-        if run.n_free == 0:
-            q = quality(work[nodes], sub, targets=tk)
-            run.before = run.after = stats_of([q])
-            run.message = ("every UV vertex is fixed (on an island border, pinned or on the "
-                           "border of the selection: grow the selection, Select > More)")
-            continue
+        start = work[nodes]
+        run.before = run.after = stats_of([quality(start, sub, targets=tk)])
         label = f"island {k + 1}/{len(groups)}"
-
-        def relay(it: int, phase: str, stats: Any, _label: str = label) -> Any:
-            return progress(it, f"{_label} {phase}", stats)
-
+        bad = None if scope == "selection" else tangled[ids]
         try:
-            res = untangle_and_smooth(work[nodes], sub, fixed=pin, params=params,
-                                      backend=backend, progress=relay if progress else None,
-                                      targets=tk)
-        except ValueError as exc:
-            run.status, run.message = "error", _line(exc)
+            best = _island(sub, start, keep[nodes], tk, _regions(sub, bad, rings), params,
+                           backend, progress, label, store, run)
+        except _Cancel:
+            result = UVResult(layout.points.copy(), np.zeros_like(moved), "cancelled", runs,
+                              time.perf_counter() - t0, backend_name or backend)
+            return result
+        if best is None:
             continue
-        backend_name = backend_name or str(res.backend)
-        run.status, run.message = str(res.status), str(res.message)
-        run.before, run.after = res.before, res.before
-        run.untangle_iterations = int(res.untangle_iterations)
-        run.smooth_iterations = int(res.smooth_iterations)
-        run.global_iterations = int(getattr(res, "global_iterations", 0))
-        run.n_frozen = int(getattr(res, "n_frozen", 0))
-        run.n_target_fallback = int(getattr(res, "n_target_fallback", 0))
-        run.seconds = float(res.seconds)
-        if res.status == "cancelled":
-            status_cancel = True
-            break
-        rounded = np.asarray(res.points).astype(store).astype(np.float64)
-        rounded[~free] = work[nodes][~free]
-        change = np.any(rounded != work[nodes], axis=1)
+        backend_name = backend_name or str(best.result.backend)
+        change = np.any(best.points != start, axis=1)
         if not change.any():
             continue
-        after = stats_of([quality(rounded, sub, targets=tk)])
-        if not accept(after, res.before):
+        if not accept(best.after, run.before):
             run.message += "; no improvement once stored: island unchanged"
-            if res.status == "untangled":  # the stored result would keep a flipped face
+            if run.status == "untangled":  # the stored result would keep a flipped face
                 run.status = "failed"
             continue
-        run.after, run.changed = after, True
-        back = rounded.copy()
+        run.after, run.changed = best.after, True
+        back = best.points.copy()
         if side[isl] < 0:
             back[:, 0] *= -1.0
         out[nodes[change]] = back[change]
         moved[nodes[change]] = True
     result = UVResult(out, moved, "cancelled", runs, time.perf_counter() - t0,
                       backend_name or backend)
-    if status_cancel:
-        result.points, result.moved = layout.points.copy(), np.zeros_like(moved)
-        return result
     if not any(r.n_free for r in runs):
         reasons = {r.message for r in runs if r.message}
         raise ValueError("nothing to move: " + "; ".join(sorted(reasons))
@@ -265,6 +314,90 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     result.status = _overall(runs)
     result.notes = _notes(runs)
     return result
+
+
+class _Cancel(Exception):
+    pass
+
+
+WHOLE_ROUNDS = 3  # runs on a whole island that keeps inverted faces, while they decrease
+
+
+def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | None,
+            regions: list[np.ndarray], params: EEGTParams | None, backend: str,
+            progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
+            run: IslandRun) -> _Attempt | None:
+    """Run the core on one island's selected faces, region after region, each from the best
+    result so far, until one ends untangled; a whole island that still has inverted faces
+    runs again from its best while their number decreases (up to WHOLE_ROUNDS runs). The
+    best attempt (island stats), or None when nothing could run. Fills ``run`` (status,
+    message, counters); _Cancel when the progress callback stops it."""
+    best: _Attempt | None = None
+    tries = [*regions[:-1], *[regions[-1]] * WHOLE_ROUNDS]
+    whole_runs = 0
+    for region in tries:
+        whole = bool(region.all())
+        if whole and whole_runs and best is not None and (
+                best.after.n_inverted <= run.n_frozen or not best.improved):
+            break
+        whole_runs += whole
+        base = start if best is None else best.points
+        part = "" if whole else f" ({int(region.sum())} of {sub.n_faces} faces)"
+        ids = np.flatnonzero(region)
+        part_fs, local, prow = island_faces(sub, ids)
+        out_nodes = np.zeros(start.shape[0], dtype=bool)
+        out_nodes[sub.indices[np.repeat(~region, sub.counts)]] = True
+        part_pin = pin[local] | out_nodes[local]
+        try:
+            free = free_nodes(local.size, part_fs, part_pin)
+        except ValueError as exc:
+            run.status, run.message = "error", _line(exc)
+            return best
+        if not free.any():
+            if whole and best is None:
+                run.n_free = 0
+                run.message = ("every UV vertex is fixed (on an island border, pinned or on "
+                               "the border of the selection: grow the selection, Select > "
+                               "More)")
+                return None
+            continue
+
+        def relay(it: int, phase: str, stats: Any, _label: str = label + part) -> Any:
+            return progress(it, f"{_label} {phase}", stats)
+
+        try:
+            res = untangle_and_smooth(base[local], part_fs, fixed=part_pin, params=params,
+                                      backend=backend, progress=relay if progress else None,
+                                      targets=None if tk is None else tk[prow])
+        except ValueError as exc:
+            run.status, run.message = "error", _line(exc)
+            return best
+        if res.status == "cancelled":
+            raise _Cancel
+        run.untangle_iterations += int(res.untangle_iterations)
+        run.smooth_iterations += int(res.smooth_iterations)
+        run.global_iterations += int(getattr(res, "global_iterations", 0))
+        run.n_target_fallback = max(run.n_target_fallback,
+                                    int(getattr(res, "n_target_fallback", 0)))
+        run.seconds += float(res.seconds)
+        pts = base.copy()
+        rounded = np.asarray(res.points).astype(store).astype(np.float64)
+        pts[local[free]] = rounded[free]
+        after = stats_of([quality(pts, sub, targets=tk)])
+        improved = best is None or after.better_than(best.after)
+        if improved:
+            fewer = best is None or after.n_inverted < best.after.n_inverted
+            best = _Attempt(pts, after, res, free, fewer)
+            run.status, run.message = str(res.status), str(res.message) + part
+            run.n_free = int(free.sum())
+            run.n_frozen = int(getattr(res, "n_frozen", 0))
+        elif whole:
+            best.improved = False
+        if res.status in ("valid", "untangled") and after.n_inverted <= run.n_frozen:
+            break
+    if best is not None and best.after.n_inverted > run.n_frozen:
+        run.status = "failed"
+    return best
 
 
 def _line(exc: Exception) -> str:

@@ -114,6 +114,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="untangle and smooth the UV map MAP (default: the active one) of "
                         "every chosen object instead of its vertex positions; objects "
                         "without it are skipped")
+    p.add_argument("--uv-scope", choices=("tangles", "selection"), default="tangles",
+                   help="with --uv: move only tangled faces and the faces around them "
+                        "(tangles, default) or every face (selection)")
     p.add_argument("--project", action="store_true",
                    help="project slightly non-planar meshes onto their plane")
     p.add_argument("--report", metavar="JSON", help="write a JSON report here")
@@ -435,7 +438,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             if ns.uv is not None:
                 res = uv_runner.run_object(obj, params, ns.uv or None, backend=backend,
                                            device=device, use_pins=not ns.no_pinned,
-                                           progress=progress,
+                                           scope=ns.uv_scope, progress=progress,
                                            write_on_fail=not ns.no_write_on_fail)
                 uv_props.store_last_run(obj, res)
                 results.append(res)

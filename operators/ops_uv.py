@@ -79,7 +79,8 @@ class UV_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
         sync, mode = _selection_mode(context)
         objs = self._targets
         jobs = [uv_runner.prepare(o, None, selected_only=True, sync=sync, select_mode=mode,
-                                  use_pins=self.use_pins, targets=self.target_shape)
+                                  use_pins=self.use_pins, targets=self.target_shape,
+                                  scope=self.scope.lower())
                 for o in objs]
         return objs, jobs
 

@@ -40,6 +40,7 @@ class IMAGE_PT_eegt_uv(_EEGTUVTab, bpy.types.Panel):
                      icon="RESTRICT_SELECT_OFF").kind = "FLIPPED"
         row.operator("uv.eegt_select_flipped", text="Overlapping",
                      icon="SELECT_INTERSECT").kind = "OVERLAPPING"
+        layout.prop(uv_settings, "scope")
         layout.prop(uv_settings, "target_shape", text="Target")
         layout.prop(uv_settings, "use_pins")
         layout.prop(settings, "backend")

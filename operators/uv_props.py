@@ -18,6 +18,14 @@ TARGET_ITEMS: tuple[tuple[str, str, str], ...] = (
     ("REGULAR", "Regular", "Pull each UV face towards the regular polygon (the paper's EEGT)"),
 )
 
+SCOPE_ITEMS: tuple[tuple[str, str, str], ...] = (
+    ("TANGLES", "Around Tangles", "In an island with flipped, inverted or overlapping faces only "
+                                  "those and the faces around them move (more around them "
+                                  "until they untangle); an island without any is smoothed "
+                                  "as a whole"),
+    ("SELECTION", "Whole Selection", "Every selected face moves (untangled and smoothed)"),
+)
+
 SELECT_ITEMS: tuple[tuple[str, str, str], ...] = (
     ("FLIPPED", "Flipped", "Faces whose area is reversed (or zero) against their island"),
     ("INVERTED", "Inverted", "Flipped faces and faces with a corner turned inside out (the "
@@ -36,6 +44,8 @@ def option_annotations(options: set[str] | None = None) -> dict[str, Any]:
         "target_shape": EnumProperty(name="Target Shape", items=TARGET_ITEMS, default="3D",
                                      description="The shape each UV face is pulled towards",
                                      **opt),
+        "scope": EnumProperty(name="Move", items=SCOPE_ITEMS, default="TANGLES",
+                              description="Which of the selected faces move", **opt),
     }
 
 

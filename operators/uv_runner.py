@@ -20,7 +20,14 @@ import numpy as np
 from ..core import EEGTParams, faces_from_csr
 from ..core.targets import face_shapes_2d
 from ..core.uv_layout import UVLayout, weld_uv
-from ..core.uv_untangle import UVMeasures, UVResult, measure, untangle_uv
+from ..core.uv_untangle import (
+    UVMeasures,
+    UVResult,
+    measure,
+    overlaps_around,
+    tangled_faces,
+    untangle_uv,
+)
 from . import mesh_io, runner, uv_mesh
 
 TARGETS = ("3D", "REGULAR")  # target shape of a UV face: its 3D face, or the regular polygon
@@ -112,6 +119,7 @@ class UVJob:
     fixed: np.ndarray | None = None  # (V,) pinned UV vertices
     targets: np.ndarray | None = None  # (C, 2) or None (regular polygons)
     target_kind: str = "3D"
+    scope: str = "tangles"  # core.uv_untangle.SCOPES
     notes: list[str] = field(default_factory=list)
     error: str | None = None
     result: UVResult | None = None
@@ -127,12 +135,13 @@ def _fail(job: UVJob, message: str) -> UVJob:
 
 def prepare(obj: bpy.types.Object, uv_name: str | None = None, *, selected_only: bool = False,
             sync: bool = True, select_mode: str = "VERTEX", use_pins: bool = True,
-            targets: str = "3D") -> UVJob:
+            targets: str = "3D", scope: str = "tangles") -> UVJob:
     """Read one object's UV map (``uv_name``, default the active one) into a :class:`UVJob`
     (``job.error`` set for bad input). ``selected_only``: only the faces selected in the UV
-    editor (see ``uv_mesh.read_uv_face_selection``); else every face."""
+    editor (see ``uv_mesh.read_uv_face_selection``); else every face. ``scope``: see
+    ``core.uv_untangle.untangle_uv``."""
     me = obj.data
-    job = UVJob(object=obj.name, mesh=me.name, target_kind=targets)
+    job = UVJob(object=obj.name, mesh=me.name, target_kind=targets, scope=scope)
     why = runner.refusal(obj)
     if why:
         return _fail(job, why)
@@ -185,11 +194,13 @@ def compute(job: UVJob, params: EEGTParams, backend: str = "numpy",
         runner.select_opencl_device(device)
     lay = job.layout
     side = lay.orientation()
-    job.before = measure(lay, lay.points, job.selected, job.targets, side)
+    over = overlaps_around(lay, lay.points, job.selected, side)
+    job.before = measure(lay, lay.points, job.selected, job.targets, side, over)
     try:
         res = untangle_uv(lay, job.selected, fixed=job.fixed, targets=job.targets,
                           params=params, backend=backend, progress=progress,
-                          accept=runner.improves)
+                          accept=runner.improves, scope=job.scope,
+                          tangled=tangled_faces(lay, lay.points, job.selected, side, over))
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return
@@ -250,13 +261,14 @@ def apply(obj: bpy.types.Object, job: UVJob, *, write: bool = True) -> UVObjectR
 def run_object(obj: bpy.types.Object, params: EEGTParams, uv_name: str | None = None, *,
                backend: str = "numpy", device: str | None = None, selected_only: bool = False,
                sync: bool = True, select_mode: str = "VERTEX", use_pins: bool = True,
-               targets: str = "3D", progress: runner.Progress | None = None,
-               write: bool = True, write_on_fail: bool = True) -> UVObjectResult:
+               targets: str = "3D", scope: str = "tangles",
+               progress: runner.Progress | None = None, write: bool = True,
+               write_on_fail: bool = True) -> UVObjectResult:
     """Prepare, compute and apply in one call (Object Mode, main thread); with
     ``write_on_fail`` off a map that keeps flipped faces is left as it was."""
     t0 = time.perf_counter()
     job = prepare(obj, uv_name, selected_only=selected_only, sync=sync,
-                  select_mode=select_mode, use_pins=use_pins, targets=targets)
+                  select_mode=select_mode, use_pins=use_pins, targets=targets, scope=scope)
     compute(job, params, backend, progress, device)
     ok = job.error is None and job.result is not None and \
         job.result.status in ("valid", "untangled")

@@ -452,3 +452,20 @@ def test_concave_3d_faces_fall_back_to_regular_and_say_so(bpy, ext):
     assert res.before["inverted"] >= 1
     assert res.target_fallback == 1 and res.after["inverted"] == 0
     assert "1 faces with a concave or degenerate 3D shape" in res.line()
+
+
+def test_scope_around_tangles_keeps_the_rest_bit_identical(bpy, ext):
+    obj = tangled(bpy, "organic", "mesh_edit", n=24)
+    uv0 = uv_values(obj)
+    c0 = counts(ext, obj)
+    assert c0["INVERTED"] > 0
+    moved = {}
+    for scope in ("TANGLES", "SELECTION"):
+        obj.data.attributes["UVMap"].data.foreach_set("vector", uv0.ravel())
+        edit_all(bpy)
+        assert bpy.ops.uv.eegt_untangle_smooth(scope=scope) == {"FINISHED"}
+        bpy.ops.object.mode_set(mode="OBJECT")
+        assert counts(ext, obj)["INVERTED"] == 0
+        moved[scope] = float(np.any(uv_values(obj) != uv0, axis=1).mean())
+    assert 0 < moved["TANGLES"] < 0.2 < moved["SELECTION"]
+    assert bpy.context.scene.eegt_uv_settings.scope == "TANGLES"  # the default

@@ -127,3 +127,59 @@ def test_progress_names_the_island():
                 params=EEGTParams(max_smooth_iterations=3),
                 progress=lambda it, phase, s: phases.append(phase))
     assert phases[0].startswith("island 1/2 ") and phases[-1].startswith("island 2/2 ")
+
+
+def _local_fold(n=14):
+    """A grid UV map (curved borders) with one interior UV vertex dragged over its
+    neighbours: a local fold in a big island."""
+    g = grid_uv(n)
+    u, v = g.uv[:, 0].astype(np.float64), g.uv[:, 1].astype(np.float64)
+    g.uv = np.stack([u + 0.03 * v * v, v + 0.02 * u * u], 1).astype(np.float32)
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, g.uv)
+    p = lay.points.copy()
+    mid = int(np.flatnonzero(lay.vertex == (n // 2) * n + n // 2)[0])
+    p[mid] += (1.6, 0.3)
+    uv = p[lay.loop_node].astype(np.float32)
+    return g, weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)
+
+
+def test_scope_tangles_moves_only_around_the_fold():
+    g, lay = _local_fold()
+    sel = np.ones(g.n_faces, bool)
+    before = measure(lay, lay.points, sel)
+    assert before.inverted >= 2
+    phases = []
+    res = untangle_uv(lay, sel, progress=lambda it, ph, s: phases.append(ph))
+    after = measure(lay, res.points, sel)
+    assert res.status == "untangled" and after.inverted == 0 and after.overlapping == 0
+    assert 0 < res.moved.sum() < 0.25 * lay.n_nodes  # the rest keeps its bits
+    assert " of 169 faces) " in phases[0]
+    whole = untangle_uv(lay, sel, scope="selection")
+    assert whole.moved.sum() > 0.5 * lay.n_nodes
+    assert measure(lay, whole.points, sel).inverted == 0
+    with pytest.raises(ValueError, match="scope must be one of tangles, selection"):
+        untangle_uv(lay, sel, scope="everything")
+
+
+def test_scope_tangles_grows_until_it_untangles():
+    # an inner disc turned 150 degrees; seeded with its inverted faces only (not the
+    # overlapping ones), one ring around them is too thin to untwist: the region grows
+    n = 20
+    g = grid_uv(n)
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, g.uv)
+    c = np.array([(n - 1) / 2, (n - 1) / 2])
+    d = lay.points - c
+    disc = np.linalg.norm(d, axis=1) < 5.0
+    t = np.radians(150.0)
+    rot = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    p = lay.points.copy()
+    p[disc] = c + d[disc] @ rot.T
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, p[lay.loop_node].astype(np.float32))
+    sel = np.ones(g.n_faces, bool)
+    assert measure(lay, lay.points, sel).inverted > 10
+    phases = []
+    res = untangle_uv(lay, sel, rings=1, tangled=flipped_faces(lay, lay.points, corners=True),
+                      progress=lambda it, ph, s: phases.append(ph))
+    tries = list(dict.fromkeys(ph.split(")")[0] for ph in phases if "faces)" in ph))
+    assert tries == ["island 1/1 (108 of 361 faces", "island 1/1 (329 of 361 faces"]
+    assert res.status == "untangled" and measure(lay, res.points, sel).inverted == 0
