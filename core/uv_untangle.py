@@ -227,6 +227,7 @@ class _Attempt:
     result: Any
     free: np.ndarray
     improved: bool = True  # fewer inverted faces than the attempt before
+    part: str = ""  # " (k of n faces)" for a run on part of the island
 
 
 def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None = None,
@@ -283,7 +284,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         bad = None if scope == "selection" else tangled[ids]
         try:
             best = _island(sub, start, keep[nodes], tk, _regions(sub, bad, rings), params,
-                           backend, progress, label, store, run)
+                           backend, progress, label, store, run, scope == "tangles")
         except _Cancel:
             result = UVResult(layout.points.copy(), np.zeros_like(moved), "cancelled", runs,
                               time.perf_counter() - t0, backend_name or backend)
@@ -323,55 +324,46 @@ class _Cancel(Exception):
 WHOLE_ROUNDS = 3  # runs on a whole island that keeps inverted faces, while they decrease
 
 
-def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | None,
-            regions: list[np.ndarray], params: EEGTParams | None, backend: str,
-            progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
-            run: IslandRun) -> _Attempt | None:
-    """Run the core on one island's selected faces, region after region, each from the best
-    result so far, until one ends untangled; a whole island that still has inverted faces
-    runs again from its best while their number decreases (up to WHOLE_ROUNDS runs). The
-    best attempt (island stats), or None when nothing could run. Fills ``run`` (status,
-    message, counters); _Cancel when the progress callback stops it."""
-    best: _Attempt | None = None
-    tries = [*regions[:-1], *[regions[-1]] * WHOLE_ROUNDS]
-    whole_runs = 0
-    for region in tries:
-        whole = bool(region.all())
-        if whole and whole_runs and best is not None and (
-                best.after.n_inverted <= run.n_frozen or not best.improved):
-            break
-        whole_runs += whole
-        base = start if best is None else best.points
-        part = "" if whole else f" ({int(region.sum())} of {sub.n_faces} faces)"
-        ids = np.flatnonzero(region)
-        part_fs, local, prow = island_faces(sub, ids)
-        out_nodes = np.zeros(start.shape[0], dtype=bool)
-        out_nodes[sub.indices[np.repeat(~region, sub.counts)]] = True
-        part_pin = pin[local] | out_nodes[local]
-        try:
-            free = free_nodes(local.size, part_fs, part_pin)
-        except ValueError as exc:
-            run.status, run.message = "error", _line(exc)
-            return best
-        if not free.any():
-            if whole and best is None:
-                run.n_free = 0
-                run.message = ("every UV vertex is fixed (on an island border, pinned or on "
-                               "the border of the selection: grow the selection, Select > "
-                               "More)")
-                return None
-            continue
+def _both_better(after: Stats, before: Stats) -> bool:
+    """No more inverted faces, and neither the worst nor the mean quality lower, one higher:
+    what a smoothing-only run must reach under scope "tangles"."""
+    return (after.n_inverted <= before.n_inverted and after.q_min >= before.q_min
+            and after.q_avg >= before.q_avg and (after.q_min, after.q_avg)
+            != (before.q_min, before.q_avg))
 
-        def relay(it: int, phase: str, stats: Any, _label: str = label + part) -> Any:
+
+class _Island:
+    """The runs of the core on one island's selected faces (island coordinates, oriented)."""
+
+    def __init__(self, sub: FaceSet, start: np.ndarray, pin: np.ndarray,
+                 tk: np.ndarray | None, params: EEGTParams | None, backend: str,
+                 progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
+                 run: IslandRun) -> None:
+        self.sub, self.start, self.pin, self.tk = sub, start, pin, tk
+        self.params, self.backend, self.progress, self.label = params, backend, progress, label
+        self.store, self.run = store, run
+
+    def attempt(self, region: np.ndarray, base: np.ndarray) -> _Attempt | None:
+        """One core run on the faces ``region`` from ``base``, the rest fixed; None when
+        nothing in it is free. ValueError (one line) from the core; _Cancel when stopped."""
+        sub, run = self.sub, self.run
+        whole = bool(region.all())
+        part = "" if whole else f" ({int(region.sum())} of {sub.n_faces} faces)"
+        part_fs, local, prow = island_faces(sub, np.flatnonzero(region))
+        out_nodes = np.zeros(base.shape[0], dtype=bool)
+        out_nodes[sub.indices[np.repeat(~region, sub.counts)]] = True
+        part_pin = self.pin[local] | out_nodes[local]
+        free = free_nodes(local.size, part_fs, part_pin)
+        if not free.any():
+            return None
+        progress = self.progress
+
+        def relay(it: int, phase: str, stats: Any, _label: str = self.label + part) -> Any:
             return progress(it, f"{_label} {phase}", stats)
 
-        try:
-            res = untangle_and_smooth(base[local], part_fs, fixed=part_pin, params=params,
-                                      backend=backend, progress=relay if progress else None,
-                                      targets=None if tk is None else tk[prow])
-        except ValueError as exc:
-            run.status, run.message = "error", _line(exc)
-            return best
+        res = untangle_and_smooth(base[local], part_fs, fixed=part_pin, params=self.params,
+                                  backend=self.backend, progress=relay if progress else None,
+                                  targets=None if self.tk is None else self.tk[prow])
         if res.status == "cancelled":
             raise _Cancel
         run.untangle_iterations += int(res.untangle_iterations)
@@ -381,20 +373,75 @@ def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | N
                                     int(getattr(res, "n_target_fallback", 0)))
         run.seconds += float(res.seconds)
         pts = base.copy()
-        rounded = np.asarray(res.points).astype(store).astype(np.float64)
+        rounded = np.asarray(res.points).astype(self.store).astype(np.float64)
         pts[local[free]] = rounded[free]
-        after = stats_of([quality(pts, sub, targets=tk)])
-        improved = best is None or after.better_than(best.after)
-        if improved:
-            fewer = best is None or after.n_inverted < best.after.n_inverted
-            best = _Attempt(pts, after, res, free, fewer)
-            run.status, run.message = str(res.status), str(res.message) + part
-            run.n_free = int(free.sum())
-            run.n_frozen = int(getattr(res, "n_frozen", 0))
-        elif whole:
-            best.improved = False
-        if res.status in ("valid", "untangled") and after.n_inverted <= run.n_frozen:
-            break
+        after = stats_of([quality(pts, sub, targets=self.tk)])
+        attempt = _Attempt(pts, after, res, free)
+        attempt.part = part
+        return attempt
+
+    def keep(self, attempt: _Attempt) -> None:
+        """Make ``attempt`` the island's result in its run record."""
+        run, res = self.run, attempt.result
+        run.status, run.message = str(res.status), str(res.message) + attempt.part
+        run.n_free = int(attempt.free.sum())
+        run.n_frozen = int(getattr(res, "n_frozen", 0))
+
+
+def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | None,
+            regions: list[np.ndarray], params: EEGTParams | None, backend: str,
+            progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
+            run: IslandRun, smooth_both: bool = False) -> _Attempt | None:
+    """Run the core on one island's selected faces, region after region, each from the best
+    result so far, until one ends untangled; a whole island that still has inverted faces
+    runs again from its best while their number decreases (up to WHOLE_ROUNDS runs). With
+    ``smooth_both`` (scope "tangles") a run that only smooths (an island without inverted
+    faces, or the whole island after its tangles were undone in a region) is kept only when
+    neither the worst nor the mean quality drops (``_both_better``). The best attempt
+    (island stats), or None when nothing changes. Fills ``run``; _Cancel when stopped."""
+    isl = _Island(sub, start, pin, tk, params, backend, progress, label, store, run)
+    initial = run.before
+    best: _Attempt | None = None
+    whole_runs = 0
+    try:
+        for region in [*regions[:-1], *[regions[-1]] * WHOLE_ROUNDS]:
+            whole = bool(region.all())
+            if whole and whole_runs and best is not None and (
+                    best.after.n_inverted <= run.n_frozen or not best.improved):
+                break
+            whole_runs += whole
+            attempt = isl.attempt(region, start if best is None else best.points)
+            if attempt is None:
+                continue
+            if best is None or attempt.after.better_than(best.after):
+                attempt.improved = best is None or (attempt.after.n_inverted
+                                                    < best.after.n_inverted)
+                best = attempt
+                isl.keep(best)
+            elif whole:
+                best.improved = False
+            if attempt.result.status in ("valid", "untangled") and \
+                    attempt.after.n_inverted <= run.n_frozen:
+                break
+        if best is None and not run.n_free:
+            run.message = ("every UV vertex is fixed (on an island border, pinned or on the "
+                           "border of the selection: grow the selection, Select > More)")
+            return None
+        if smooth_both and best is not None:
+            if initial.n_inverted == 0:  # only smoothed: both qualities must hold
+                if not _both_better(best.after, initial):
+                    run.status, run.message = "valid", "smoothing would lower the worst or " \
+                        "the mean quality: island unchanged"
+                    return None
+            elif best.part and best.after.n_inverted <= run.n_frozen:  # then smooth it all
+                whole = isl.attempt(np.ones(sub.n_faces, dtype=bool), best.points)
+                if whole is not None and _both_better(whole.after, best.after):
+                    best = whole
+                    isl.keep(best)
+                    run.message += " (untangled in a region, then smoothed whole)"
+    except ValueError as exc:
+        run.status, run.message = "error", _line(exc)
+        return best
     if best is not None and best.after.n_inverted > run.n_frozen:
         run.status = "failed"
     return best
