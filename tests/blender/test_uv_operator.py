@@ -455,9 +455,11 @@ def test_concave_3d_faces_fall_back_to_regular_and_say_so(bpy, ext):
 
 
 def test_scope_around_tangles_repairs_a_local_fold_and_keeps_a_good_unwrap(bpy, ext):
-    """Around Tangles: the fold and the faces around it move; smoothing the rest would lower
-    the mean distortion of the good unwrap, so the rest keeps its bits. Whole Selection
-    reshapes the island."""
+    """Around Tangles: the fold and the faces around it move; the rest of the good unwrap
+    only when smoothing it lowers neither its worst nor its mean distortion. Measured with
+    this core: smoothing the monkey's island lowers its mean, so the rest keeps its bits
+    (0.978 -> 0.986), while Whole Selection reshapes the island (0.978 -> 0.946). Whatever
+    the core, Around Tangles never lowers the mean and never ends below Whole Selection."""
     obj = tangled(bpy, "monkey", "mesh_edit", levels=1)
     uv0 = uv_values(obj)
     c0 = counts(ext, obj)
@@ -472,6 +474,7 @@ def test_scope_around_tangles_repairs_a_local_fold_and_keeps_a_good_unwrap(bpy, 
         moved[scope] = float(np.any(uv_values(obj) != uv0, axis=1).mean())
         (res,) = ops_uv(ext).LAST_RESULTS
         mean[scope] = (res.before["distortion_mean"], res.after["distortion_mean"])
-    assert 0 < moved["TANGLES"] < 0.1 < moved["SELECTION"]
-    assert mean["TANGLES"][1] >= mean["TANGLES"][0] > mean["SELECTION"][1]
+    assert 0 < moved["TANGLES"] <= moved["SELECTION"]
+    assert mean["TANGLES"][1] >= mean["TANGLES"][0]
+    assert mean["TANGLES"][1] >= mean["SELECTION"][1] - 1e-3
     assert bpy.context.scene.eegt_uv_settings.scope == "TANGLES"  # the default
