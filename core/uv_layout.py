@@ -93,10 +93,10 @@ class UVLayout:
         side[~(np.abs(self.area) > rel_tol * box)] = 0
         return side
 
-    def oriented_points(self, side: np.ndarray) -> np.ndarray:
-        """UV vertex positions with every mirrored island reflected (u -> -u, exact), so that
-        each island with area is counterclockwise."""
-        p = self.points.copy()
+    def oriented_points(self, side: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """UV vertex positions (``points``, default the map's own) with every mirrored island
+        reflected (u -> -u, exact), so that each island with area is counterclockwise."""
+        p = np.array(self.points if points is None else points, dtype=np.float64)
         p[side[self.node_island] < 0, 0] *= -1.0
         return p
 

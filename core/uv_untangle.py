@@ -1,17 +1,19 @@
 """Untangle and smooth the selected faces of a UV map, island by island.
 
-Each island that has selected faces and something free to move is one run of the core
-(``untangle_and_smooth``) on its selected faces: the island's border (seams, mesh borders),
-the border of the selection, every UV vertex also used by an unselected face and the pinned
-UV vertices stay where they are. A mirrored island is reflected (u -> -u, exact) before the
-run and back after it, so the core always sees counterclockwise faces. Results are rounded to
-the UV map's storage type and an island is only changed when its rounded result is better
-than its input (``accept``), so a run never makes an island worse.
+The core (``untangle_and_smooth``) runs on the selected faces of each island that has
+something free to move: the island's border (seams, mesh borders), the border of the
+selection, every UV vertex also used by an unselected face and the pinned UV vertices stay
+where they are. A mirrored island is reflected (u -> -u, exact) before the runs and back after
+them, so the core always sees counterclockwise faces. With scope "tangles" only the tangled
+faces and a few rings around them run first, grown until they untangle (see
+``untangle_uv``). Results are rounded to the UV map's storage type and an island is only
+changed when its rounded result is better than its input (``accept``).
 
-Measures reported for the selection: flipped faces (inverted in their island's orientation:
-negative or zero area, a reflex or crossed corner), overlapping faces (share area with
-another face of the same island, ``uv_overlap``) and the distortion against the targets (the
-mean ratio of each face against its target shape: 1 = similar to its 3D face).
+Measures of a selection (``measure``): flipped faces (zero area or against their island's
+orientation), inverted faces (flipped, or a reflex or crossed corner: what the core removes),
+overlapping faces (share area with another face of the same island, ``uv_overlap``) and the
+distortion against the targets (the mean ratio of each face against its target shape: 1 =
+similar to its 3D face).
 """
 
 from __future__ import annotations
@@ -70,7 +72,7 @@ def overlaps_around(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
     their island (selected or not), at UV vertex ``points`` (as stored)."""
     side = layout.orientation() if side is None else side
     around = np.isin(layout.island, np.unique(layout.island[np.asarray(faces, dtype=bool)]))
-    return overlapping_faces(_oriented(points, layout, side), layout.faces, layout.island,
+    return overlapping_faces(layout.oriented_points(side, points), layout.faces, layout.island,
                              faces=around)
 
 
@@ -87,7 +89,7 @@ def measure(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
     ids = np.flatnonzero(chosen)
     if ids.size == 0:
         return UVMeasures(0, 0, 0, 0, 0.0, 0.0, int(zero.sum()))
-    p = _oriented(points, layout, side)
+    p = layout.oriented_points(side, points)
     sub, nodes, rows = island_faces(layout.faces, ids)
     q = quality(p[nodes], sub, targets=None if targets is None else targets[rows])
     s = stats_of([q])
@@ -104,17 +106,11 @@ def flipped_faces(layout: UVLayout, points: np.ndarray, side: np.ndarray | None 
     with ``corners`` also those with a reflex or crossed corner (the inverted faces the core
     removes). Islands without area have none."""
     side = layout.orientation() if side is None else side
-    p = _oriented(points, layout, side)
+    p = layout.oriented_points(side, points)
     bad = signed_face_areas(p, layout.faces) <= 0.0
     if corners:
         bad |= quality(p, layout.faces) <= 0.0
     return bad & (side[layout.island] != 0)
-
-
-def _oriented(points: np.ndarray, layout: UVLayout, side: np.ndarray) -> np.ndarray:
-    p = np.array(points, dtype=np.float64)
-    p[side[layout.node_island] < 0, 0] *= -1.0
-    return p
 
 
 @dataclass
@@ -261,7 +257,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     keep[layout.faces.indices[np.repeat(~selected, layout.faces.counts)]] = True
     if scope == "tangles" and tangled is None:
         tangled = tangled_faces(layout, layout.points, selected, side)
-    work = _oriented(layout.points, layout, side)
+    work = layout.oriented_points(side, layout.points)
     out = layout.points.copy()
     moved = np.zeros(layout.n_nodes, dtype=bool)
     runs: list[IslandRun] = []
