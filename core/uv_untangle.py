@@ -197,17 +197,21 @@ def _grown(fs_nodes: np.ndarray, face_of: np.ndarray, n_faces: int, seed: np.nda
     return region
 
 
+REGION_SHARE = 0.75  # a region over this share of the island's faces: run the whole island
+
+
 def _regions(sub: FaceSet, bad: np.ndarray | None, rings: int) -> list[np.ndarray]:
     """The face sets to try, smallest first: the tangled faces grown by ``rings``, 4
-    ``rings``, 16 ``rings``, ... rings, then every face (the only one without tangles)."""
+    ``rings``, 16 ``rings``, ... rings while under REGION_SHARE of the island, then every face
+    (the only one for an island without tangles, or with tangles nearly everywhere)."""
     every = np.ones(sub.n_faces, dtype=bool)
-    if bad is None or not bad.any() or bad.all():
+    if bad is None or not bad.any():
         return [every]
     face_of = np.repeat(np.arange(sub.n_faces), sub.counts)
     out, r = [], rings
     while True:
         region = _grown(sub.indices, face_of, sub.n_faces, bad, r)
-        if region.all():
+        if region.sum() > REGION_SHARE * sub.n_faces:
             break
         out.append(region)
         r *= 4

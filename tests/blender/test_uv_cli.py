@@ -122,8 +122,7 @@ def test_uv_progress_lines_name_the_island(bpy, ext, blend, capfd):
     path, _ = blend
     assert cli(ext).execute([str(path), "--uv", "--object", "Sphere"]) == 0
     out = capfd.readouterr().out
-    # the first try: the tangled faces and two rings around them, part of the island
-    assert re.search(r"EEGT Sphere: island 1/1 \(\d+ of 512 faces\) untangle iteration 0: "
-                     r"inverted \d+", out)
+    # the jitter reaches most of the island: the whole island runs at once
+    assert re.search(r"EEGT Sphere: island 1/1 untangle iteration 0: inverted \d+", out)
     assert "EEGT Sphere UV 'UVMap': flipped " in out
     assert "EEGT Plain" not in out
