@@ -6,9 +6,21 @@ Thin by design: the algorithm lives in ``core`` (NumPy only).
 
 from __future__ import annotations
 
-from . import cli, ops_pin, ops_quality, ops_untangle, panel, prefs, props
+from . import (
+    cli,
+    ops_pin,
+    ops_quality,
+    ops_untangle,
+    ops_uv,
+    panel,
+    panel_uv,
+    prefs,
+    props,
+    uv_props,
+)
 
-_modules = (props, prefs, ops_untangle, ops_quality, ops_pin, panel, cli)
+_modules = (props, prefs, ops_untangle, ops_quality, ops_pin, panel, cli,
+            uv_props, ops_uv, panel_uv)
 
 
 def register() -> None:

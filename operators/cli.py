@@ -45,7 +45,7 @@ from typing import Any
 import bpy
 
 from ..core import EEGTParams
-from . import metrics, props, report, runner
+from . import metrics, props, report, runner, uv_props, uv_runner
 from .ops_untangle import _printer
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_FAILED = 0, 1, 2, 3
@@ -112,7 +112,15 @@ def build_parser() -> argparse.ArgumentParser:
             kw["choices"] = [c[0] for c in props.STRING_CHOICES[f.name]]
         group.add_argument(_flag(f.name), **kw)
     p.add_argument("--no-pinned", action="store_true",
-                   help="ignore the eegt_pinned attribute / vertex group")
+                   help="ignore the eegt_pinned attribute / vertex group (with --uv: the "
+                        "UV pins)")
+    p.add_argument("--uv", nargs="?", const="", default=None, metavar="MAP",
+                   help="untangle and smooth the UV map MAP (default: the active one) of "
+                        "every chosen object instead of its vertex positions; objects "
+                        "without it are skipped")
+    p.add_argument("--uv-scope", choices=("tangles", "selection"), default="tangles",
+                   help="with --uv: move only tangled faces and the faces around them "
+                        "(tangles, default) or every face (selection)")
     p.add_argument("--project", action="store_true",
                    help="project slightly non-planar meshes onto their plane")
     p.add_argument("--report", metavar="JSON", help="write a JSON report here")
@@ -391,6 +399,19 @@ def _objects(names: list[str], path: str) -> tuple[list[bpy.types.Object], list[
     return unique, [o.name for o in faceless]
 
 
+def _uv_objects(objs: list[bpy.types.Object], name: str,
+                rep: dict[str, Any]) -> list[bpy.types.Object]:
+    """--uv: the objects with the UV map; the others skipped with a line (none: exit 2)."""
+    try:
+        kept, skipped = uv_runner.objects_with_uv_map(objs, name or None)
+    except ValueError as exc:
+        raise UsageError(f"eegt: {exc}") from None
+    for entry in skipped:
+        print(f"EEGT {entry['object']}: skipped: {entry['reason']}", flush=True)
+    rep["skipped"] += skipped
+    return kept
+
+
 def _backend(choice: str | None, device: str | None) -> tuple[str, str | None]:
     from .prefs import resolve_backend
     name, pref_device = resolve_backend(choice.upper() if choice else "PREFS")
@@ -417,9 +438,21 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         rep["skipped"] = [{"object": name, "reason": "no faces"} for name in skipped]
         if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
             bpy.ops.object.mode_set(mode="OBJECT")
+        if ns.uv is not None:
+            objs = _uv_objects(objs, ns.uv, rep)
         results, measured = [], []
         for obj in objs:
             progress = None if ns.quiet else _printer(obj.name)
+            if ns.uv is not None:
+                res = uv_runner.run_object(obj, params, ns.uv or None, backend=backend,
+                                           device=device, use_pins=not ns.no_pinned,
+                                           scope=ns.uv_scope, progress=progress,
+                                           write_on_fail=not ns.no_write_on_fail)
+                uv_props.store_last_run(obj, res)
+                results.append(res)
+                measured.append(None)  # --metrics measure positions, which --uv leaves alone
+                print("EEGT " + res.line(), flush=True)
+                continue
             job = runner.prepare(obj, use_pinned=not ns.no_pinned, project=ns.project)
             runner.compute(job, params, backend, progress, device)
             ok = job.error is None and job.result is not None and \

@@ -46,11 +46,13 @@ EXTRA_OPTIONS = ("backend", "use_pinned", "project")
 
 
 class _Worker:
-    """Runs ``runner.compute`` for every job in a thread; cancellable between iterations."""
+    """Runs ``compute`` (``runner.compute`` or another job's compute with the same
+    signature) for every job in a thread; cancellable between iterations."""
 
-    def __init__(self, jobs: list[runner.Job], params: Any, backend: str,
-                 device: str | None) -> None:
+    def __init__(self, jobs: list[Any], params: Any, backend: str, device: str | None,
+                 compute: Callable[..., None] = runner.compute) -> None:
         self.jobs, self.params, self.backend, self.device = jobs, params, backend, device
+        self.compute = compute
         self.cancel = False
         self.index = 0
         self.iteration = 0
@@ -70,57 +72,38 @@ class _Worker:
                 self.index = i
                 if self.cancel:
                     break
-                runner.compute(job, self.params, self.backend, self._progress, self.device)
+                self.compute(job, self.params, self.backend, self._progress, self.device)
         except BaseException as exc:  # reported on the main thread
             self.error = exc
 
 
-class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
-    """Untangle inverted faces and smooth a planar mesh (EEGT). Boundary and pinned vertices stay; in Edit Mode only the selected faces move"""  # noqa: E501
+class EEGTRunMixin:
+    """The run machinery of an EEGT operator: scene defaults, the synchronous path
+    (background, EXEC_DEFAULT, redo panel) and the modal one (worker thread, progress, ESC),
+    one undo step, one report line per object.
 
-    bl_idname = "mesh.eegt_untangle_smooth"
-    bl_label = "Untangle & Smooth"
-    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
-    __annotations__ = _annotations()
+    Subclasses give ``_prepare(context) -> (objects, jobs)`` (called in Object Mode),
+    ``_finish(objects, jobs) -> set[str]`` (writes, Object Mode), ``_compute`` (a job's
+    compute, run in the worker thread: no bpy) and ``_scene_options``: (scene property
+    group, option names) pairs whose values fill the options the caller did not set.
+    """
 
-    @classmethod
-    def poll(cls, context: bpy.types.Context) -> bool:
-        if context.mode not in ("OBJECT", "EDIT_MESH"):
-            cls.poll_message_set("Needs Object Mode or mesh Edit Mode")
-            return False
-        if not modes.target_objects(context):
-            cls.poll_message_set("Select a mesh object")
-            return False
-        return True
+    _compute = staticmethod(runner.compute)
+    _scene_options: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
-    # -- shared steps ---------------------------------------------------------------------
     def _fill_from_scene(self, context: bpy.types.Context) -> None:
-        settings = getattr(context.scene, "eegt_settings", None)
-        if settings is None:
-            return
-        for name in [f.name for f in props.param_fields()] + list(EXTRA_OPTIONS):
-            if not self.properties.is_property_set(name):
-                setattr(self, name, getattr(settings, name))
+        for group, names in self._scene_options:
+            settings = getattr(context.scene, group, None)
+            if settings is None:
+                continue
+            for name in names:
+                if not self.properties.is_property_set(name):
+                    setattr(self, name, getattr(settings, name))
 
-    def _prepare(
-        self, context: bpy.types.Context
-    ) -> tuple[list[bpy.types.Object], list[runner.Job]]:
-        """Read every target mesh (call in Object Mode: Edit Mode data is flushed by then)."""
-        objs = self._targets
-        jobs = [runner.prepare(o, selected_only=self._edit, use_pinned=self.use_pinned,
-                               project=self.project) for o in objs]
-        return objs, jobs
-
-    def _finish(self, objs: list[bpy.types.Object], jobs: list[runner.Job]) -> set[str]:
-        """Write results back (call in Object Mode), report one line per object."""
-        results = [runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
-        LAST_RESULTS[:] = results
-        for obj, res in zip(objs, results, strict=True):
-            runner.store_last_run(obj, res)
-            self.report({"INFO"} if res.ok else {"WARNING"}, res.line())
-        if not any(r.written for r in results):
-            return {"CANCELLED"}
-        return {"FINISHED"}
+    @staticmethod
+    def _has_changes(jobs: list[Any]) -> bool:
+        """Whether any job has something to write (else no mode switch is needed)."""
+        return any(getattr(j, "new_co", None) is not None for j in jobs)
 
     # -- synchronous path (background, EXEC_DEFAULT, redo panel) ---------------------------
     def _setup(self, context: bpy.types.Context):
@@ -146,7 +129,7 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
             objs, jobs = self._prepare(context)
             for job in jobs:
                 progress = _printer(job.object) if verbose else None
-                runner.compute(job, params, backend, progress, device)
+                self._compute(job, params, backend, progress, device)
             return self._finish(objs, jobs)
 
     # -- modal path (UI) ---------------------------------------------------------------------
@@ -159,7 +142,7 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
         params, backend, device = setup
         with modes.object_mode(context):
             self._objs, self._jobs = self._prepare(context)
-        self._worker = _Worker(self._jobs, params, backend, device)
+        self._worker = _Worker(self._jobs, params, backend, device, self._compute)
         self._worker.thread.start()
         self._t0 = time.perf_counter()
         wm = context.window_manager
@@ -204,10 +187,50 @@ class MESH_OT_eegt_untangle_smooth(bpy.types.Operator):
         if w.error is not None:
             self.report({"WARNING"}, f"EEGT internal error: {w.error!r}; no mesh changed")
             return {"CANCELLED"}
-        if not any(j.new_co is not None for j in self._jobs):
+        if not self._has_changes(self._jobs):
             return self._finish(self._objs, self._jobs)
         with modes.object_mode(context):
             return self._finish(self._objs, self._jobs)
+
+
+class MESH_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
+    """Untangle inverted faces and smooth a planar mesh (EEGT). Boundary and pinned vertices stay; in Edit Mode only the selected faces move"""  # noqa: E501
+
+    bl_idname = "mesh.eegt_untangle_smooth"
+    bl_label = "Untangle & Smooth"
+    bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
+    __annotations__ = _annotations()
+    _scene_options = (("eegt_settings", (*(f.name for f in props.param_fields()), *EXTRA_OPTIONS)),)
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        if context.mode not in ("OBJECT", "EDIT_MESH"):
+            cls.poll_message_set("Needs Object Mode or mesh Edit Mode")
+            return False
+        if not modes.target_objects(context):
+            cls.poll_message_set("Select a mesh object")
+            return False
+        return True
+
+    def _prepare(
+        self, context: bpy.types.Context
+    ) -> tuple[list[bpy.types.Object], list[runner.Job]]:
+        """Read every target mesh (call in Object Mode: Edit Mode data is flushed by then)."""
+        objs = self._targets
+        jobs = [runner.prepare(o, selected_only=self._edit, use_pinned=self.use_pinned,
+                               project=self.project) for o in objs]
+        return objs, jobs
+
+    def _finish(self, objs: list[bpy.types.Object], jobs: list[runner.Job]) -> set[str]:
+        """Write results back (call in Object Mode), report one line per object."""
+        results = [runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
+        LAST_RESULTS[:] = results
+        for obj, res in zip(objs, results, strict=True):
+            runner.store_last_run(obj, res)
+            self.report({"INFO"} if res.ok else {"WARNING"}, res.line())
+        if not any(r.written for r in results):
+            return {"CANCELLED"}
+        return {"FINISHED"}
 
 
 def _printer(name: str, clock: Callable[[], float] = time.monotonic) -> runner.Progress:

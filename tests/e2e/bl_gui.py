@@ -17,49 +17,19 @@ import os
 import subprocess
 import sys
 import threading
-import time
-import traceback
 
 import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import guikit
 import meshcheck
+from guikit import check, click, finish, log, probe, shot, to_x11, wait_until, xdo
 
 ART = sys.argv[sys.argv.index("--") + 1]
-SCREEN_H = 900
 OBJ = "Tangled"
 OP_ID = "MESH_OT_eegt_untangle_smooth"
 NEW_A = 0.35  # the redo-panel change: Stretch Factor a 0.2 -> 0.35
-T0 = time.time()
-
-
-def log(msg):
-    print(f"E2E-GUI {time.time() - T0:6.1f}s {msg}", flush=True)
-
-
-def finish(ok, msg):
-    print(f"E2E-GUI-{'OK' if ok else 'FAIL'} {msg}", flush=True)
-    sys.stdout.flush()
-    os._exit(0 if ok else 1)  # a raise inside a timer would leave Blender running
-
-
-def xdo(*args):
-    subprocess.run(["xdotool", *map(str, args)], check=True, timeout=10)
-
-
-def to_x11(wx, wy):
-    """Blender window coordinates (origin bottom-left) -> X11 screen (origin top-left)."""
-    return int(wx), int(SCREEN_H - wy)
-
-
-def shot(name, region=None):
-    """Screenshot of the whole screen, or cropped to a region."""
-    cmd = ["import", "-window", "root"]
-    if region is not None:
-        x, y = to_x11(region.x, region.y + region.height)
-        cmd += ["-crop", f"{region.width}x{region.height}+{x}+{y}"]
-    subprocess.run([*cmd, f"{ART}/{name}.png"], check=True, timeout=30)
 
 
 def shot_mesh(name, margin=24):
@@ -109,53 +79,6 @@ def last_op():
     return ops[-1] if len(ops) else None
 
 
-def wait_until(cond, timeout, step=0.2):
-    """Generator helper: yield until cond() is true; returns whether it became true."""
-    end = time.time() + timeout
-    while time.time() < end:
-        if cond():
-            return True
-        yield step
-    return cond()
-
-
-def probe(points, key, match):
-    """Hover each (x11) point, press `key`, and return the first point whose clipboard text
-    satisfies match(text), moved down to the middle of the hit (the first hit is usually the
-    button's top edge). Generator: yields between events so Blender handles them."""
-    wm = bpy.context.window_manager
-
-    def hit(x, y):
-        wm.clipboard = ""
-        xdo("mousemove", x, y)
-        yield 0.12
-        xdo("key", key)
-        yield 0.12
-        text = wm.clipboard
-        if os.environ.get("E2E_GUI_DEBUG"):
-            log(f"probe {key} at {x},{y}: {text!r}")
-        return text if text and match(text) else None
-
-    for x, y in points:
-        text = yield from hit(x, y)
-        if text:
-            last = y
-            for dy in range(3, 40, 3):  # X11 y grows downwards
-                if not (yield from hit(x, y + dy)):
-                    break
-                last = y + dy
-            return (x, (y + last) // 2), text
-    return None, None
-
-
-def click(pt):
-    """Hover first, let Blender activate the button under the mouse, then click: a press
-    arriving together with the move that enters a button can be lost."""
-    xdo("mousemove", *pt)
-    yield 0.3
-    xdo("click", 1)
-
-
 def as_float(text):
     try:
         return float(text)
@@ -196,16 +119,7 @@ def steps():
     #    the active category is EEGT.
     win, area, rg = view3d()
     ui = rg["UI"]
-    tab_x = ui.x + ui.width - 10
-    clicks = 0
-    for wy in range(ui.y + ui.height - 15, ui.y + 20, -14):
-        if ui.active_panel_category == "EEGT":
-            break
-        xdo("mousemove", *to_x11(tab_x, wy), "click", 1)
-        clicks += 1
-        yield 0.25
-    check(ui.active_panel_category == "EEGT",
-          f"no click on the tab strip opened the EEGT tab (now {ui.active_panel_category!r})")
+    clicks = yield from guikit.open_tab(ui, "EEGT")
     log(f"EEGT tab open after {clicks} clicks on the tab strip")
     yield 0.5
     shot("gui_panel", ui)
@@ -407,33 +321,4 @@ def esc_cancel():
         "the key was sent, mesh exactly unchanged")
 
 
-class CheckFailed(Exception):
-    pass
-
-
-def check(cond, msg):
-    if not cond:
-        raise CheckFailed(msg)
-
-
-GEN = steps()
-
-
-def tick():
-    try:
-        return next(GEN)
-    except StopIteration:
-        finish(False, "test ended without a verdict")
-    except CheckFailed as e:
-        shot("gui_failure")
-        finish(False, str(e))
-    except Exception:
-        finish(False, traceback.format_exc().replace("\n", " | "))
-
-
-def watchdog():
-    finish(False, "watchdog: GUI test took more than 240 s")
-
-
-bpy.app.timers.register(tick, first_interval=2.0)
-bpy.app.timers.register(watchdog, first_interval=240.0)
+guikit.start(steps(), ART, "E2E-GUI")

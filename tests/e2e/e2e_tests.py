@@ -702,6 +702,53 @@ def t_batch_format_suffix_and_bad_arguments():
     return "PLY outputs with suffix; 3 bad batches exit 2 with one line"
 
 
+# ---------------------------------------------------------------- UV maps ----------------
+
+UV_BLEND = f"{OUT}/tangled_uv_sphere.blend"
+
+
+def make_uv_blend():
+    """A .blend with a tangled UV map (bench.uv_assets: sphere, jittered, a few pins)."""
+    if not os.path.isfile(UV_BLEND):
+        rc, out = blender(["-b", "--factory-startup", "--python-exit-code", "1", "--python",
+                           f"{HERE}/bl_make_uv_blend.py", "--", REPO, UV_BLEND],
+                          timeout=120, log="make_uv_blend")
+        check(rc == 0 and os.path.isfile(UV_BLEND), f"making the UV .blend: rc={rc}: "
+                                                    f"{tail(out)}")
+    return UV_BLEND
+
+
+@test
+def t_cli_uv():
+    """blender -b -c eegt FILE.blend --uv: exit 0, the output's UVs checked by meshcheck."""
+    blend = make_uv_blend()
+    out_blend, rep, res = f"{OUT}/uv_out.blend", f"{OUT}/uv_report.json", f"{OUT}/uv_check.json"
+    rc, out = blender(["-b", "-c", "eegt", blend, "--uv", "-o", out_blend, "--report", rep],
+                      timeout=240, log="cli_uv")
+    check(rc == 0, f"exit code {rc}: {tail(out)}")
+    _, entries = report_entries(rep)
+    check(len(entries) == 1, f"report has {len(entries)} object entries")
+    e = entries[0]
+    check(e["status"] == "untangled" and e["after"]["flipped"] == 0
+          and e["before"]["flipped"] > 0, f"report: {e['status']}, {e['before']}, {e['after']}")
+    rc, out = blender(["-b", "--python-exit-code", "1", "--python", f"{HERE}/bl_uv_check.py",
+                       "--", blend, out_blend, res], timeout=120, log="uv_check")
+    check(rc == 0, f"uv check: exit code {rc}: {tail(out)}")
+    with open(res) as fh:
+        c = json.load(fh)
+    check(c["in"]["n_inverted"] > 0 and c["out"]["n_inverted"] == 0,
+          f"inverted UV faces {c['in']['n_inverted']} -> {c['out']['n_inverted']}")
+    check(c["in"]["n_flipped"] == e["before"]["flipped"],
+          f"report flipped {e['before']['flipped']} != meshcheck {c['in']['n_flipped']}")
+    check(c["border_kept"] and c["pins_kept"] and c["positions_kept"],
+          f"border kept {c['border_kept']}, pins kept {c['pins_kept']}, positions kept "
+          f"{c['positions_kept']}")
+    check(c["out"]["n_uv_vertices"] == c["in"]["n_uv_vertices"], "UV vertices merged or split")
+    return (f"flipped {c['in']['n_flipped']} -> 0, inverted {c['in']['n_inverted']} -> 0, "
+            f"distortion mean {e['before']['distortion_mean']:.3f} -> "
+            f"{e['after']['distortion_mean']:.3f}; border, pins, positions exact")
+
+
 # ---------------------------------------------------------------- OpenCL -----------------
 
 
@@ -744,6 +791,19 @@ def t_gui_click_undo_redo_panel():
     check(rc == 0 and lines and lines[-1].startswith("E2E-GUI-OK"),
           f"exit code {rc}: {' | '.join(lines[-4:]) or tail(out)}")
     return lines[-1].removeprefix("E2E-GUI-OK").strip()
+
+
+@test
+def t_gui_uv_click_undo():
+    check(DISPLAY, "no X display (Xvfb did not start)")
+    blend = make_uv_blend()
+    rc, out = blender(["--window-geometry", "0", "0", "1600", "900",
+                       blend, "--python", f"{HERE}/bl_gui_uv.py", "--", ART],
+                      timeout=200, env={"DISPLAY": DISPLAY}, log="gui_uv")
+    lines = [ln for ln in out.splitlines() if ln.startswith("E2E-GUI-UV")]
+    check(rc == 0 and lines and lines[-1].startswith("E2E-GUI-UV-OK"),
+          f"exit code {rc}: {' | '.join(lines[-4:]) or tail(out)}")
+    return lines[-1].removeprefix("E2E-GUI-UV-OK").strip()
 
 
 # ---------------------------------------------------------------- main -------------------

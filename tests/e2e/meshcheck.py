@@ -105,6 +105,29 @@ def compare(path_in, path_out):
     return res
 
 
+def uv_check(uv, faces, corner_verts):
+    """A UV map checked on its own: uv (L, 2) per loop, faces as lists of loop indices,
+    corner_verts (L,) the mesh vertex of each loop. Loops of one vertex with equal UVs are
+    one UV vertex; the map is taken as one island, its orientation from its total signed
+    area. Returns n_inverted (a corner det <= 0 in that orientation), n_flipped (area <= 0)
+    and the loops on the UV border (edges used by one face of the welded UV mesh)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    area = [0.5 * float(np.sum(uv[f, 0] * np.roll(uv[f, 1], -1) - np.roll(uv[f, 0], -1)
+                                * uv[f, 1])) for f in faces]
+    side = 1.0 if sum(area) > 0 else -1.0
+    xy = uv * [side, 1.0]
+    q = [face_quality(xy, np.asarray(f)) for f in faces]
+    ids = {}
+    node = [ids.setdefault((int(v), float(a), float(b)), len(ids))
+            for v, (a, b) in zip(corner_verts, uv)]
+    welded = [np.array([node[i] for i in f]) for f in faces]
+    border = set(boundary_nodes(welded))
+    return {"n_inverted": int(sum(x <= 0.0 for x in q)),
+            "n_flipped": int(sum(side * a <= 0.0 for a in area)),
+            "orientation": int(side), "n_uv_vertices": len(ids),
+            "border_loops": [i for i, n in enumerate(node) if n in border]}
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "stats":
         print(json.dumps(stats(*read_obj(sys.argv[2]))))

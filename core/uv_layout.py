@@ -1,0 +1,167 @@
+"""UV maps as planar meshes: weld face corners into UV vertices, find islands and their sides.
+
+A UV map stores one 2D point per face corner (Blender's loop). Corners of one mesh vertex
+whose UVs are equal are one UV vertex; the faces over those UV vertices form the UV mesh,
+whose connected components are the islands. Seams and mesh borders are that mesh's
+boundary. An island is either counterclockwise (its faces keep the 3D faces' orientation)
+or mirrored (clockwise, as mirrored UVs of symmetric models are): its total signed area
+tells which, and folds cannot change it. Everything here is NumPy; no Blender.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .faces import FaceSet, faces_from_csr
+
+__all__ = [
+    "UVLayout",
+    "components",
+    "corner_loops",
+    "island_faces",
+    "next_corner",
+    "signed_face_areas",
+    "weld_uv",
+]
+
+
+def components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n,) component label (0..k-1, numbered by smallest member) of a graph with edges
+    a[i] - b[i]: union-find by hooking roots to the smaller root, then pointer jumping,
+    a few vectorized rounds (about log of the longest chain)."""
+    parent = np.arange(n, dtype=np.int64)
+    a = np.asarray(a, dtype=np.int64)
+    b = np.asarray(b, dtype=np.int64)
+    while True:
+        ra, rb = parent[a], parent[b]
+        differ = ra != rb
+        if not differ.any():
+            break
+        lo, hi = np.minimum(ra[differ], rb[differ]), np.maximum(ra[differ], rb[differ])
+        np.minimum.at(parent, hi, lo)  # a root hooks onto the smallest root it touches
+        while True:  # compress: every node points at its root again
+            jumped = parent[parent]
+            if np.array_equal(jumped, parent):
+                break
+            parent = jumped
+        a, b = a[differ], b[differ]  # edges inside one component stay inside it
+    return np.unique(parent, return_inverse=True)[1].astype(np.int64)
+
+
+def corner_loops(loop_start: np.ndarray, loop_total: np.ndarray) -> np.ndarray:
+    """Loop index of every face corner in face order (a FaceSet's ``indices`` order), for
+    Blender's face offsets whatever their order."""
+    loop_start = np.asarray(loop_start, dtype=np.int64)
+    loop_total = np.asarray(loop_total, dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(loop_total)])
+    return np.repeat(loop_start - offsets[:-1], loop_total) + np.arange(int(offsets[-1]))
+
+
+@dataclass(frozen=True)
+class UVLayout:
+    """A UV map welded into a polygon mesh over UV vertices (face order = Blender's)."""
+
+    points: np.ndarray  # (V, 2) float64: the UV of each UV vertex (exact float32 values)
+    vertex: np.ndarray  # (V,) mesh vertex of each UV vertex
+    loop_node: np.ndarray  # (L,) UV vertex of each loop (Blender loop order)
+    corner_loop: np.ndarray  # (C,) loop of each face corner, face order
+    faces: FaceSet  # every face over UV vertices
+    island: np.ndarray  # (F,) island of each face, 0..n_islands-1
+    node_island: np.ndarray  # (V,) island of each UV vertex
+    area: np.ndarray  # (n_islands,) signed UV area of each island
+
+    @property
+    def n_islands(self) -> int:
+        return int(self.area.size)
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.points.shape[0])
+
+    def orientation(self, rel_tol: float = 1e-9) -> np.ndarray:
+        """(n_islands,) +1 counterclockwise, -1 mirrored (clockwise), 0 no usable area: the
+        island's |area| is at most ``rel_tol`` times its bounding box's area (collapsed to a
+        point or a line, so its side cannot be told)."""
+        lo = np.full((self.n_islands, 2), np.inf)
+        hi = np.full((self.n_islands, 2), -np.inf)
+        np.minimum.at(lo, self.node_island, self.points)
+        np.maximum.at(hi, self.node_island, self.points)
+        box = np.prod(hi - lo, axis=1)
+        side = np.sign(self.area).astype(np.int8)
+        side[~(np.abs(self.area) > rel_tol * box)] = 0
+        return side
+
+    def oriented_points(self, side: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+        """UV vertex positions (``points``, default the map's own) with every mirrored island
+        reflected (u -> -u, exact), so that each island with area is counterclockwise."""
+        p = np.array(self.points if points is None else points, dtype=np.float64)
+        p[side[self.node_island] < 0, 0] *= -1.0
+        return p
+
+
+def signed_face_areas(points: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """(F,) signed area of every face (shoelace; positive = counterclockwise)."""
+    out = np.empty(fs.n_faces)
+    for g in fs.groups:
+        x, y = points[g.nodes, 0], points[g.nodes, 1]
+        out[g.ids] = 0.5 * np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y, axis=0)
+    return out
+
+
+def next_corner(fs: FaceSet) -> np.ndarray:
+    """(C,) row of the next corner of the same face, for every corner row of ``fs``."""
+    nxt = np.arange(1, fs.n_corners + 1)
+    nxt[fs.offsets[1:] - 1] = fs.offsets[:-1]
+    return nxt
+
+
+def weld_uv(loop_start, loop_total, corner_verts, uv) -> UVLayout:
+    """Weld a UV map: loops of one mesh vertex with equal UVs (float32, -0 = +0) become one
+    UV vertex. ValueError (one line) for NaN/infinite UVs or mismatched arrays."""
+    loop_start = np.asarray(loop_start, dtype=np.int64)
+    loop_total = np.asarray(loop_total, dtype=np.int64)
+    corner_verts = np.asarray(corner_verts, dtype=np.int64)
+    uv = np.asarray(uv, dtype=np.float32).reshape(-1, 2)
+    if uv.shape[0] != corner_verts.size:
+        raise ValueError(f"the UV map has {uv.shape[0]} values for {corner_verts.size} face "
+                         "corners")
+    if loop_start.size == 0:
+        raise ValueError("mesh has no faces")
+    corner_loop = corner_loops(loop_start, loop_total)
+    used = np.zeros(corner_verts.size, dtype=bool)
+    used[corner_loop] = True
+    finite = np.isfinite(uv).all(axis=1)
+    if not finite[used].all():
+        bad = int(np.count_nonzero(used & ~finite))
+        raise ValueError(f"{bad} UVs are NaN or infinite")
+    clean = uv + np.float32(0.0)  # -0.0 + 0.0 = +0.0: equal values, equal bits
+    bits = clean.view(np.uint32).astype(np.int64)
+    order = np.lexsort((bits[:, 1], bits[:, 0], corner_verts))
+    keys = np.stack([corner_verts[order], bits[order, 0], bits[order, 1]], axis=1)
+    new = np.ones(order.size, dtype=bool)
+    new[1:] = np.any(keys[1:] != keys[:-1], axis=1)
+    loop_node = np.empty(order.size, dtype=np.int64)
+    loop_node[order] = np.cumsum(new) - 1
+    first = order[new]
+    points = clean[first].astype(np.float64)
+    faces = faces_from_csr(loop_start, loop_total, loop_node)
+    n = points.shape[0]
+    node_island = components(n, faces.indices, faces.indices[next_corner(faces)])
+    island = node_island[faces.indices[faces.offsets[:-1]]]
+    n_islands = int(node_island.max()) + 1 if n else 0
+    area = np.bincount(island, weights=signed_face_areas(points, faces), minlength=n_islands)
+    return UVLayout(points, corner_verts[first], loop_node, corner_loop, faces, island,
+                    node_island, area)
+
+
+def island_faces(fs: FaceSet, face_ids: np.ndarray) -> tuple[FaceSet, np.ndarray, np.ndarray]:
+    """The faces ``face_ids`` (in that order) as a FaceSet over their own nodes: (faces,
+    global node of each local node, row of each local corner in ``fs``'s corner order)."""
+    face_ids = np.asarray(face_ids, dtype=np.int64)
+    counts = fs.counts[face_ids]
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    rows = np.repeat(fs.offsets[face_ids] - offsets[:-1], counts) + np.arange(int(offsets[-1]))
+    nodes, local = np.unique(fs.indices[rows], return_inverse=True)
+    return FaceSet(offsets, local.reshape(-1)), nodes, rows

@@ -1,0 +1,489 @@
+"""Untangle and smooth the selected faces of a UV map, island by island.
+
+The core (``untangle_and_smooth``) runs on the selected faces of each island that has
+something free to move: the island's border (seams, mesh borders), the border of the
+selection, every UV vertex also used by an unselected face and the pinned UV vertices stay
+where they are. A mirrored island is reflected (u -> -u, exact) before the runs and back after
+them, so the core always sees counterclockwise faces. With scope "tangles" only the tangled
+faces and a few rings around them run first, grown until they untangle (see
+``untangle_uv``). Results are rounded to the UV map's storage type and an island is only
+changed when its rounded result is better than its input (``accept``).
+
+Measures of a selection (``measure``): flipped faces (zero area or against their island's
+orientation), inverted faces (flipped, or a reflex or crossed corner: what the core removes),
+overlapping faces (share area with another face of the same island, ``uv_overlap``) and the
+distortion against the targets (the mean ratio of each face against its target shape: 1 =
+similar to its 3D face).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .faces import FaceSet
+from .params import EEGTParams
+from .pipeline import untangle_and_smooth
+from .quality import Stats, quality, stats_of
+from .topology import free_nodes
+from .uv_layout import UVLayout, island_faces, signed_face_areas
+from .uv_overlap import overlapping_faces
+
+__all__ = [
+    "IslandRun",
+    "UVMeasures",
+    "UVResult",
+    "flipped_faces",
+    "measure",
+    "overlaps_around",
+    "tangled_faces",
+    "untangle_uv",
+]
+
+Accept = Callable[[Stats, Stats], bool]
+
+
+@dataclass(frozen=True)
+class UVMeasures:
+    """What a UV artist asks of a set of faces."""
+
+    n_faces: int
+    flipped: int  # signed area against the island's orientation (or zero)
+    inverted: int  # no valid shape in the island's orientation: flipped or a reflex corner
+    overlapping: int  # share area with another face of their island
+    distortion_mean: float  # mean ratio against the targets (flipped count as 0)
+    distortion_worst: float  # the lowest one
+    zero_area: int = 0  # faces of islands with no area (side unknown: not measured)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"n_faces": self.n_faces, "flipped": self.flipped, "inverted": self.inverted,
+                "overlapping": self.overlapping,
+                "distortion_mean": self.distortion_mean,
+                "distortion_worst": self.distortion_worst, "zero_area": self.zero_area}
+
+
+def overlaps_around(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
+                    side: np.ndarray | None = None) -> np.ndarray:
+    """(F,) bool: faces of the islands that ``faces`` touch that overlap another face of
+    their island (selected or not), at UV vertex ``points`` (as stored)."""
+    side = layout.orientation() if side is None else side
+    around = np.isin(layout.island, np.unique(layout.island[np.asarray(faces, dtype=bool)]))
+    return overlapping_faces(layout.oriented_points(side, points), layout.faces, layout.island,
+                             faces=around)
+
+
+def measure(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
+            targets: np.ndarray | None = None, side: np.ndarray | None = None,
+            overlap: np.ndarray | None = None) -> UVMeasures:
+    """Measures of the faces in the bool mask ``faces`` at UV vertex ``points`` (as stored,
+    unmirrored). ``targets``: (C, 2) rows in ``layout.faces`` corner order, or None;
+    ``overlap``: ``overlaps_around`` of the same points when already known."""
+    side = layout.orientation() if side is None else side
+    faces = np.asarray(faces, dtype=bool)
+    zero = faces & (side[layout.island] == 0)
+    chosen = faces & ~zero
+    ids = np.flatnonzero(chosen)
+    if ids.size == 0:
+        return UVMeasures(0, 0, 0, 0, 0.0, 0.0, int(zero.sum()))
+    p = layout.oriented_points(side, points)
+    sub, nodes, rows = island_faces(layout.faces, ids)
+    q = quality(p[nodes], sub, targets=None if targets is None else targets[rows])
+    s = stats_of([q])
+    over = overlaps_around(layout, points, faces, side) if overlap is None else overlap
+    flipped = int(np.count_nonzero(signed_face_areas(p[nodes], sub) <= 0.0))
+    return UVMeasures(int(ids.size), flipped, int(s.n_inverted),
+                      int(np.count_nonzero(over & chosen)), float(s.q_avg), float(s.q_min),
+                      int(zero.sum()))
+
+
+def flipped_faces(layout: UVLayout, points: np.ndarray, side: np.ndarray | None = None,
+                  corners: bool = False) -> np.ndarray:
+    """(F,) bool: faces whose signed area is zero or against their island's orientation;
+    with ``corners`` also those with a reflex or crossed corner (the inverted faces the core
+    removes). Islands without area have none."""
+    side = layout.orientation() if side is None else side
+    p = layout.oriented_points(side, points)
+    bad = signed_face_areas(p, layout.faces) <= 0.0
+    if corners:
+        bad |= quality(p, layout.faces) <= 0.0
+    return bad & (side[layout.island] != 0)
+
+
+@dataclass
+class IslandRun:
+    """One island's run."""
+
+    island: int
+    n_faces: int
+    mirrored: bool
+    status: str  # valid | untangled | failed | error | skipped
+    message: str = ""
+    n_free: int = 0
+    before: Stats | None = None
+    after: Stats | None = None
+    changed: bool = False
+    untangle_iterations: int = 0
+    smooth_iterations: int = 0
+    global_iterations: int = 0
+    n_frozen: int = 0
+    n_target_fallback: int = 0
+    seconds: float = 0.0
+
+
+@dataclass
+class UVResult:
+    """Outcome of ``untangle_uv``: the UV vertex positions to store and what happened."""
+
+    points: np.ndarray  # (V, 2) float64 holding values of the storage type
+    moved: np.ndarray  # (V,) bool: UV vertices whose stored value changes
+    status: str  # valid | untangled | failed | cancelled
+    islands: list[IslandRun] = field(default_factory=list)
+    seconds: float = 0.0
+    backend: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n_free(self) -> int:
+        return sum(r.n_free for r in self.islands)
+
+    @property
+    def n_target_fallback(self) -> int:
+        return sum(r.n_target_fallback for r in self.islands)
+
+    @property
+    def iterations(self) -> tuple[int, int, int]:
+        """(untangle, global, smooth) iterations summed over the islands."""
+        return (sum(r.untangle_iterations for r in self.islands),
+                sum(r.global_iterations for r in self.islands),
+                sum(r.smooth_iterations for r in self.islands))
+
+
+def _strictly_better(after: Stats, before: Stats) -> bool:
+    return after.better_than(before)
+
+
+SCOPES = ("tangles", "selection")
+
+
+def tangled_faces(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
+                  side: np.ndarray | None = None,
+                  overlap: np.ndarray | None = None) -> np.ndarray:
+    """(F,) bool: the faces (among the mask ``faces``) that are inverted in their island's
+    orientation or overlap another face of their island (``overlap``: ``overlaps_around``
+    when known): where untangling has to work."""
+    side = layout.orientation() if side is None else side
+    bad = flipped_faces(layout, points, side, corners=True)
+    bad |= overlaps_around(layout, points, faces, side) if overlap is None else overlap
+    return bad & np.asarray(faces, dtype=bool)
+
+
+def _grown(fs_nodes: np.ndarray, face_of: np.ndarray, n_faces: int, seed: np.ndarray,
+           rings: int) -> np.ndarray:
+    """(F,) bool: ``seed`` faces and every face within ``rings`` rings of faces of them
+    (faces sharing a node count as neighbours)."""
+    region = seed.copy()
+    for _ in range(rings):
+        near = np.zeros(int(fs_nodes.max()) + 1, dtype=bool)
+        near[fs_nodes[region[face_of]]] = True
+        grown = np.zeros(n_faces, dtype=bool)
+        np.logical_or.at(grown, face_of, near[fs_nodes])
+        if np.array_equal(grown, region):
+            break
+        region = grown
+    return region
+
+
+REGION_SHARE = 0.75  # a region over this share of the island's faces: run the whole island
+
+
+def _regions(sub: FaceSet, bad: np.ndarray | None, rings: int) -> list[np.ndarray]:
+    """The face sets to try, smallest first: the tangled faces grown by ``rings``, 4
+    ``rings``, 16 ``rings``, ... rings while under REGION_SHARE of the island, then every face
+    (the only one for an island without tangles, or with tangles nearly everywhere)."""
+    every = np.ones(sub.n_faces, dtype=bool)
+    if bad is None or not bad.any():
+        return [every]
+    face_of = np.repeat(np.arange(sub.n_faces), sub.counts)
+    out, r = [], rings
+    while True:
+        region = _grown(sub.indices, face_of, sub.n_faces, bad, r)
+        if region.sum() > REGION_SHARE * sub.n_faces:
+            break
+        out.append(region)
+        r *= 4
+    return [*out, every]
+
+
+@dataclass
+class _Attempt:
+    """One core run on part of an island, as island coordinates and island stats."""
+
+    points: np.ndarray  # (n, 2) island UV vertices (oriented), storable values
+    after: Stats
+    result: Any
+    free: np.ndarray
+    improved: bool = True  # fewer inverted faces than the attempt before
+    part: str = ""  # " (k of n faces)" for a run on part of the island
+
+
+def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None = None,
+                targets: np.ndarray | None = None, params: EEGTParams | None = None,
+                backend: str = "numpy", progress: Callable[[int, str, Any], Any] | None = None,
+                store: type = np.float32, accept: Accept = _strictly_better,
+                scope: str = "tangles", tangled: np.ndarray | None = None,
+                rings: int = 2) -> UVResult:
+    """Untangle and smooth the ``selected`` faces (bool (F,)) of a welded UV map.
+
+    ``fixed``: (V,) extra UV vertices that must not move (pins). ``targets``: (C, 2) target
+    corner rows in ``layout.faces`` order, or None for regular polygons. ``scope``:
+    "tangles" (an island with tangled faces, ``tangled_faces`` or the mask ``tangled``, only
+    moves them and the faces within ``rings`` rings of them, the rings doubled until it
+    untangles or the whole selection of the island is in; an island without tangles is
+    smoothed as a whole) or "selection" (every selected face moves). Results are rounded to
+    ``store`` and an island changes only when ``accept(rounded stats, input stats)``, both
+    over its selected faces. ValueError (one line) when nothing can move: no face selected,
+    only islands without area, or every selected UV vertex fixed.
+    """
+    t0 = time.perf_counter()
+    selected = np.asarray(selected, dtype=bool)
+    if selected.shape != (layout.faces.n_faces,):
+        raise ValueError(f"selected must be a ({layout.faces.n_faces},) bool array")
+    if not selected.any():
+        raise ValueError("no UV faces selected")
+    if scope not in SCOPES:
+        raise ValueError(f"scope must be one of {', '.join(SCOPES)}, got {scope!r}")
+    side = layout.orientation()
+    keep = np.zeros(layout.n_nodes, dtype=bool) if fixed is None else np.array(fixed, bool)
+    keep[layout.faces.indices[np.repeat(~selected, layout.faces.counts)]] = True
+    if scope == "tangles" and tangled is None:
+        tangled = tangled_faces(layout, layout.points, selected, side)
+    work = layout.oriented_points(side, layout.points)
+    out = layout.points.copy()
+    moved = np.zeros(layout.n_nodes, dtype=bool)
+    runs: list[IslandRun] = []
+    sel_ids = np.flatnonzero(selected)
+    sel_ids = sel_ids[np.argsort(layout.island[sel_ids], kind="stable")]
+    groups = np.split(sel_ids, np.flatnonzero(np.diff(layout.island[sel_ids])) + 1)
+    backend_name = ""
+    for k, ids in enumerate(groups):
+        isl = int(layout.island[ids[0]])
+        run = IslandRun(isl, int(ids.size), bool(side[isl] < 0), "skipped")
+        runs.append(run)
+        if side[isl] == 0:
+            run.message = "no UV area (collapsed to a point or a line): unwrap it first"
+            continue
+        sub, nodes, rows = island_faces(layout.faces, ids)
+        tk = None if targets is None else targets[rows]
+        start = work[nodes]
+        run.before = run.after = stats_of([quality(start, sub, targets=tk)])
+        label = f"island {k + 1}/{len(groups)}"
+        bad = None if scope == "selection" else tangled[ids]
+        try:
+            best = _island(sub, start, keep[nodes], tk, _regions(sub, bad, rings), params,
+                           backend, progress, label, store, run, scope == "tangles")
+        except _Cancel:
+            result = UVResult(layout.points.copy(), np.zeros_like(moved), "cancelled", runs,
+                              time.perf_counter() - t0, backend_name or backend)
+            return result
+        if best is None:
+            continue
+        backend_name = backend_name or str(best.result.backend)
+        change = np.any(best.points != start, axis=1)
+        if not change.any():
+            continue
+        if not accept(best.after, run.before):
+            run.message += "; no improvement once stored: island unchanged"
+            if run.status == "untangled":  # the stored result would keep a flipped face
+                run.status = "failed"
+            continue
+        run.after, run.changed = best.after, True
+        back = best.points.copy()
+        if side[isl] < 0:
+            back[:, 0] *= -1.0
+        out[nodes[change]] = back[change]
+        moved[nodes[change]] = True
+    result = UVResult(out, moved, "cancelled", runs, time.perf_counter() - t0,
+                      backend_name or backend)
+    if not any(r.n_free for r in runs):
+        reasons = {r.message for r in runs if r.message}
+        raise ValueError("nothing to move: " + "; ".join(sorted(reasons))
+                         if reasons else "nothing to move")
+    result.status = _overall(runs)
+    result.notes = _notes(runs)
+    return result
+
+
+class _Cancel(Exception):
+    pass
+
+
+WHOLE_ROUNDS = 3  # runs on a whole island that keeps inverted faces, while they decrease
+
+
+def _both_better(after: Stats, before: Stats) -> bool:
+    """No more inverted faces, and neither the worst nor the mean quality lower, one higher:
+    what a smoothing-only run must reach under scope "tangles"."""
+    return (after.n_inverted <= before.n_inverted and after.q_min >= before.q_min
+            and after.q_avg >= before.q_avg and (after.q_min, after.q_avg)
+            != (before.q_min, before.q_avg))
+
+
+class _Island:
+    """The runs of the core on one island's selected faces (island coordinates, oriented)."""
+
+    def __init__(self, sub: FaceSet, start: np.ndarray, pin: np.ndarray,
+                 tk: np.ndarray | None, params: EEGTParams | None, backend: str,
+                 progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
+                 run: IslandRun) -> None:
+        self.sub, self.start, self.pin, self.tk = sub, start, pin, tk
+        self.params, self.backend, self.progress, self.label = params, backend, progress, label
+        self.store, self.run = store, run
+
+    def attempt(self, region: np.ndarray, base: np.ndarray) -> _Attempt | None:
+        """One core run on the faces ``region`` from ``base``, the rest fixed; None when
+        nothing in it is free. ValueError (one line) from the core; _Cancel when stopped."""
+        sub, run = self.sub, self.run
+        whole = bool(region.all())
+        part = "" if whole else f" ({int(region.sum())} of {sub.n_faces} faces)"
+        part_fs, local, prow = island_faces(sub, np.flatnonzero(region))
+        out_nodes = np.zeros(base.shape[0], dtype=bool)
+        out_nodes[sub.indices[np.repeat(~region, sub.counts)]] = True
+        part_pin = self.pin[local] | out_nodes[local]
+        free = free_nodes(local.size, part_fs, part_pin)
+        if not free.any():
+            return None
+        progress = self.progress
+
+        def relay(it: int, phase: str, stats: Any, _label: str = self.label + part) -> Any:
+            return progress(it, f"{_label} {phase}", stats)
+
+        res = untangle_and_smooth(base[local], part_fs, fixed=part_pin, params=self.params,
+                                  backend=self.backend, progress=relay if progress else None,
+                                  targets=None if self.tk is None else self.tk[prow])
+        if res.status == "cancelled":
+            raise _Cancel
+        run.untangle_iterations += int(res.untangle_iterations)
+        run.smooth_iterations += int(res.smooth_iterations)
+        run.global_iterations += int(getattr(res, "global_iterations", 0))
+        run.n_target_fallback = max(run.n_target_fallback,
+                                    int(getattr(res, "n_target_fallback", 0)))
+        run.seconds += float(res.seconds)
+        pts = base.copy()
+        rounded = np.asarray(res.points).astype(self.store).astype(np.float64)
+        pts[local[free]] = rounded[free]
+        after = stats_of([quality(pts, sub, targets=self.tk)])
+        attempt = _Attempt(pts, after, res, free)
+        attempt.part = part
+        return attempt
+
+    def keep(self, attempt: _Attempt) -> None:
+        """Make ``attempt`` the island's result in its run record."""
+        run, res = self.run, attempt.result
+        run.status, run.message = str(res.status), str(res.message) + attempt.part
+        run.n_free = int(attempt.free.sum())
+        run.n_frozen = int(getattr(res, "n_frozen", 0))
+
+
+def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | None,
+            regions: list[np.ndarray], params: EEGTParams | None, backend: str,
+            progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
+            run: IslandRun, smooth_both: bool = False) -> _Attempt | None:
+    """Run the core on one island's selected faces, region after region, each from the best
+    result so far, until one ends untangled; a whole island that still has inverted faces
+    runs again from its best while their number decreases (up to WHOLE_ROUNDS runs). With
+    ``smooth_both`` (scope "tangles") a run that only smooths (an island without inverted
+    faces, or the whole island after its tangles were undone in a region) is kept only when
+    neither the worst nor the mean quality drops (``_both_better``). The best attempt
+    (island stats), or None when nothing changes. Fills ``run``; _Cancel when stopped."""
+    isl = _Island(sub, start, pin, tk, params, backend, progress, label, store, run)
+    initial = run.before
+    best: _Attempt | None = None
+    whole_runs = 0
+    try:
+        for region in [*regions[:-1], *[regions[-1]] * WHOLE_ROUNDS]:
+            whole = bool(region.all())
+            if whole and whole_runs and best is not None and (
+                    best.after.n_inverted <= run.n_frozen or not best.improved):
+                break
+            whole_runs += whole
+            attempt = isl.attempt(region, start if best is None else best.points)
+            if attempt is None:
+                continue
+            if best is None or attempt.after.better_than(best.after):
+                attempt.improved = best is None or (attempt.after.n_inverted
+                                                    < best.after.n_inverted)
+                best = attempt
+                isl.keep(best)
+            elif whole:
+                best.improved = False
+            if attempt.result.status in ("valid", "untangled") and \
+                    attempt.after.n_inverted <= run.n_frozen:
+                break
+        if best is None and not run.n_free:
+            run.message = ("every UV vertex is fixed (on an island border, pinned or on the "
+                           "border of the selection: grow the selection, Select > More)")
+            return None
+        if smooth_both and best is not None:
+            if initial.n_inverted == 0:  # only smoothed: both qualities must hold
+                if not _both_better(best.after, initial):
+                    run.status, run.message = "valid", "smoothing would lower the worst or " \
+                        "the mean quality: island unchanged"
+                    return None
+            elif best.part and best.after.n_inverted <= run.n_frozen:  # then smooth it all
+                whole = isl.attempt(np.ones(sub.n_faces, dtype=bool), best.points)
+                if whole is not None and _both_better(whole.after, best.after):
+                    best = whole
+                    isl.keep(best)
+                    run.message += " (untangled in a region, then smoothed whole)"
+    except ValueError as exc:
+        run.status, run.message = "error", _line(exc)
+        return best
+    if best is not None and best.after.n_inverted > run.n_frozen:
+        run.status = "failed"
+    return best
+
+
+def _line(exc: Exception) -> str:
+    text = str(exc)
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
+def _overall(runs: list[IslandRun]) -> str:
+    """failed when an island that could move ends with a movable flipped face or errs;
+    untangled when some island had flipped faces; else valid."""
+    active = [r for r in runs if r.n_free or r.status == "error"]
+    if any(r.status in ("failed", "error") for r in active):
+        return "failed"
+    if any(r.before is not None and r.before.n_inverted > r.n_frozen for r in active):
+        return "untangled"
+    return "valid"
+
+
+def _notes(runs: list[IslandRun]) -> list[str]:
+    """One note per kind of island problem (counts, not one line per island)."""
+    notes = []
+    skipped = [r for r in runs if r.status == "skipped" and r.n_free == 0 and r.before is None]
+    if skipped:
+        notes.append(f"{len(skipped)} island(s) without UV area skipped (unwrap them first)")
+    for r in runs:
+        if r.status == "error":
+            notes.append(f"island {r.island}: {r.message}")
+        elif r.status == "failed":
+            n = (r.after or r.before).n_inverted if (r.after or r.before) else 0
+            notes.append(f"island {r.island}: {n} flipped faces remain")
+    frozen = sum(r.n_frozen for r in runs)
+    if frozen:
+        notes.append(f"{frozen} faces are flipped with every corner fixed (border or pins): "
+                     "they cannot change")
+    mirrored = sum(1 for r in runs if r.mirrored)
+    if mirrored:
+        notes.append(f"{mirrored} mirrored island(s)")
+    fallback = sum(r.n_target_fallback for r in runs)
+    if fallback:
+        notes.append(f"{fallback} faces with a concave or degenerate 3D shape used the "
+                     "regular polygon as target")
+    return notes

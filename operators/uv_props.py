@@ -1,0 +1,113 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Settings of the UV tools (scene) and the statistics of the last UV run (object).
+
+The EEGT parameters and the backend are shared with the mesh operator (``eegt_settings``);
+only what is UV-specific lives here.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+
+TARGET_ITEMS: tuple[tuple[str, str, str], ...] = (
+    ("3D", "3D Faces", "Pull each UV face towards its own 3D face's shape (untangling also "
+                       "lowers stretch); distortion 1 = similar to the 3D face"),
+    ("REGULAR", "Regular", "Pull each UV face towards the regular polygon (the paper's EEGT)"),
+)
+
+SCOPE_ITEMS: tuple[tuple[str, str, str], ...] = (
+    ("TANGLES", "Around Tangles", "In an island with flipped, inverted or overlapping faces only "
+                                  "those and the faces around them move (more around them "
+                                  "until they untangle); an island without any is smoothed "
+                                  "as a whole"),
+    ("SELECTION", "Whole Selection", "Every selected face moves (untangled and smoothed)"),
+)
+
+SELECT_ITEMS: tuple[tuple[str, str, str], ...] = (
+    ("FLIPPED", "Flipped", "Faces whose area is reversed (or zero) against their island"),
+    ("INVERTED", "Inverted", "Flipped faces and faces with a corner turned inside out (the "
+                             "faces Untangle & Smooth UVs removes)"),
+    ("OVERLAPPING", "Overlapping", "Faces that cover part of another face of their island "
+                                   "(overlap between islands is layout: not counted)"),
+)
+
+
+def option_annotations(options: set[str] | None = None) -> dict[str, Any]:
+    """The UV-specific options (scene settings and the operator's redo panel)."""
+    opt = {"options": options} if options is not None else {}
+    return {
+        "use_pins": BoolProperty(name="Keep Pinned UVs", default=True, **opt,
+                                 description="UVs pinned in the UV editor (P) stay fixed"),
+        "target_shape": EnumProperty(name="Target Shape", items=TARGET_ITEMS, default="3D",
+                                     description="The shape each UV face is pulled towards",
+                                     **opt),
+        "scope": EnumProperty(name="Move", items=SCOPE_ITEMS, default="TANGLES",
+                              description="Which of the selected faces move", **opt),
+    }
+
+
+OPTION_NAMES = tuple(option_annotations())
+
+EEGT_PG_uv_settings = type("EEGT_PG_uv_settings", (bpy.types.PropertyGroup,), {
+    "__annotations__": option_annotations(),
+    "__doc__": "UV settings of Untangle & Smooth UVs (defaults of the operator)",
+})
+
+
+class EEGT_PG_uv_last_run(bpy.types.PropertyGroup):
+    """Statistics of the last UV run on an object (shown in the UV editor's sidebar)."""
+
+    has_run: BoolProperty(default=False)  # type: ignore[valid-type]
+    status: StringProperty(default="")  # type: ignore[valid-type]
+    message: StringProperty(default="")  # type: ignore[valid-type]
+    uv_map: StringProperty(default="")  # type: ignore[valid-type]
+    flipped_before: IntProperty(default=0)  # type: ignore[valid-type]
+    flipped_after: IntProperty(default=0)  # type: ignore[valid-type]
+    inverted_before: IntProperty(default=0)  # type: ignore[valid-type]
+    inverted_after: IntProperty(default=0)  # type: ignore[valid-type]
+    overlapping_before: IntProperty(default=0)  # type: ignore[valid-type]
+    overlapping_after: IntProperty(default=0)  # type: ignore[valid-type]
+    distortion_mean_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    distortion_mean_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    distortion_worst_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    distortion_worst_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
+    seconds: FloatProperty(default=0.0)  # type: ignore[valid-type]
+
+
+def store_last_run(obj: bpy.types.Object, result: Any) -> None:
+    """Keep a UV run's outcome (``uv_runner.UVObjectResult``) on the object."""
+    lr = getattr(obj, "eegt_last_uv_run", None)
+    if lr is None:
+        return
+    lr.has_run = True
+    lr.status, lr.message, lr.uv_map = result.status, result.line(), result.uv_map
+    b, a = result.before or {}, result.after or {}
+    for key in ("flipped", "inverted", "overlapping"):
+        setattr(lr, f"{key}_before", int(b.get(key, 0)))
+        setattr(lr, f"{key}_after", int(a.get(key, 0)))
+    for key in ("distortion_mean", "distortion_worst"):
+        setattr(lr, f"{key}_before", float(b.get(key, 0.0)))
+        setattr(lr, f"{key}_after", float(a.get(key, 0.0)))
+    lr.seconds = result.seconds
+
+
+classes = (EEGT_PG_uv_settings, EEGT_PG_uv_last_run)
+
+
+def register() -> None:
+    """Register the property groups and attach them to Scene and Object."""
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.eegt_uv_settings = bpy.props.PointerProperty(type=EEGT_PG_uv_settings)
+    bpy.types.Object.eegt_last_uv_run = bpy.props.PointerProperty(type=EEGT_PG_uv_last_run)
+
+
+def unregister() -> None:
+    """Remove what :func:`register` added."""
+    del bpy.types.Object.eegt_last_uv_run
+    del bpy.types.Scene.eegt_uv_settings
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

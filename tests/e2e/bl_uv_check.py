@@ -1,0 +1,45 @@
+"""Run inside Blender (background): the UV map of object "Tangled" in two .blend files,
+checked by meshcheck.uv_check (not the extension's code). Args after --: IN.blend OUT.blend
+RESULT.json; writes {"in": ..., "out": ..., "border_kept": bool, "pins_kept": bool,
+"positions_kept": bool, "moved": loops moved}."""
+import json
+import os
+import sys
+
+import bpy
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import meshcheck
+
+
+def read(path):
+    bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+    me = bpy.data.objects["Tangled"].data
+    n = len(me.loops)
+    uv = np.empty(2 * n, np.float32)
+    me.attributes[me.uv_layers.active.name].data.foreach_get("vector", uv)
+    pins = np.zeros(n, bool)
+    if len(me.uv_layers.active.pin) == n:
+        me.uv_layers.active.pin.foreach_get("value", pins)
+    co = np.empty(3 * len(me.vertices), np.float32)
+    me.attributes["position"].data.foreach_get("vector", co)
+    cv = np.empty(n, np.int64)
+    me.loops.foreach_get("vertex_index", cv)
+    faces = [list(range(p.loop_start, p.loop_start + p.loop_total)) for p in me.polygons]
+    return uv.reshape(-1, 2), pins, co, cv, faces
+
+
+inp, out, result = sys.argv[sys.argv.index("--") + 1:][:3]
+uv0, pins0, co0, cv, faces = read(inp)
+uv1, pins1, co1, _, _ = read(out)
+c0, c1 = meshcheck.uv_check(uv0, faces, cv), meshcheck.uv_check(uv1, faces, cv)
+border = c0.pop("border_loops")
+c1.pop("border_loops")
+with open(result, "w") as fh:
+    json.dump({"in": c0, "out": c1,
+               "border_kept": bool(np.array_equal(uv0[border], uv1[border])),
+               "pins_kept": bool(pins0.any() and np.array_equal(uv0[pins0], uv1[pins0])),
+               "positions_kept": bool(np.array_equal(co0, co1)),
+               "moved": int(np.any(uv0 != uv1, axis=1).sum())}, fh)
+print("E2E-UV-CHECK written", result)
