@@ -43,7 +43,8 @@ __all__ = [
     "boundary_structure",
 ]
 
-SLIDE_REACH = 0.45  # a sliding node moves at most this share of the gap to each neighbour
+SLIDE_REACH = 0.45  # a sliding node moves at most this share of the gap to each neighbour ...
+SLIDE_GAP = 0.1  # ... beyond this parameter gap (a tenth of a segment), which it never closes
 _LOCATE_CHUNK = 1 << 20  # node/segment pairs per vectorized batch of `Slide.locate`
 
 
@@ -212,8 +213,8 @@ class Slide:
         dp = np.where(per & (dp <= 0.0), dp + n, dp)
         dn = tn - t
         dn = np.where(per & (dn <= 0.0), dn + n, dn)
-        lo = t - SLIDE_REACH * dp
-        hi = t + SLIDE_REACH * dn
+        lo = t - SLIDE_REACH * np.maximum(dp - SLIDE_GAP, 0.0)
+        hi = t + SLIDE_REACH * np.maximum(dn - SLIDE_GAP, 0.0)
         kf = np.floor(lo)
         kl = np.floor(hi)
         kl = np.where(per, kl, np.minimum(kl, n - 1.0))

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from . import fpmath
-from .boundary import SLIDE_REACH, BoundaryMotion
+from .boundary import SLIDE_GAP, SLIDE_REACH, BoundaryMotion
 from .engine_numpy import _DIST_FLOOR, NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
@@ -539,7 +539,8 @@ class OpenCLEngine:
         self.k_slide_save.set_args(n_slots, self.tau, self.tau_old)
         self.k_slide_project = self.cl.Kernel(self.prg, "slide_project")
         self.k_slide_project.set_args(n_slots, *self._slide_bufs[:10], self.mv, self.P, self.tau,
-                                      self.tau_old, np.float64(SLIDE_REACH))
+                                      self.tau_old, np.float64(SLIDE_REACH),
+                                      np.float64(SLIDE_GAP))
         self.k_stitch.set_arg(8, self.mv)
         self.k_revert.set_arg(5, self._slide_bufs[10])
         self.k_revert.set_arg(6, self.tau)

@@ -826,7 +826,8 @@ __kernel void slide_project(const int S, __global const int *restrict snode,
                             __global const int *restrict periodic,
                             __global const double *restrict seg, __global const int *restrict mv,
                             __global double2 *restrict P, __global double *restrict tau,
-                            __global const double *restrict tau_old, const double reach)
+                            __global const double *restrict tau_old, const double reach,
+                            const double min_gap)
 {
     const int s = get_global_id(0);
     if (s >= S) return;
@@ -843,8 +844,8 @@ __kernel void slide_project(const int S, __global const int *restrict snode,
     if (per && dp <= 0.0) dp = dp + n;
     double dn = tn - t;
     if (per && dn <= 0.0) dn = dn + n;
-    const double lo = t - reach * dp;
-    const double hi = t + reach * dn;
+    const double lo = t - reach * FMAX(dp - min_gap, 0.0);
+    const double hi = t + reach * FMAX(dn - min_gap, 0.0);
     const double kf = FLOOR(lo);
     double kl = FLOOR(hi);
     if (!per) kl = FMIN(kl, n - 1.0);

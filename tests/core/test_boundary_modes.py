@@ -21,7 +21,7 @@ from core import (
     untangle_and_smooth,
     untangle_and_smooth_3d,
 )
-from core.boundary import SLIDE_REACH, Slide, SlideView, boundary_motion
+from core.boundary import SLIDE_GAP, SLIDE_REACH, Slide, SlideView, boundary_motion
 from core.faces import as_faceset
 from core.optimize import GlobalOptions, untangle_global
 
@@ -211,17 +211,23 @@ def test_projection_keeps_order_and_lands_on_the_curve():
     s = m.slide
     bottom = [int(np.flatnonzero(s.node == i)[0]) for i in range(1, 6)]
     tau = s.home.copy()
-    # node 1 pushed far past node 2 (and off the line): it stops SLIDE_REACH of the gap on
+    # node 1 pushed far past node 2 (and off the line): it stops SLIDE_REACH of the gap
+    # beyond the smallest gap SLIDE_GAP on
     sel = np.array([bottom[0]])
     t, x, y = s.project(tau, sel, np.array([4.0]), np.array([-0.3]))
-    assert t[0] == pytest.approx(1.0 + SLIDE_REACH) and (x[0], y[0]) == (t[0], 0.0)
+    assert t[0] == pytest.approx(1.0 + SLIDE_REACH * (1.0 - SLIDE_GAP))
+    assert (x[0], y[0]) == (t[0], 0.0)
     # a small move off the line: the foot of the perpendicular
     t, x, y = s.project(tau, sel, np.array([1.2]), np.array([0.25]))
     assert (x[0], y[0]) == (1.2, 0.0)
-    # neighbours pushed towards each other in one step keep a gap (Jacobi, reach < 1/2)
+    # neighbours pushed towards each other, step after step (Jacobi, reach < 1/2), keep
+    # at least the smallest gap
     sel = np.array(bottom[1:3])
-    t, _, _ = s.project(tau, sel, np.array([3.0, 2.0]), np.array([0.0, 0.0]))
+    for _ in range(50):
+        t, _, _ = s.project(tau, sel, np.array([3.0, 2.0]), np.array([0.0, 0.0]))
+        tau[sel] = t
     assert tau[bottom[0]] < t[0] < t[1] < tau[bottom[3]]
+    assert t[1] - t[0] == pytest.approx(SLIDE_GAP, rel=1e-12)  # approached, never crossed
 
 
 def test_periodic_loop_wraps_around():
