@@ -117,6 +117,9 @@ class Slide:
         self.home = np.asarray(home, dtype=np.float64)  # each slot's input parameter
         self._sorted_slots = np.argsort(self.node, kind="stable")
         self._sorted_nodes = self.node[self._sorted_slots]
+        # `locate` remembers each slot's last position and parameter: a slot asked about
+        # again at the same position (most of them, between two stages) costs nothing
+        self._known = (*self.point(np.arange(self.size), self.home), self.home.copy())
 
     @property
     def size(self) -> int:
@@ -155,6 +158,18 @@ class Slide:
         their parameter up to round-off."""
         slots = np.asarray(slots, dtype=np.int64)
         px, py = np.asarray(px, np.float64), np.asarray(py, np.float64)
+        kx, ky, kt = self._known
+        hit = (kx[slots] == px) & (ky[slots] == py)
+        out = kt[slots]  # a copy
+        if not hit.all():
+            miss = np.flatnonzero(~hit)
+            t = self._search(slots[miss], px[miss], py[miss])
+            out[miss] = t
+            kx[slots[miss]], ky[slots[miss]], kt[slots[miss]] = px[miss], py[miss], t
+        return out
+
+    def _search(self, slots: np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+        """`locate` over every segment of each slot's curve."""
         c = self.curve[slots]
         counts = self.n_seg[c]
         out = np.empty(slots.size)
