@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .boundary import BoundaryMotion
 from .engine_numpy import NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
@@ -46,9 +47,11 @@ def make_engine(
     free: np.ndarray,
     params: EEGTParams,
     targets: Targets | None = None,
+    motion: BoundaryMotion | None = None,
 ):
     """Build the engine for `backend`; returns (engine, name actually used). `targets`:
-    per-face target shapes prepared for `faces` (None: regular polygons)."""
+    per-face target shapes prepared for `faces` (None: regular polygons); `motion`: the
+    boundary mode's sliding nodes and distance anchors (None: the paper's fixed boundary)."""
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend in ("opencl", "auto"):
@@ -56,10 +59,10 @@ def make_engine(
         if cls is not None and backend == "auto" and faces.n_faces < AUTO_ENGINE_MIN_FACES:
             # the global stage's device solver runs on CPU devices only (one work-item)
             name = HYBRID if _device_is_cpu() else SMALL_ON_GPU
-            return NumpyEngine(points, faces, free, params, targets), name
+            return NumpyEngine(points, faces, free, params, targets, motion), name
         if cls is not None:
             try:
-                return cls(points, faces, free, params, targets), cls.name
+                return cls(points, faces, free, params, targets, motion), cls.name
             except RuntimeError as exc:  # device refused the kernels: fall back, say why
                 why = f"OpenCL backend failed ({exc}); using NumPy"
         name = "numpy"
@@ -68,6 +71,6 @@ def make_engine(
             import warnings
 
             warnings.warn(why, RuntimeWarning, stacklevel=3)
-        engine = NumpyEngine(points, faces, free, params, targets)
+        engine = NumpyEngine(points, faces, free, params, targets, motion)
         return engine, f"{name} ({why})" if why else name
-    return NumpyEngine(points, faces, free, params, targets), "numpy"
+    return NumpyEngine(points, faces, free, params, targets, motion), "numpy"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .boundary import BoundaryMotion
 from .distance import NearestBoundary
 from .faces import FaceSet
 from .fpmath import power
@@ -55,6 +56,9 @@ class _FixedNodeDistance:
         return np.sqrt(np.minimum.reduce(dx, axis=0))
 
 
+_UNIFORM = object()  # distance weights without anchors: f = 1 for every element
+
+
 class NumpyEngine:
     """Holds the mesh state of one run; the pipeline drives it iteration by iteration."""
 
@@ -67,28 +71,36 @@ class NumpyEngine:
         free: np.ndarray,
         params: EEGTParams,
         targets: Targets | None = None,
+        motion: BoundaryMotion | None = None,
     ):
-        """`targets`: per-face target shapes prepared for `faces` (None: regular polygons)."""
-        self._setup(points, faces, free, params, None, targets)
+        """`targets`: per-face target shapes prepared for `faces` (None: regular polygons);
+        `motion`: a boundary mode's movable nodes, sliding nodes and distance anchors (None:
+        `free` moves, the other used nodes are the anchors: the paper)."""
+        self._setup(points, faces, free, params, None, targets, motion)
 
     def restarted(self, points: np.ndarray) -> NumpyEngine:
         """A fresh engine for the same run at new positions whose fixed nodes are where they
         are here: it shares the nearest-boundary search (its queries are exact, whatever
         element centroids it was refined for) instead of building another one."""
         engine = NumpyEngine.__new__(NumpyEngine)
-        engine._setup(points, self.faces, self.free, self.params, self._distance, self.targets)
+        engine._setup(points, self.faces, self.free, self.params, self._distance, self.targets,
+                      self.motion)
         return engine
 
     @property
-    def nearest(self) -> NearestBoundary:
-        """The quadtree over the fixed nodes (refined for the first engine's centroids)."""
-        return self._distance.tree
+    def nearest(self) -> NearestBoundary | None:
+        """The quadtree over the fixed nodes (refined for the first engine's centroids);
+        None when the distance weights are uniform (no anchors)."""
+        return None if self._distance is _UNIFORM else self._distance.tree
 
-    def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest, targets) -> None:
+    def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest, targets,
+               motion: BoundaryMotion | None = None) -> None:
         """State at `points`; `nearest`: distances to these fixed nodes (None: set them up)."""
         self.params = params
         self.faces = faces
         self.targets = targets
+        self.motion = motion
+        self.slide = None if motion is None else motion.slide
         # per group: its GroupTargets, or None (the paper's regular polygon)
         self.group_targets = [None] * len(faces.groups) if targets is None else targets.groups
         self.x = np.ascontiguousarray(points[:, 0], dtype=np.float64).copy()
@@ -100,12 +112,24 @@ class NumpyEngine:
         self.q = self._quality_all()
         self.lbar, min_edge = self._edge_lengths()
         centroids = self._centroids()
+        if nearest is None and motion is not None:
+            nearest = _UNIFORM
+            if motion.anchor_x.size:
+                nearest = _FixedNodeDistance(
+                    motion.anchor_x, motion.anchor_y, *centroids, 0.5 * min_edge
+                )
         if nearest is None:
             fixed_idx = np.flatnonzero(~self.free & faces.used_nodes(self.n_nodes))
             nearest = _FixedNodeDistance(
                 self.x[fixed_idx], self.y[fixed_idx], *centroids, 0.5 * min_edge
             )
         self._distance = nearest
+        if self.slide is not None:  # the sliding nodes' parameters on their curves
+            s = self.slide
+            self.tau = s.locate(np.arange(s.size), self.x[s.node], self.y[s.node])
+            self.tau_old = self.tau.copy()
+            self.slot = np.full(self.n_nodes, -1, dtype=np.int64)
+            self.slot[s.node] = np.arange(s.size)
         self.inv_d_pow: list[np.ndarray] = []
         self.iteration = 0
         self._refresh_distances(centroids)
@@ -139,6 +163,9 @@ class NumpyEngine:
     def _refresh_distances(self, centroids: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """f_j = (lbar / d_j)^c from element vertex centroids (those of the current positions,
         computed unless given) to the nearest fixed node."""
+        if self._distance is _UNIFORM:  # no anchors: every element weighs the same
+            self.inv_d_pow = [np.ones(g.size) for g in self.groups]
+            return
         c = self.params.c
         floor = _DIST_FLOOR * self.lbar
         cx, cy = self._centroids() if centroids is None else centroids
@@ -191,10 +218,26 @@ class NumpyEngine:
         old_x, old_y = self.x.copy(), self.y.copy()
         np.add(self.x, dx, out=self.x, where=moving)
         np.add(self.y, dy, out=self.y, where=moving)
+        if self.slide is not None:
+            self._slide(moving)
         self.q = self._quality_all()
         if phase == "smooth":
             self._revert_inverted(old_x, old_y)
         return self.stats()
+
+    def _slide(self, moving: np.ndarray) -> None:
+        """Sliding nodes that moved go to the nearest point of their curve within their
+        reach (core.boundary.Slide.project), from the parameters before the step."""
+        s = self.slide
+        np.copyto(self.tau_old, self.tau)
+        sel = np.flatnonzero(moving[s.node])
+        if sel.size == 0:
+            return
+        nodes = s.node[sel]
+        tau, x, y = s.project(self.tau_old, sel, self.x[nodes], self.y[nodes])
+        self.tau[sel] = tau
+        self.x[nodes] = x
+        self.y[nodes] = y
 
     def _revert_inverted(self, old_x: np.ndarray, old_y: np.ndarray) -> None:
         """Move every node of a face that became inverted back, until none is inverted."""
@@ -207,6 +250,10 @@ class NumpyEngine:
                 return
             self.x[back] = old_x[back]
             self.y[back] = old_y[back]
+            if self.slide is not None:
+                slots = self.slot[back]
+                slots = slots[slots >= 0]
+                self.tau[slots] = self.tau_old[slots]
             self.q = self._quality_all()
 
     # -- best iterate --------------------------------------------------------------------

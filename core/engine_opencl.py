@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from . import fpmath
+from .boundary import SLIDE_GAP, SLIDE_REACH, BoundaryMotion
 from .engine_numpy import _DIST_FLOOR, NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
@@ -314,6 +315,7 @@ class OpenCLEngine:
         free: np.ndarray,
         params: EEGTParams,
         targets: Targets | None = None,
+        motion: BoundaryMotion | None = None,
     ):
         rt = _runtime()
         cl = rt.cl
@@ -323,7 +325,7 @@ class OpenCLEngine:
         self.faces = faces
         self.iteration = 0
         # The reference engine builds the initial state: lbar, quadtree, q, distance weights.
-        ref = NumpyEngine(points, faces, free, params, targets)
+        ref = NumpyEngine(points, faces, free, params, targets, motion)
         self.targets = targets
         self.lbar = ref.lbar
         self.n_nodes = n = ref.n_nodes
@@ -361,8 +363,14 @@ class OpenCLEngine:
         self.row = buf(row.astype(np.int32))
         self.ccorner = buf(np.ascontiguousarray(order, dtype=np.int32))
         self.cface = buf(np.ascontiguousarray(corner_face[order], dtype=np.int32))
-        # distance quadtree (boundary nodes never move): the reference's, flattened
+        # distance quadtree (boundary nodes never move): the reference's, flattened; without
+        # anchors (uniform weights) a one-node stand-in that the kernels never search
         nb = ref.nearest
+        self.uniform = nb is None
+        if nb is None:
+            from .distance import NearestBoundary
+
+            nb = NearestBoundary(np.zeros(1), np.zeros(1))
         lv_len = [c.size for c in nb.child]
         level_off = np.concatenate([[0], np.cumsum(lv_len)])
         tree = np.concatenate([level_off, *nb.child, *nb.leaf_start, *nb.leaf_len, nb.cand]).astype(
@@ -400,6 +408,7 @@ class OpenCLEngine:
         self.part = empty(32 * self.n_rows)
         self._host_part = np.zeros((self.n_rows, 4), dtype=np.float64)
         self._setup_kernels(groups, params, ref.group_targets)
+        self._setup_slide(ref)
         self._stats = ref.stats()
         del ref
 
@@ -495,10 +504,47 @@ class OpenCLEngine:
         n = np.int32(self.n_nodes)
         self.k_stitch = kernel("stitch")
         self.k_stitch.set_args(
-            n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old
+            n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old, None
         )
         self.k_revert = kernel("revert")
-        self.k_revert.set_args(n, self.flag, self.P, self.old, self.part)
+        self.k_revert.set_args(n, self.flag, self.P, self.old, self.part, None, None, None)
+
+    def _setup_slide(self, ref: NumpyEngine) -> None:
+        """Buffers and kernels of the sliding nodes (none: `self.slide` is None)."""
+        self.slide = s = ref.slide
+        if s is None:
+            return
+        mf, ctx = self.cl.mem_flags, self.rt.ctx
+
+        def ro(a: np.ndarray, dtype):
+            return self.cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                                  hostbuf=np.ascontiguousarray(a, dtype=dtype))
+
+        def rw(a: np.ndarray, dtype):
+            return self.cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR,
+                                  hostbuf=np.ascontiguousarray(a, dtype=dtype))
+
+        seg = np.stack([s.ax, s.ay, s.dx, s.dy, s.len2], axis=1)
+        self.tau = rw(ref.tau, np.float64)
+        self.tau_old = rw(ref.tau, np.float64)
+        self.mv = rw(np.zeros(self.n_nodes), np.int32)
+        self._slide_bufs = [
+            ro(s.node, np.int32), ro(s.curve, np.int32), ro(s.prev_slot, np.int32),
+            ro(s.next_slot, np.int32), ro(s.prev_tau, np.float64), ro(s.next_tau, np.float64),
+            ro(s.seg_first, np.int32), ro(s.n_seg, np.int32), ro(s.periodic, np.int32),
+            ro(seg, np.float64), ro(ref.slot, np.int32),
+        ]
+        n_slots = np.int32(s.size)
+        self.k_slide_save = self.cl.Kernel(self.prg, "slide_save")
+        self.k_slide_save.set_args(n_slots, self.tau, self.tau_old)
+        self.k_slide_project = self.cl.Kernel(self.prg, "slide_project")
+        self.k_slide_project.set_args(n_slots, *self._slide_bufs[:10], self.mv, self.P, self.tau,
+                                      self.tau_old, np.float64(SLIDE_REACH),
+                                      np.float64(SLIDE_GAP))
+        self.k_stitch.set_arg(8, self.mv)
+        self.k_revert.set_arg(5, self._slide_bufs[10])
+        self.k_revert.set_arg(6, self.tau)
+        self.k_revert.set_arg(7, self.tau_old)
 
     # -- enqueue helpers -----------------------------------------------------------------
     def _run(self, kernel, gsize: int) -> None:
@@ -535,8 +581,12 @@ class OpenCLEngine:
         """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back."""
         self.iteration += 1
         refresh = self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0
-        self._faces(3 if refresh else 2)
+        self._faces(3 if refresh and not self.uniform else 2)
         self._run(self.k_stitch, _roundup(self.n_nodes, _WG))
+        if self.slide is not None:
+            slots = _roundup(self.slide.size, _WG)
+            self._run(self.k_slide_save, slots)
+            self._run(self.k_slide_project, slots)
         self._faces(1)
         if phase != "smooth":
             self._stats = self._to_stats(self._read_part())

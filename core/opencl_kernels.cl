@@ -768,10 +768,13 @@ MOVE_TRI_KERNEL_X(move_tgt_tri_d, 1, TGT_ARG, TRI_TARGET_STRETCH)
 
 // Stitching (eq. 18) as a gather: node i sums its incident corners in the order NumPy's
 // bincount meets them (CSR rows built on the host), then moves by sum(w d) / sum(w).
+// mv (NULL without sliding nodes): 1 where the node moves by NumPy's rule (a nonzero move),
+// else 0, for slide_project.
 __kernel void stitch(const int N, __global const int *restrict row,
                      __global const int *restrict ccorner, __global const int *restrict cface,
                      __global const double2 *restrict cmove, __global const double *restrict wf,
-                     __global double2 *restrict P, __global double2 *restrict old)
+                     __global double2 *restrict P, __global double2 *restrict old,
+                     __global int *restrict mv)
 {
     const int i = get_global_id(0);
     if (i >= N) return;
@@ -786,17 +789,112 @@ __kernel void stitch(const int N, __global const int *restrict row,
         sy += m.y;
         sw += wf[cface[e]];
     }
+    int moved = 0;
     if (sw > 0.0) {
         const double dx = sx / sw, dy = sy / sw;
-        if (dx != 0.0 || dy != 0.0) P[i] = (double2)(p.x + dx, p.y + dy);
+        if (dx != 0.0 || dy != 0.0) {
+            P[i] = (double2)(p.x + dx, p.y + dy);
+            moved = 1;
+        }
     }
+    if (mv) mv[i] = moved;
+}
+
+// ---- boundary sliding (boundary.py: Slide.project) --------------------------------------
+// Slot s is sliding node snode[s] on curve scurve[s]; its loop neighbours are slots
+// (prev_slot / next_slot >= 0, parameters from tau_old) or fixed at prev_tau / next_tau.
+// Curves: first segment, segment count, periodic flag; segments: seg[5 k ..] = (ax, ay, dx,
+// dy, len2). A node that moved goes to the nearest point of its curve within
+// tau -/+ reach times the gaps to its neighbours (the first nearest segment on ties); a
+// result not strictly between them keeps tau. Same operations as NumPy, in its order.
+
+__kernel void slide_save(const int S, __global const double *restrict tau,
+                         __global double *restrict tau_old)
+{
+    const int s = get_global_id(0);
+    if (s < S) tau_old[s] = tau[s];
+}
+
+__kernel void slide_project(const int S, __global const int *restrict snode,
+                            __global const int *restrict scurve,
+                            __global const int *restrict prev_slot,
+                            __global const int *restrict next_slot,
+                            __global const double *restrict prev_tau,
+                            __global const double *restrict next_tau,
+                            __global const int *restrict seg_first,
+                            __global const int *restrict n_seg,
+                            __global const int *restrict periodic,
+                            __global const double *restrict seg, __global const int *restrict mv,
+                            __global double2 *restrict P, __global double *restrict tau,
+                            __global const double *restrict tau_old, const double reach,
+                            const double min_gap)
+{
+    const int s = get_global_id(0);
+    if (s >= S) return;
+    const int i = snode[s];
+    if (!mv[i]) return;
+    const double t = tau_old[s];
+    const int c = scurve[s];
+    const double n = (double)n_seg[c];
+    const int per = periodic[c];
+    const int base = seg_first[c];
+    const double tp = prev_slot[s] >= 0 ? tau_old[prev_slot[s]] : prev_tau[s];
+    const double tn = next_slot[s] >= 0 ? tau_old[next_slot[s]] : next_tau[s];
+    double dp = t - tp;
+    if (per && dp <= 0.0) dp = dp + n;
+    double dn = tn - t;
+    if (per && dn <= 0.0) dn = dn + n;
+    const double lo = t - reach * FMAX(dp - min_gap, 0.0);
+    const double hi = t + reach * FMAX(dn - min_gap, 0.0);
+    const double kf = FLOOR(lo);
+    double kl = FLOOR(hi);
+    if (!per) kl = FMIN(kl, n - 1.0);
+    long cnt = (long)(kl - kf) + 1;
+    if (cnt < 1) cnt = 1;
+    const double2 p = P[i];
+    double best = 0.0, bk = 0.0, bu = 0.0;
+    for (long j = 0; j < cnt; ++j) {
+        const double k = kf + (double)j;
+        const double kw = per ? k - FLOOR(k / n) * n : k;
+        const long g = 5 * (long)(base + (long)kw);
+        const double ax = seg[g], ay = seg[g + 1], dx = seg[g + 2], dy = seg[g + 3];
+        const double len2 = seg[g + 4];
+        const double ulo = FMAX(lo - k, 0.0);
+        const double uhi = FMIN(hi - k, 1.0);
+        const double num = (p.x - ax) * dx + (p.y - ay) * dy;
+        double u = len2 > 0.0 ? num / len2 : 0.0;
+        u = FMIN(FMAX(u, ulo), uhi);
+        const double fx = (ax + u * dx) - p.x;
+        const double fy = (ay + u * dy) - p.y;
+        const double d2 = fx * fx + fy * fy;
+        if (j == 0 || d2 < best) {
+            best = d2;
+            bk = kw;
+            bu = u;
+        }
+    }
+    double tnew = bk + bu;
+    if (per && tnew >= n) tnew = tnew - n;
+    double a = tnew - tp;
+    if (per && a < 0.0) a = a + n;
+    double b = tn - tp;
+    if (per && b <= 0.0) b = b + n;
+    if (!(a > 0.0 && a < b)) tnew = t;
+    const double k2 = FLOOR(tnew);
+    const long g2 = 5 * (long)(base + (long)k2);
+    const double u2 = tnew - k2;
+    tau[s] = tnew;
+    P[i] = (double2)(seg[g2] + u2 * seg[g2 + 2], seg[g2 + 1] + u2 * seg[g2 + 3]);
 }
 
 // Smoothing: every marked node that moved this iteration goes back; flags are cleared;
 // out[3] (the first stats row's last slot, zeroed by the quality kernels) becomes 1 when some
-// node went back.
+// node went back. slot (NULL without sliding nodes): a node's slot, whose parameter goes
+// back too.
 __kernel void revert(const int N, __global int *restrict flag, __global double2 *restrict P,
-                     __global const double2 *restrict old, __global double *restrict out)
+                     __global const double2 *restrict old, __global double *restrict out,
+                     __global const int *restrict slot, __global double *restrict tau,
+                     __global const double *restrict tau_old)
 {
     const int i = get_global_id(0);
     if (i >= N || !flag[i]) return;
@@ -805,5 +903,6 @@ __kernel void revert(const int N, __global int *restrict flag, __global double2 
     if (p.x != o.x || p.y != o.y) {
         P[i] = o;
         out[3] = 1.0;
+        if (slot && slot[i] >= 0) tau[slot[i]] = tau_old[slot[i]];
     }
 }

@@ -6,9 +6,11 @@ import math
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 
-__all__ = ["UNTANGLE_METHODS", "EEGTParams"]
+__all__ = ["BOUNDARY_MODES", "TARGETS", "UNTANGLE_METHODS", "EEGTParams"]
 
 UNTANGLE_METHODS = ("auto", "global", "eegt+local", "eegt+global", "eegt")
+BOUNDARY_MODES = ("fixed", "slide", "free")  # core.boundary
+TARGETS = ("regular", "reference")
 
 
 @dataclass(frozen=True)
@@ -87,6 +89,28 @@ class EEGTParams:
             "help": "Shrink step: 'edge' keeps the mean edge length (paper), 'area' the area."
         },
     )
+    boundary: str = field(
+        default="fixed",
+        metadata={
+            "help": "Boundary vertices: 'fixed' stay (paper), 'slide' move along the input "
+            "boundary curve (corners sharper than the feature angle, pinned and non-manifold "
+            "vertices stay), 'free' move freely (only pinned and non-manifold vertices stay)"
+        },
+    )
+    feature_angle: float = field(
+        default=30.0,
+        metadata={
+            "help": "Boundary 'slide': a boundary vertex whose boundary turns by more than "
+            "this many degrees is a corner and stays"
+        },
+    )
+    target: str = field(
+        default="regular",
+        metadata={
+            "help": "Shape each face is pulled towards: 'regular' polygon (paper), or its "
+            "shape in a 'reference' mesh of the same topology (keeps grading and anisotropy)"
+        },
+    )
 
     def __post_init__(self) -> None:
         self._check_types()
@@ -108,6 +132,12 @@ class EEGTParams:
             ),
             (self.polish_iterations >= 0, "polish_iterations must be >= 0"),
             (self.lift_rounds >= 0, "lift_rounds must be >= 0"),
+            (
+                self.boundary in BOUNDARY_MODES,
+                f"boundary must be one of {', '.join(BOUNDARY_MODES)}",
+            ),
+            (0.0 <= self.feature_angle <= 180.0, "feature_angle must be in [0, 180] degrees"),
+            (self.target in TARGETS, f"target must be one of {', '.join(TARGETS)}"),
         ]
         for ok, message in checks:
             if not ok:

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .backends import make_engine
+from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .engine_numpy import NumpyEngine
 from .faces import FaceSet, as_faceset
 from .optimize import GlobalOptions, active_submesh, lift_min_quality, stops, untangle_global
@@ -17,6 +18,7 @@ from .optimize.device import solver_for
 from .optimize.reference import Factors
 from .params import EEGTParams
 from .quality import Stats, _check_points, group_quality, mesh_stats
+from .reference_shapes import reference_targets
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import free_nodes
 
@@ -77,6 +79,7 @@ def untangle_and_smooth(
     backend: str = "numpy",
     progress: Progress | None = None,
     targets=None,
+    reference_points=None,
 ) -> EEGTResult:
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
@@ -96,8 +99,15 @@ def untangle_and_smooth(
     each face is pulled towards its target's shape (translation, rotation, uniform scale
     free), and every quality of the run (best iterate, before/after, never worse than the
     input) is the mean ratio against the targets. Unusable targets (non-finite, a corner
-    not strictly convex) fall back to the regular polygon (`n_target_fallback`). The global
-    stage (untangle "global", polish, lift) still optimises regular shapes.
+    not strictly convex) fall back to the regular polygon (`n_target_fallback`).
+
+    `reference_points` with `params.target == "reference"`: an (N, 2) mesh of the same
+    topology whose faces' shapes are the targets (core.reference_shapes: counterclockwise,
+    finite; its inverted faces fall back to the regular polygon).
+
+    `params.boundary`: "fixed" (boundary nodes never move), "slide" (they move along the
+    input boundary polyline; corners above `params.feature_angle`, pinned and non-manifold
+    nodes stay), "free" (only pinned and non-manifold nodes stay); see core.boundary.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
@@ -105,17 +115,27 @@ def untangle_and_smooth(
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
     p = _check_points(points)
     fs = as_faceset(faces, p.shape[0])
+    if params.target == "reference":
+        if targets is not None:
+            raise ValueError("give targets or a reference mesh (target 'reference'), not both")
+        targets = reference_targets(reference_points, fs, p.shape[0])
+    elif reference_points is not None:
+        raise ValueError("reference_points given but target is 'regular': set "
+                         "target='reference' to use them")
     tg = prepare_targets(targets, fs)
     free = free_nodes(p.shape[0], fs, fixed)
-    if not free.any():
+    if params.boundary == "fixed" and not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
     center, scale = _normalisation(p, fs)
     work = (p - center) / scale
     _check_orientation(work, fs)
+    motion = boundary_motion(work, fs, fixed, params.boundary, params.feature_angle)
+    if motion is not None:
+        free = motion.movable
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
     frozen = frozen_faces(_as_given(p, fs, center, scale), fs, free)
-    run = _Run(work, fs, free, params, backend, progress, frozen, tg)
+    run = _Run(work, fs, free, params, backend, progress, frozen, tg, motion)
     try:
         status, message = run.execute()
     except _CancelRun:
@@ -232,8 +252,11 @@ class _Run:
     """One run of the pipeline: EEGT phases on an engine, the global stage on the host."""
 
     def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress, frozen,
-                 targets: Targets | None = None):
+                 targets: Targets | None = None, motion: BoundaryMotion | None = None):
         self.p, self.fs, self.free, self.params = p, fs, free, params
+        self.motion = motion
+        slide = None if motion is None else motion.slide
+        self.slide = None if slide is None else SlideView(slide)  # the global stage's
         self.frozen = frozen
         self.n_frozen = int(frozen.sum())  # inverted faces no move can change
         self.backend, self.progress = backend, progress
@@ -241,7 +264,8 @@ class _Run:
         if self.mode == "auto":
             self.mode = "eegt+local" if fs.n_faces >= LOCAL_MIN_FACES else "global"
         self.targets = targets
-        self.engine, self.backend_name = make_engine(backend, p, fs, free, params, targets)
+        self.engine, self.backend_name = make_engine(backend, p, fs, free, params, targets,
+                                                     motion)
         self.before = self.best = self.engine.stats()
         self.best_pts: np.ndarray | None = None  # None: the engine's best buffer holds it
         self.engine.save_best()
@@ -365,6 +389,7 @@ class _Run:
             sub_pts, info = untangle_global(
                 start[nodes], sub, sfree, options,
                 progress=relay if self.progress is not None else None, factors=sub_f,
+                slide=None if self.slide is None else self.slide.sub(nodes, start),
             )
             self.n_global += int(info["iterations"])
             if info.get("status") == "cancelled":
@@ -392,7 +417,7 @@ class _Run:
         """'eegt+local' on a valid mesh: the lift's whole-mesh run maximises the mean quality
         (up to `polish_iterations`), its rounds raise the worst faces (`lift_rounds`)."""
         start = self.best_points()
-        self.lbfgs = solver_for(self.backend_name)
+        self.lbfgs = self._solver()
         options = GlobalOptions(
             lift_first_iter=self.params.polish_iterations,
             lift_rounds=self.params.lift_rounds,
@@ -418,7 +443,7 @@ class _Run:
         def relay(iterations: int, _max_iter: int, n_inv: int) -> None:
             self.report(base + iterations, "global", Stats(n_inv, *self._best_q()))
 
-        self.lbfgs = solver_for(self.backend_name)  # built here: not for runs without one
+        self.lbfgs = self._solver()  # built here: not for runs without one
         options = GlobalOptions(
             max_iter=self.params.max_untangle_iterations + polish,
             polish_iter=polish,
@@ -433,6 +458,7 @@ class _Run:
                 options,
                 progress=relay if self.progress is not None else None,  # no pauses unasked
                 factors=factors,
+                slide=self.slide,
             )
             self.n_global += int(info["iterations"])
             if info.get("status") == "cancelled":
@@ -445,6 +471,11 @@ class _Run:
         self.polished = True
         return self._adopt(pts, start)
 
+    def _solver(self):
+        """The global stage's device solver, or None for the host's (always with sliding
+        nodes: their parameters are variables the device solvers do not have)."""
+        return None if self.slide is not None else solver_for(self.backend_name)
+
     def _adopt(self, pts: np.ndarray, start: np.ndarray) -> Stats:
         """Continue the EEGT engine from `pts` (fixed rows reset to the input's bits); the
         best iterate stays the better of it and the earlier best."""
@@ -455,7 +486,7 @@ class _Run:
             self.engine = self.engine.restarted(pts)
         else:
             self.engine, _ = make_engine(
-                self.backend, pts, self.fs, self.free, self.params, self.targets
+                self.backend, pts, self.fs, self.free, self.params, self.targets, self.motion
             )
         current = self.engine.stats()
         if current.better_than(self.best):
@@ -490,6 +521,7 @@ class _Run:
         out, info = lift_min_quality(
             pts, groups, self.free, options,
             progress=relay if self.progress is not None else None, factors=factors,
+            slide=self.slide,
         )
         self.n_global += int(info["iterations"])
         if info.get("status") == "cancelled":

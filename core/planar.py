@@ -9,6 +9,7 @@ from .params import EEGTParams
 from .pipeline import EEGTResult, Progress, _normalisation, untangle_and_smooth
 from .plane import PlaneFrame
 from .quality import _check_points
+from .reference_shapes import reference_to_2d
 from .topology import free_nodes
 
 __all__ = ["untangle_and_smooth_3d"]
@@ -24,6 +25,7 @@ def untangle_and_smooth_3d(
     tol: float = 1e-5,
     project: bool = False,
     targets=None,
+    reference_points=None,
 ) -> EEGTResult:
     """Like untangle_and_smooth for (N, 3) points on a plane; result points are (N, 3).
 
@@ -35,7 +37,9 @@ def untangle_and_smooth_3d(
     the others at their orthogonal projection. Like the 2D core, it works in centred
     coordinates scaled by a power of two, so units from 1e-300 to 1e300 give the same result.
     ``targets`` are per-corner 2D target shapes, passed through as they are (intrinsic 2D
-    shapes, see untangle_and_smooth).
+    shapes, see untangle_and_smooth). ``reference_points`` (target "reference") may be (N, 3),
+    a planar reference anywhere in space (taken in its own plane, faces counterclockwise;
+    refused when not planar within ``tol``), or (N, 2).
     """
     original = _check_points(points3d, 3)
     fs = as_faceset(faces, original.shape[0])
@@ -45,7 +49,11 @@ def untangle_and_smooth_3d(
     work = (original - center) / scale
     frame = PlaneFrame.fit(work, faces, tol=tol, project=project, fixed=fixed)
     flat = frame.to_2d(work)
-    res = untangle_and_smooth(flat, faces, fixed, params, backend, progress, targets)
+    if reference_points is not None and np.ndim(reference_points) == 2 and \
+            np.shape(reference_points)[1] == 3:
+        reference_points = reference_to_2d(reference_points, fs, original.shape[0], tol)
+    res = untangle_and_smooth(flat, faces, fixed, params, backend, progress, targets,
+                              reference_points)
     out = original.copy()
     if res.status != "cancelled":
         moved = res.moved & np.any(res.points != flat, axis=1)

@@ -47,6 +47,7 @@ import bpy
 from ..core import EEGTParams
 from . import metrics, props, report, runner, uv_props, uv_runner
 from .ops_untangle import _printer
+from .reference_input import ReferenceSource, from_file
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_FAILED = 0, 1, 2, 3
 MESH_EXTENSIONS = (".obj", ".ply", ".stl")
@@ -123,6 +124,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "(tangles, default) or every face (selection)")
     p.add_argument("--project", action="store_true",
                    help="project slightly non-planar meshes onto their plane")
+    p.add_argument("--reference", metavar="OBJ", default=None,
+                   help="target 'reference': an OBJ file of the same topology (same vertex "
+                        "order and faces) whose face shapes are the targets (implies --target "
+                        "reference)")
+    p.add_argument("--reference-key", metavar="NAME", default=None,
+                   help="target 'reference': the shape key whose face shapes are the targets "
+                        "(implies --target reference; default with --target reference: the "
+                        "Basis key when another key is active)")
     p.add_argument("--report", metavar="JSON", help="write a JSON report here")
     p.add_argument("--metrics", type=metrics.parse_names, metavar="LIST", default=(),
                    help="add the before/after min/mean/max and count beyond the threshold of "
@@ -134,7 +143,27 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _reference(ns: argparse.Namespace, params: EEGTParams) -> ReferenceSource | None:
+    """The reference choice of target 'reference' (None for 'regular'); UsageError for a
+    contradiction or an unreadable file."""
+    if params.target != "reference":
+        return None
+    if ns.reference and ns.reference_key:
+        raise UsageError("eegt: give --reference or --reference-key, not both")
+    if ns.reference:
+        try:
+            return from_file(ns.reference)
+        except ValueError as exc:
+            raise UsageError(f"eegt: {exc}") from None
+    return ReferenceSource(key=ns.reference_key or "")
+
+
 def _params(ns: argparse.Namespace) -> EEGTParams:
+    if (ns.reference or ns.reference_key) and ns.target is None:
+        ns.target = "reference"
+    elif (ns.reference or ns.reference_key) and ns.target != "reference":
+        raise UsageError(f"eegt: --reference / --reference-key need --target reference, "
+                         f"not {ns.target}")
     base = EEGTParams.paper() if ns.paper else EEGTParams()
     changes = {f.name: getattr(ns, f.name) for f in dataclasses.fields(EEGTParams)
                if getattr(ns, f.name) is not None}
@@ -429,8 +458,11 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         rep["input"], rep["output"] = ns.input, ns.output
         _check_paths(ns)
         params = _params(ns)
+        reference = _reference(ns, params)
         rep["params"] = params.as_dict() if hasattr(params, "as_dict") else \
             dataclasses.asdict(params)
+        if reference is not None:
+            rep["reference"] = reference.describe()
         backend, device = _backend(ns.backend, ns.device)
         rep["backend_requested"] = backend
         _load(ns.input)
@@ -453,7 +485,8 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
                 measured.append(None)  # --metrics measure positions, which --uv leaves alone
                 print("EEGT " + res.line(), flush=True)
                 continue
-            job = runner.prepare(obj, use_pinned=not ns.no_pinned, project=ns.project)
+            job = runner.prepare(obj, use_pinned=not ns.no_pinned, project=ns.project,
+                                 reference=reference)
             runner.compute(job, params, backend, progress, device)
             ok = job.error is None and job.result is not None and \
                 job.result.status in ("valid", "untangled")

@@ -14,10 +14,11 @@ from collections.abc import Callable
 from typing import Any
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty
+from bpy.props import BoolProperty, EnumProperty, StringProperty
 
 from . import modes, props, runner
 from .prefs import resolve_backend
+from .reference_input import ReferenceSource
 
 PRINT_EVERY = 1.0  # seconds: the longest a background run stays silent between progress lines
 
@@ -39,10 +40,14 @@ def _annotations() -> dict[str, Any]:
     ann["project"] = BoolProperty(
         name="Project to Plane", default=False, options=skip,
         description="Project a slightly non-planar mesh onto its plane instead of refusing it")
+    ann["reference_key"] = StringProperty(name="Reference Key", default="", options=skip,
+                                          description=props.REFERENCE_KEY_HELP)
+    ann["reference_object"] = StringProperty(name="Reference Object", default="", options=skip,
+                                             description=props.REFERENCE_OBJECT_HELP)
     return ann
 
 
-EXTRA_OPTIONS = ("backend", "use_pinned", "project")
+EXTRA_OPTIONS = ("backend", "use_pinned", "project", "reference_key", "reference_object")
 
 
 class _Worker:
@@ -90,6 +95,7 @@ class EEGTRunMixin:
 
     _compute = staticmethod(runner.compute)
     _scene_options: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    _id_names: tuple[str, ...] = ()  # options the scene holds as an ID and the call as its name
 
     def _fill_from_scene(self, context: bpy.types.Context) -> None:
         for group, names in self._scene_options:
@@ -98,7 +104,10 @@ class EEGTRunMixin:
                 continue
             for name in names:
                 if not self.properties.is_property_set(name):
-                    setattr(self, name, getattr(settings, name))
+                    value = getattr(settings, name)
+                    if name in self._id_names:
+                        value = value.name if value is not None else ""
+                    setattr(self, name, value)
 
     @staticmethod
     def _has_changes(jobs: list[Any]) -> bool:
@@ -201,6 +210,7 @@ class MESH_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}  # noqa: RUF012
     __annotations__ = _annotations()
     _scene_options = (("eegt_settings", (*(f.name for f in props.param_fields()), *EXTRA_OPTIONS)),)
+    _id_names = ("reference_object",)
 
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
@@ -212,13 +222,35 @@ class MESH_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
             return False
         return True
 
+    def draw(self, context: bpy.types.Context) -> None:
+        """The redo panel: every option, the reference choice with search fields."""
+        from .panel import draw_boundary_target
+
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        draw_boundary_target(layout, self, context.active_object)
+        skip = {*props.MAIN_PANEL_FIELDS, "reference_key", "reference_object"}
+        for name in self.properties.bl_rna.properties.keys():
+            if name not in skip and name != "rna_type":
+                layout.prop(self, name)
+
+    def _setup(self, context: bpy.types.Context):
+        """The shared set-up, then the reference shapes when the target is 'reference'."""
+        setup = super()._setup(context)
+        self._reference = None
+        if setup is not None and setup[0].target == "reference":
+            self._reference = ReferenceSource(key=self.reference_key,
+                                              object=self.reference_object)
+        return setup
+
     def _prepare(
         self, context: bpy.types.Context
     ) -> tuple[list[bpy.types.Object], list[runner.Job]]:
         """Read every target mesh (call in Object Mode: Edit Mode data is flushed by then)."""
         objs = self._targets
         jobs = [runner.prepare(o, selected_only=self._edit, use_pinned=self.use_pinned,
-                               project=self.project) for o in objs]
+                               project=self.project, reference=self._reference) for o in objs]
         return objs, jobs
 
     def _finish(self, objs: list[bpy.types.Object], jobs: list[runner.Job]) -> set[str]:

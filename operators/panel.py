@@ -16,6 +16,29 @@ class _EEGTTab:
     bl_category = "EEGT"
 
 
+def draw_boundary_target(layout: bpy.types.UILayout, owner, obj) -> None:
+    """Boundary mode, feature angle (slide), target shape and, for target 'reference', its
+    shape key (searched among ``obj``'s keys) or object: the scene settings or an
+    operator's own properties (its reference object is a name there)."""
+    col = layout.column(align=True)
+    col.prop(owner, "boundary")
+    if owner.boundary == "slide":
+        col.prop(owner, "feature_angle")
+    col = layout.column(align=True)
+    col.prop(owner, "target")
+    if owner.target != "reference":
+        return
+    keys = obj.data.shape_keys if obj is not None and obj.type == "MESH" else None
+    if keys is not None:
+        col.prop_search(owner, "reference_key", keys, "key_blocks", text="Key")
+    else:
+        col.prop(owner, "reference_key", text="Key")
+    if isinstance(owner.bl_rna.properties["reference_object"], bpy.types.PointerProperty):
+        col.prop(owner, "reference_object", text="Object")
+    else:
+        col.prop_search(owner, "reference_object", bpy.data, "objects", text="Object")
+
+
 class VIEW3D_PT_eegt(_EEGTTab, bpy.types.Panel):
     """Parameters, pins, analysis and the Untangle & Smooth button"""
 
@@ -36,6 +59,7 @@ class VIEW3D_PT_eegt(_EEGTTab, bpy.types.Panel):
                      icon="RESTRICT_SELECT_OFF")
         col.prop(settings, "quality_measure", text="Measure")
         layout.prop(settings, "backend")
+        draw_boundary_target(layout, settings, context.active_object)
         row = layout.row(align=True)
         row.operator("mesh.eegt_pin", icon="PINNED")
         row.operator("mesh.eegt_unpin", icon="UNPINNED")
@@ -58,7 +82,8 @@ class VIEW3D_PT_eegt_params(_EEGTTab, bpy.types.Panel):
         layout.use_property_decorate = False
         settings = context.scene.eegt_settings
         for f in props.param_fields():
-            layout.prop(settings, f.name)
+            if f.name not in props.MAIN_PANEL_FIELDS:
+                layout.prop(settings, f.name)
 
 
 class VIEW3D_PT_eegt_last_run(_EEGTTab, bpy.types.Panel):

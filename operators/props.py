@@ -30,6 +30,18 @@ STRING_CHOICES: dict[str, tuple[tuple[str, str, str], ...]] = {
         ("edge", "Edge", "Shrink keeps the mean edge length (paper)"),
         ("area", "Area", "Shrink keeps the mean area"),
     ),
+    "boundary": (
+        ("fixed", "Fixed", "Boundary vertices stay where they are (paper)"),
+        ("slide", "Slide", "Boundary vertices slide along the input boundary and never leave "
+         "it; corners sharper than the Feature Angle, pinned and non-manifold vertices stay"),
+        ("free", "Free", "Boundary vertices move freely; only pinned and non-manifold vertices "
+         "stay"),
+    ),
+    "target": (
+        ("regular", "Regular", "Pull every face towards the regular polygon (paper)"),
+        ("reference", "Reference", "Pull every face towards its own shape in a reference of "
+         "the same topology (a shape key or an object): keeps grading and anisotropy"),
+    ),
 }
 
 LABELS: dict[str, str] = {
@@ -46,7 +58,13 @@ LABELS: dict[str, str] = {
     "untangle": "Untangle With",
     "stall_iterations": "Stall Iterations",
     "polish_iterations": "Polish Iterations",
+    "boundary": "Boundary",
+    "feature_angle": "Feature Angle",
+    "target": "Target Shape",
 }
+
+# Fields the main panel draws itself (with the reference choice), not the Parameters list.
+MAIN_PANEL_FIELDS = ("boundary", "feature_angle", "target")
 
 # Lower bounds matching EEGTParams.__post_init__ (soft_max keeps the sliders usable).
 BOUNDS: dict[str, dict[str, float]] = {
@@ -61,6 +79,7 @@ BOUNDS: dict[str, dict[str, float]] = {
     "polish_iterations": {"min": 0, "soft_max": 5000},
     "max_smooth_iterations": {"min": 0, "soft_max": 5000},
     "distance_refresh": {"min": 1, "soft_max": 100},
+    "feature_angle": {"min": 0.0, "max": 180.0, "soft_max": 180.0},
 }
 
 BACKEND_ITEMS: tuple[tuple[str, str, str], ...] = (
@@ -81,6 +100,16 @@ def measure_property(**kw: Any) -> Any:
     return EnumProperty(name="Measure", items=MEASURE_ITEMS, default="mean_ratio",
                         description="Element quality measure to compute, store as a face "
                                     "attribute and show as the heat map", **kw)
+
+
+REFERENCE_KEY_HELP = ("Target Reference: the shape key whose face shapes are the targets "
+                      "(empty: the Basis key when another key is being edited)")
+REFERENCE_OBJECT_HELP = ("Target Reference: a mesh object of the same topology whose face "
+                         "shapes are the targets (instead of a shape key)")
+
+
+def _is_mesh(_self: Any, obj: Any) -> bool:
+    return obj.type == "MESH"
 
 
 def param_fields() -> list[dataclasses.Field]:
@@ -120,7 +149,7 @@ def blender_property(f: dataclasses.Field, options: set[str] | None = None) -> A
                            soft_max=int(bounds.get("soft_max", 2**31 - 1)))
     if isinstance(default, float):
         return FloatProperty(name=name, description=desc, default=default, **opt,
-                             min=bounds.get("min", -3.4e38),
+                             min=bounds.get("min", -3.4e38), max=bounds.get("max", 3.4e38),
                              soft_max=bounds.get("soft_max", 3.4e38),
                              precision=4 if default and abs(default) < 0.01 else 3)
     if isinstance(default, str) and f.name in STRING_CHOICES:
@@ -167,6 +196,11 @@ def _settings_class() -> type:
     annotations["project"] = BoolProperty(
         name="Project to Plane", default=False,
         description="Project a slightly non-planar mesh onto its plane instead of refusing it")
+    annotations["reference_key"] = StringProperty(name="Reference Key", default="",
+                                                  description=REFERENCE_KEY_HELP)
+    annotations["reference_object"] = bpy.props.PointerProperty(
+        name="Reference Object", type=bpy.types.Object, poll=_is_mesh,
+        description=REFERENCE_OBJECT_HELP)
     return type("EEGT_PG_settings", (bpy.types.PropertyGroup,), {
         "__annotations__": annotations,
         "__doc__": "EEGT parameters of this scene (defaults for the operator)",

@@ -19,7 +19,9 @@ import numpy as np
 from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
 from ..core.pipeline import frozen_note
 from ..core.plane import PlaneFrame
-from . import mesh_io
+from ..core.reference_shapes import reference_targets, reference_to_2d
+from . import mesh_io, reference_input
+from .reference_input import ReferenceSource
 
 Progress = Callable[[int, str, Any], bool]
 
@@ -139,6 +141,8 @@ class Job:
     frame: Any = None
     points2d: np.ndarray | None = None
     project: bool = False  # put every free node on the fixed nodes' plane (PlaneFrame.fit)
+    reference2d: np.ndarray | None = None  # (n, 2) reference positions (target "reference")
+    targets: np.ndarray | None = None  # (n_corners, 2) their face corners: the stats' targets
     notes: list[str] = field(default_factory=list)
     error: str | None = None
     result: Any = None
@@ -165,12 +169,13 @@ def _fail(job: Job, message: str) -> Job:
 
 
 def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: bool = True,
-            project: bool = False) -> Job:
+            project: bool = False, reference: ReferenceSource | None = None) -> Job:
     """Read one mesh object into a :class:`Job` (sets ``job.error`` for bad input).
 
     ``selected_only``: only the selected faces move; vertices of unselected faces (the
     selection border and everything outside) stay fixed. Loose vertices and the vertices of
-    loose edges never move.
+    loose edges never move. ``reference`` (target "reference"): where the reference shapes
+    come from (``reference_input``); a missing, mismatched or non-planar one is an error.
     """
     me = obj.data
     job = Job(object=obj.name, mesh=me.name, co=np.zeros((0, 3), np.float32))
@@ -240,6 +245,15 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     except ValueError as exc:
         return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
     job.project = project
+    if reference is not None:
+        try:
+            ref3d, what = reference_input.reference_positions(obj, reference, job.key_name)
+            job.reference2d = reference_to_2d(ref3d[nodes].astype(np.float64), job.faces,
+                                              nodes.size, PLANE_TOL)
+            job.targets = reference_targets(job.reference2d, job.faces, nodes.size)
+        except ValueError as exc:
+            return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        job.notes.append(f"quality against the face shapes of {what}")
     if project and job.frame.fixed_offset > PLANE_TOL * job.frame.size:
         job.notes.append(f"boundary/pinned vertices up to {job.frame.fixed_offset:.3g} off the "
                          f"plane were kept where they are (they never move)")
@@ -264,7 +278,8 @@ def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Prog
         select_opencl_device(device)
     try:
         res = untangle_and_smooth(job.points2d, job.faces, fixed=job.fixed, params=params,
-                                  backend=backend, progress=progress)
+                                  backend=backend, progress=progress,
+                                  reference_points=job.reference2d)
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return
@@ -303,14 +318,15 @@ def _positions_to_write(job: Job, res: Any) -> tuple[np.ndarray | None, Any]:
     if moved.any():
         out = _placed(job, res.points, moved, free)
         if out is not None:
-            written = mesh_stats(job.frame.to_2d(out[job.nodes].astype(np.float64)), job.faces)
+            written = mesh_stats(job.frame.to_2d(out[job.nodes].astype(np.float64)), job.faces,
+                                 targets=job.targets)
             if improves(written, before):
                 return out, written
     if job.project:  # the projection alone
         out = _placed(job, res.points, np.zeros_like(moved), free)
         if out is not None:
             return out, mesh_stats(job.frame.to_2d(out[job.nodes].astype(np.float64)),
-                                   job.faces)
+                                   job.faces, targets=job.targets)
     return None, None
 
 
@@ -401,10 +417,13 @@ def store_last_run(obj: bpy.types.Object, result: ObjectResult) -> None:
 def run_object(obj: bpy.types.Object, params: EEGTParams, *, backend: str = "numpy",
                device: str | None = None, selected_only: bool = False, use_pinned: bool = True,
                project: bool = False, progress: Progress | None = None,
-               write: bool = True) -> ObjectResult:
+               write: bool = True, reference: ReferenceSource | None = None) -> ObjectResult:
     """Prepare, compute and apply in one call (Object Mode, main thread)."""
     t0 = time.perf_counter()
-    job = prepare(obj, selected_only=selected_only, use_pinned=use_pinned, project=project)
+    if params.target == "reference" and reference is None:
+        reference = ReferenceSource()
+    job = prepare(obj, selected_only=selected_only, use_pinned=use_pinned, project=project,
+                  reference=reference if params.target == "reference" else None)
     compute(job, params, backend, progress, device)
     result = apply(obj, job, write=write)
     if result.seconds == 0.0:

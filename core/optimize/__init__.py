@@ -17,6 +17,8 @@ Where things live (NumPy and OpenCL twins side by side):
 - stage drivers (eps continuation and polish, the lift): `stages.untangle_global`,
   `stages.lift_min_quality`; what they are handed: `options.GlobalOptions`.
 - which solver runs: `device.solver_for`.
+- boundary sliding (a sliding node's parameter on its curve as its variable, order kept in
+  the line search): `slide.SlideState`, `slide.SlideProblem` (host solver only).
 
 The EEGT iteration itself (transform, stitching with the weights f(d) g(q) of eq. 20-21) is
 in `core/transform.py` and `core/engine_numpy.py`, twinned by `core/engine_opencl.py` and

@@ -51,6 +51,25 @@ class State:
     def pack(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         return np.concatenate([x[self.fidx], y[self.fidx]])
 
+    @property
+    def size(self) -> int:
+        """Length of v."""
+        return 2 * self.nf
+
+    @property
+    def written(self) -> np.ndarray:
+        """The nodes v moves (`unpack` gives the others as they were)."""
+        return self.fidx
+
+    def preconditioner(self, precond: np.ndarray) -> np.ndarray:
+        """The diagonal preconditioner of v from the energy's per-node one."""
+        return np.tile(precond[self.fidx], 2)
+
+    def view(self, en):
+        """The energy as `lbfgs` sees it for this state (here: itself; core.optimize.slide
+        puts the sliding nodes' parameters in between)."""
+        return en
+
 
 def lbfgs(
     en: FoldoverEnergy,
@@ -81,7 +100,7 @@ def lbfgs(
     layout, fixed = en._packed(st)
     evaluate, gradient = en._eval, en._grad
     mul, red, amax = np.multiply, np.add.reduce, np.maximum.reduce
-    n2 = 2 * st.nf
+    n2 = st.size
     z = np.concatenate([v0, fixed])  # the energy's input: trial points go into z[:n2]
     zv = z[:n2]
     tmp = np.empty(n2)  # scratch: a product before its sum, a scaled vector
@@ -91,7 +110,7 @@ def lbfgs(
     v = v0
     e, _, ok = evaluate(z, layout, eps)
     g = gradient(layout)[:n2] if ok else np.zeros(n2)
-    dpre = np.tile(en.precond[st.fidx], 2)
+    dpre = st.preconditioner(en.precond)
     # memory: (s, y, rho = 1 / s.y, s.y, y.(dpre y)) per pair, oldest first
     mem: list[tuple[np.ndarray, np.ndarray, float, float, float]] = []
     e_hist = [e]

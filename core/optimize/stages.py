@@ -10,10 +10,12 @@ from typing import Any
 
 import numpy as np
 
+from ..boundary import SlideView
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
 from .options import GlobalOptions, Solver
 from .reference import Factors
-from .solver import State, stops
+from .slide import make_state
+from .solver import State, lbfgs, stops
 from .submesh import active_submesh
 
 __all__ = ["lift_min_quality", "untangle_global"]
@@ -42,6 +44,25 @@ def _checked_input(points, free) -> tuple[np.ndarray, np.ndarray]:
     return P, free
 
 
+def _untangle_state(
+    P: np.ndarray, free: np.ndarray, slide: SlideView | None, en: FoldoverEnergy
+) -> tuple[State, bool]:
+    """The state `untangle_global` starts with, and whether the sliding nodes join later.
+    While some corner is inverted the sliding nodes stay (the foldover energy would pull
+    them to their neighbours: every trial step past one is refused, and the line search
+    stalls); they slide once the mesh is valid, or from the start when nothing else moves."""
+    if slide is None or en.i0.size == 0:
+        return make_state(P, free, slide), False
+    if float(np.min(en.dets(P[:, 0], P[:, 1]))) > 0.0:
+        return make_state(P, free, slide), False
+    _, local = slide.here(P.shape[0])
+    rest = free.copy()
+    rest[local] = False
+    if not rest.any():
+        return make_state(P, free, slide), False
+    return State(P, rest), True
+
+
 def untangle_global(
     points: np.ndarray,
     groups: Mapping[int, np.ndarray],
@@ -49,16 +70,18 @@ def untangle_global(
     options: GlobalOptions | None = None,
     progress: Callable[[int, int, int], Any] | None = None,
     factors: Factors | None = None,
+    slide: SlideView | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Untangle a planar polygon mesh by minimising the foldover-free energy (eps continuation).
 
     points: (N, 2) float64; groups: arity -> (F_n, n) int node arrays, counterclockwise = valid;
     free: (N,) bool mask of the nodes that may move; options: budgets (max_iter, polish_iter,
     polish_power, time_limit) and the solver (`GlobalOptions`; None: the defaults); factors:
-    per-face target shapes (`reference.Factors`, aligned with groups; None: regular polygons).
-    progress(iterations, max_iter, n_inverted) is called after each round and every
-    `tick_every` L-BFGS iterations inside it (a few tenths of a second of work on any mesh
-    size); a falsy answer other than None cancels (`stops`).
+    per-face target shapes (`reference.Factors`, aligned with groups; None: regular polygons);
+    slide: the free nodes that slide along their boundary curves (core.optimize.slide; the
+    host solver then runs). progress(iterations, max_iter, n_inverted) is called after each
+    round and every `tick_every` L-BFGS iterations inside it (a few tenths of a second of
+    work on any mesh size); a falsy answer other than None cancels (`stops`).
 
     Returns (new points, info); non-free rows are bit-identical to the input. Once valid, steps
     that would invert a corner are rejected, so a valid iterate stays valid; when no valid one
@@ -73,9 +96,9 @@ def untangle_global(
         raise ValueError("points contain NaN or inf")
     opt = options if options is not None else GlobalOptions()
     max_iter, polish_iter = opt.max_iter, opt.polish_iter
-    run_lbfgs = opt.run()
     en = FoldoverEnergy(P, groups, free, factors)
-    st = State(P, free)
+    run_lbfgs = opt.run() if slide is None else lbfgs
+    st, later = _untangle_state(P, free, slide, en)
     n_inv = en.n_inverted(st.x, st.y)
     info: dict[str, Any] = {
         "iterations": 0,
@@ -88,7 +111,7 @@ def untangle_global(
         "seconds_per_iter": 0.0,
         "status": "nothing to do",
     }
-    if en.i0.size == 0 or st.nf == 0:
+    if en.i0.size == 0 or st.size == 0:
         info["seconds"] = time.perf_counter() - t_start
         return P, info
 
@@ -123,7 +146,7 @@ def untangle_global(
                 cancel = cancel or stops(progress(done + it, max_iter, n_now))
                 return not cancel
 
-        v, its = run_lbfgs(en, st, v, eps, max_it=cap, guard=guard, tick=tick)
+        v, its = run_lbfgs(st.view(en), st, v, eps, max_it=cap, guard=guard, tick=tick)
         total += its
         if guard:
             polish_used += its
@@ -134,6 +157,9 @@ def untangle_global(
         n_inv = en.n_inverted(x, y)
         if n_inv <= best_inv:
             best_v, best_inv = v, n_inv
+        if later and valid:  # valid now: the sliding nodes join (best_v is this iterate)
+            st, later = make_state(np.column_stack([x, y]), free, slide), False
+            v = best_v = st.pack(x, y)
         if cancel or (progress is not None and stops(progress(total, max_iter, n_inv))):
             status = "cancelled"
             break
@@ -152,8 +178,8 @@ def untangle_global(
 
     x, y = st.unpack(best_v)
     out = P.copy()
-    out[st.fidx, 0] = x[st.fidx]
-    out[st.fidx, 1] = y[st.fidx]
+    out[st.written, 0] = x[st.written]
+    out[st.written, 1] = y[st.written]
     n_out = en.n_inverted(x, y)
     if not status:
         status = "untangled" if n_out == 0 else "failed"
@@ -180,13 +206,15 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
     mesh (docs/global_untangle.md, "Restarts")."""
     chunk, max_it, tol = opt.lift_chunk, opt.lift_first_iter, opt.lift_rel_tol
     if chunk <= 0:
-        return run_lbfgs(en, st, v, EPS_MIN, max_it=max_it, guard=True, rel_tol=tol, tick=tick)
+        return run_lbfgs(st.view(en), st, v, EPS_MIN, max_it=max_it, guard=True, rel_tol=tol,
+                         tick=tick)
     total = 0
     e0 = en.value(*st.unpack(v), EPS_MIN)
     while total < max_it:
         sub = None if tick is None else (lambda it, base=total: tick(base + it))
         v, its = run_lbfgs(
-            en, st, v, EPS_MIN, max_it=min(chunk, max_it - total), guard=True, rel_tol=tol,
+            st.view(en), st, v, EPS_MIN, max_it=min(chunk, max_it - total), guard=True,
+            rel_tol=tol,
             tick=sub,
         )
         total += its
@@ -206,6 +234,7 @@ def lift_min_quality(
     options: GlobalOptions | None = None,
     progress: Callable[[int, int, float, float], Any] | None = None,
     factors: Factors | None = None,
+    slide: SlideView | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Raise the worst element quality of a valid mesh without lowering its mean quality.
 
@@ -223,21 +252,22 @@ def lift_min_quality(
     progress(iterations, rounds_done, q_min, q_avg) after each run and every few tenths of a
     second inside one, with the kept iterate's qualities; a falsy answer other than None
     cancels (`stops`) and the input is returned. options.solver runs the L-BFGS solves;
-    factors: per-face target shapes (the qualities are then against them).
+    factors: per-face target shapes (the qualities are then against them); slide: the free
+    nodes that slide along their boundary curves (the host solver then runs).
     """
     t_start = time.perf_counter()
     P, free = _checked_input(points, free)
     opt = options if options is not None else GlobalOptions()
     rounds = opt.lift_rounds
-    run_lbfgs = opt.run()
     en = LiftEnergy(P, groups, free, factors)
-    st = State(P, free)
+    st = make_state(P, free, slide)
+    run_lbfgs = opt.run() if type(st) is State else lbfgs
     info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
     q = en.element_quality(st.x, st.y) if en.n_elem else np.zeros(0)
     m0 = float(q.min()) if q.size else 0.0
     a0 = float(q.mean()) if q.size else 0.0
     info.update(q_min_in=m0, q_avg_in=a0, q_min_out=m0, q_avg_out=a0)
-    if q.size == 0 or st.nf == 0 or not m0 > 0.0 or not np.all(np.isfinite(P)):
+    if q.size == 0 or st.size == 0 or not m0 > 0.0 or not np.all(np.isfinite(P)):
         info["seconds"] = time.perf_counter() - t_start
         return P, info
 
@@ -274,10 +304,11 @@ def lift_min_quality(
             sp = np.stack([x[nodes], y[nodes]], axis=1)
             sen = LiftEnergy(sp, sub, sfree, sub_f)
             sen.qc = en.qc
-            sst = State(sp, sfree)
+            sst = make_state(sp, sfree, None if slide is None else
+                             slide.sub(nodes, np.column_stack([x, y])))
             sv, its = run_lbfgs(
-                sen, sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER, guard=True,
-                rel_tol=opt.lift_rel_tol, tick=tick,
+                sst.view(sen), sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER,
+                guard=True, rel_tol=opt.lift_rel_tol, tick=tick,
             )
             sx, sy = sst.unpack(sv)
             xt, yt = x.copy(), y.copy()
@@ -309,7 +340,7 @@ def lift_min_quality(
     if best_v is None:
         return P, info
     x, y = st.unpack(best_v)
-    P[st.fidx, 0] = x[st.fidx]
-    P[st.fidx, 1] = y[st.fidx]
+    P[st.written, 0] = x[st.written]
+    P[st.written, 1] = y[st.written]
     info.update(q_min_out=best_m, q_avg_out=best_a, status="lifted")
     return P, info

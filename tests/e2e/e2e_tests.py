@@ -227,6 +227,29 @@ def t_cli_impossible_exit3():
             f"(grid minimum {best}); --no-write-on-fail leaves it unchanged")
 
 
+@test
+def t_cli_boundary_slide():
+    """--boundary slide in the real Blender: every boundary vertex stays on the input boundary
+    (meshcheck's own polyline test), the corners stay, order is kept, quality beats fixed."""
+    inp = f"{DATA}/quad_hole.obj"
+    out_fixed, _, _, _ = run_cli("boundary_fixed", inp)
+    out_obj, rep, _, secs = run_cli("boundary_slide", inp, ["--boundary", "slide"])
+    c = meshcheck.compare(inp, out_obj)
+    check(c["same_topology"] and c["out"]["n_inverted"] == 0, f"result: {c['out']}")
+    s = meshcheck.slide_check(inp, out_obj)
+    check(s["dist_rel"] <= 1e-6, f"a boundary vertex left the boundary: {s['dist_rel']:.2e}")
+    check(s["corners"] == 4 and s["corner_move_rel"] <= 1e-6, f"corners: {s}")
+    check(s["order_kept"], "boundary order changed")
+    check(s["moved"] >= 20, f"only {s['moved']} boundary vertices slid")
+    f = meshcheck.compare(inp, out_fixed)["out"]
+    check(c["out"]["q_avg"] > f["q_avg"] + 0.01,
+          f"slide q_avg {c['out']['q_avg']:.3f} not above fixed {f['q_avg']:.3f}")
+    _, entries = report_entries(rep)
+    check(entries[0]["status"] == "untangled", f"report {entries[0]['status']}")
+    return (f"{s['moved']} boundary vertices slid (max off-curve {s['dist_rel']:.1e}), "
+            f"q_avg {f['q_avg']:.3f} (fixed) -> {c['out']['q_avg']:.3f}, {secs:.1f} s")
+
+
 def _grid():  # centre positions over [-1, 4]^2 (the U spans [0, 3]^2), step 0.1
     return [i * 0.1 - 1.0 for i in range(51)]
 

@@ -128,6 +128,75 @@ def uv_check(uv, faces, corner_verts):
             "border_loops": [i for i, n in enumerate(node) if n in border]}
 
 
+def boundary_loops(faces):
+    """Closed boundary loops (interior on the left for counterclockwise faces)."""
+    uses = {}
+    for f in faces:
+        for a, b in zip(f, np.roll(f, -1)):
+            uses.setdefault((min(a, b), max(a, b)), []).append((int(a), int(b)))
+    nxt = {pairs[0][0]: pairs[0][1] for pairs in uses.values() if len(pairs) == 1}
+    seen, loops = set(), []
+    for s in nxt:
+        if s in seen:
+            continue
+        loop, v = [], s
+        while v not in seen:
+            seen.add(v)
+            loop.append(v)
+            v = nxt[v]
+        loops.append(np.array(loop))
+    return loops
+
+
+def slide_check(path_in, path_out, feature_deg=30.0):
+    """Boundary sliding: each output boundary vertex's distance to its input loop polyline
+    (relative to the size), how far the corners (turning angle > feature_deg) moved, whether
+    every loop kept its vertices' cyclic order, how many boundary vertices moved."""
+    vi, fi = read_obj(path_in)
+    vo, _ = read_obj(path_out)
+    xi, _ = plane_2d(vi, fi)
+    xo = plane_2d_like(vi, fi, vo)
+    size = float(np.ptp(xi, axis=0).max())
+    res = {"dist_rel": 0.0, "corners": 0, "corner_move_rel": 0.0, "order_kept": True,
+           "moved": 0}
+    for loop in boundary_loops(fi):
+        a = xi[loop]
+        b = np.roll(a, -1, axis=0)
+        d = b - a
+        q = xo[loop]
+        u = np.clip(((q[:, None] - a[None]) * d[None]).sum(2) / (d * d).sum(1)[None], 0, 1)
+        dist = np.sqrt(((a[None] + u[..., None] * d[None] - q[:, None]) ** 2).sum(2))
+        k = dist.argmin(1)
+        t = k + u[np.arange(len(loop)), k]
+        res["dist_rel"] = max(res["dist_rel"], float(dist.min(1).max()) / size)
+        e1, e2 = a - np.roll(a, 1, axis=0), d
+        cos = (e1 * e2).sum(1) / np.sqrt((e1 * e1).sum(1) * (e2 * e2).sum(1))
+        corner = cos < math.cos(math.radians(feature_deg))
+        res["corners"] += int(corner.sum())
+        if corner.any():
+            move = np.sqrt(((q[corner] - a[corner]) ** 2).sum(1)).max() / size
+            res["corner_move_rel"] = max(res["corner_move_rel"], float(move))
+        gaps = (np.roll(t, -1) - t) % len(loop)
+        res["order_kept"] &= bool(np.all(gaps > 0) and abs(gaps.sum() - len(loop)) < 1e-6)
+        res["moved"] += int((np.sqrt(((q - a) ** 2).sum(1)) > 1e-4 * size).sum())
+    return res
+
+
+def plane_2d_like(verts_ref, faces, verts):
+    """`verts` in the 2D frame plane_2d gives `verts_ref` (so both compare in one frame)."""
+    n = np.zeros(3)
+    for f in faces:
+        p = verts_ref[f]
+        n += 0.5 * np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)
+    n /= np.linalg.norm(n)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(n, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(n, u)
+    c = verts_ref.mean(axis=0)
+    return np.stack([(verts - c) @ u, (verts - c) @ v], axis=1)
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "stats":
         print(json.dumps(stats(*read_obj(sys.argv[2]))))

@@ -1,0 +1,81 @@
+"""Reference meshes as target shapes (`target="reference"`): each face is pulled towards its
+own shape in a mesh of the same topology, e.g. the undeformed mesh of a mesh deformed by a
+moving body, so that grading and anisotropy (boundary layers) survive the untangling.
+
+The reference's per-corner points become the per-face targets of core.targets (only each
+face's shape counts: a reference in other units, moved or turned, gives the same targets).
+A reference face that is inverted, degenerate or not strictly convex falls back to the
+regular polygon (`n_target_fallback`). A reference of the wrong size, with non-finite
+coordinates, clockwise (negative total signed area) or of zero area is refused with a
+one-line ValueError; in 3D, so is one that is not planar.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .faces import FaceSet, as_faceset
+from .plane import PlaneFrame
+
+__all__ = ["reference_targets", "reference_to_2d"]
+
+
+def _signed_area(p: np.ndarray, fs: FaceSet) -> float:
+    total = 0.0
+    for g in fs.groups:
+        x, y = p[g.nodes, 0], p[g.nodes, 1]
+        total += float(np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y))
+    return 0.5 * total
+
+
+def _checked(reference_points, n_nodes: int, width: int) -> np.ndarray:
+    if reference_points is None:
+        raise ValueError("target 'reference' needs a reference mesh (reference_points: the "
+                         "same mesh's vertices in their reference positions)")
+    try:
+        r = np.array(reference_points, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError("reference_points must be an array of numbers") from None
+    if r.ndim != 2 or r.shape[1] != width:
+        raise ValueError(f"reference_points must be an (N, {width}) array, got shape {r.shape}")
+    if r.shape[0] != n_nodes:
+        raise ValueError(f"reference mesh has {r.shape[0]} vertices, the mesh has {n_nodes} "
+                         "(it must have the same topology)")
+    return r
+
+
+def reference_targets(reference_points, faces, n_nodes: int) -> np.ndarray:
+    """(n_corners, 2) targets: the reference's position of every face corner (the faces'
+    corner order), from an (N, 2) reference with the faces counterclockwise."""
+    fs = as_faceset(faces, n_nodes)
+    r = _checked(reference_points, n_nodes, 2)
+    used = fs.used_nodes(n_nodes)
+    if not np.isfinite(r[used]).all():
+        bad = int(np.count_nonzero(~np.isfinite(r[used]).all(axis=1)))
+        raise ValueError(f"reference mesh has {bad} vertices with NaN or infinite coordinates")
+    span = float(np.max(np.ptp(r[used], axis=0)))
+    scale = 1.0 / span if span > 0.0 else 1.0  # the sign test free of overflow and underflow
+    area = _signed_area((r - r[used].mean(axis=0)) * scale, fs)
+    if area < 0.0:
+        raise ValueError("reference mesh is clockwise (its total signed area is negative): "
+                         "it must have the faces' orientation")
+    if not area > 0.0:
+        raise ValueError("reference mesh has zero total area")
+    return r[fs.indices]
+
+
+def reference_to_2d(reference3d, faces, n_nodes: int, tol: float = 1e-5) -> np.ndarray:
+    """(N, 2) coordinates of an (N, 3) planar reference in its own plane, oriented so that
+    its faces are counterclockwise (the plane's normal is its vector area); ValueError (one
+    line) when it is not planar within `tol` of its size."""
+    fs = as_faceset(faces, n_nodes)
+    r = _checked(reference3d, n_nodes, 3)
+    used = fs.used_nodes(n_nodes)
+    if not np.isfinite(r[used]).all():
+        bad = int(np.count_nonzero(~np.isfinite(r[used]).all(axis=1)))
+        raise ValueError(f"reference mesh has {bad} vertices with NaN or infinite coordinates")
+    try:
+        frame = PlaneFrame.fit(np.where(used[:, None], r, 0.0), fs, tol=tol)
+    except ValueError as exc:
+        raise ValueError(f"reference {str(exc).splitlines()[0]}") from None
+    return frame.to_2d(r)
