@@ -52,9 +52,11 @@ test: lint
 demo: $(STAMP)
 	$(PY) -m bench.demo --out out
 
-# Speed tables of the NumPy core (shared meshes, 1M triangles).
+# The scale table: generated tangled meshes of 100k, 1M and 4M triangles and 1M quads, NumPy
+# and auto (time, quality, peak RSS, time per element) and docs/scale.png. Per-iteration
+# tables of the engines: python -m bench.run.
 bench: $(STAMP)
-	$(PY) -m bench.run
+	$(PY) -m bench.scale --plot docs/scale.png --json build/scale.json
 
 # The paper's Tables 1-3 side by side with our modes, Blender's Smooth Vertices and the peers;
 # rewrites the README's results block and docs/results.md. Robustness: bench.robustness.

@@ -92,7 +92,7 @@ def row(r: dict) -> str:
             f"{its} | {r['rss_mb']:.0f} | {ns:.0f} |")
 
 
-def plot(results: list[dict], path: Path) -> None:
+def plot(results: list[dict], path: Path, note: str = "") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -111,7 +111,8 @@ def plot(results: list[dict], path: Path) -> None:
     ax.set_ylabel("seconds (untangle + smooth, default parameters)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    ax.set_title("Tangled square with three holes (5 % inverted)", fontsize=10)
+    title = "Tangled square with three holes (5 % inverted)"
+    ax.set_title(title + (f"\n{note}" if note else ""), fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
 
@@ -124,10 +125,20 @@ def main() -> None:
     ap.add_argument("--params", default="{}", help="EEGTParams fields as JSON")
     ap.add_argument("--plot", type=Path, help="write the time-against-size picture here")
     ap.add_argument("--json", type=Path, help="write the raw results here")
+    ap.add_argument("--note", default="", help="a second title line for the plot")
+    ap.add_argument("--replot", type=Path, nargs="+", metavar="JSON",
+                    help="no runs: print and plot (with --plot) the results of earlier --json files")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         child(*args.child)
+        return
+    if args.replot:
+        results = [r for path in args.replot for r in json.loads(path.read_text())]
+        for r in results:
+            print(row(r))
+        if args.plot:
+            plot(results, args.plot, args.note)
         return
     params = json.loads(args.params)
     print(f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
@@ -148,7 +159,7 @@ def main() -> None:
     if args.json:
         args.json.write_text(json.dumps(results, indent=1))
     if args.plot:
-        plot(results, args.plot)
+        plot(results, args.plot, args.note)
 
 
 if __name__ == "__main__":
