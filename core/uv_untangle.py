@@ -396,7 +396,7 @@ def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | N
     result so far, until one ends untangled; a whole island that still has inverted faces
     runs again from its best while their number decreases (up to WHOLE_ROUNDS runs). With
     ``smooth_both`` (scope "tangles") a run that only smooths (an island without inverted
-    faces, or the whole island after its tangles were undone in a region) is kept only when
+    faces, or the whole island once more after its tangles were undone) is kept only when
     neither the worst nor the mean quality drops (``_both_better``). The best attempt
     (island stats), or None when nothing changes. Fills ``run``; _Cancel when stopped."""
     isl = _Island(sub, start, pin, tk, params, backend, progress, label, store, run)
@@ -433,12 +433,14 @@ def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | N
                     run.status, run.message = "valid", "smoothing would lower the worst or " \
                         "the mean quality: island unchanged"
                     return None
-            elif best.part and best.after.n_inverted <= run.n_frozen:  # then smooth it all
+            elif best.after.n_inverted <= run.n_frozen:  # untangled: smooth it all again
                 whole = isl.attempt(np.ones(sub.n_faces, dtype=bool), best.points)
                 if whole is not None and _both_better(whole.after, best.after):
+                    where = "in a region" if best.part else "first"
                     best = whole
                     isl.keep(best)
-                    run.message += " (untangled in a region, then smoothed whole)"
+                    run.status = "untangled"
+                    run.message += f" (untangled {where}, then smoothed whole)"
     except ValueError as exc:
         run.status, run.message = "error", _line(exc)
         return best
