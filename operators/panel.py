@@ -25,7 +25,7 @@ def draw_boundary_target(layout: bpy.types.UILayout, owner, obj) -> None:
     if owner.boundary == "slide":
         col.prop(owner, "feature_angle")
     col = layout.column(align=True)
-    col.prop(owner, "target")
+    col.prop(owner, "target", text="Target")
     if owner.target != "reference":
         return
     keys = obj.data.shape_keys if obj is not None and obj.type == "MESH" else None
