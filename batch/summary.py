@@ -71,7 +71,7 @@ def file_entry(result: dict[str, Any]) -> dict[str, Any]:
         "input": result["input"], "output": result.get("output"), "status": status,
         "exit_code": result.get("exit_code"),
         "written": bool(rep.get("written")) if rep else False,
-        "seconds": result.get("seconds", 0.0),
+        "started": result.get("started"), "seconds": result.get("seconds", 0.0),
         "before": combine([o.get("before") for o in objects], faces),
         "after": combine([o.get("after") for o in objects], faces),
         "backend": ",".join(backends), "host": result.get("host", ""),

@@ -178,6 +178,13 @@ def _result(task: Task, **kw: Any) -> Result:
     return res
 
 
+def _stamp(result: Result | None, clock: float) -> Result | None:
+    """The result with the time its file started (seconds since the epoch)."""
+    if result is not None:
+        result.setdefault("started", round(clock, 3))
+    return result
+
+
 def _from_report(task: Task, report: dict[str, Any], elapsed: float, pid: int,
                  log: str) -> Result:
     code = int(report["exit_code"])
@@ -251,12 +258,16 @@ class Run:
         self.report_path = os.path.join(workdir, f"{tag}.json")
         self.log_path = os.path.join(workdir, f"{tag}.log")
         self.timeout = task.get("timeout")
-        self.started = time.monotonic()
+        self.started, self.clock = time.monotonic(), time.time()
         self.proc = _spawn(command(blender, task, self.report_path), self.log_path, env)
         self.result: Result | None = None
 
     def poll(self) -> Result | None:
-        """The result once the process has ended (killed when past its timeout), else None."""
+        """The result once the process has ended (killed when past its timeout), else None;
+        it says when the file started (``started``, seconds since the epoch)."""
+        return _stamp(self._poll(), self.clock)
+
+    def _poll(self) -> Result | None:
         if self.result is not None:
             return self.result
         code = self.proc.poll()
@@ -284,6 +295,9 @@ class Run:
     def kill(self, status: str, message: str) -> Result:
         """Kill the process, remove its temporary files; the result says `status` (timeout
         or cancelled), unless the command had finished and Blender was only exiting."""
+        return _stamp(self._stop(status, message), self.clock)
+
+    def _stop(self, status: str, message: str) -> Result:
         _kill(self.proc)
         _remove_temporaries(self.task.get("output"), self.proc.pid)
         elapsed = time.monotonic() - self.started
@@ -354,7 +368,7 @@ class Served:
         self.timeout = task.get("timeout")
         self.log_start = os.path.getsize(server.log_path) if \
             os.path.exists(server.log_path) else 0
-        self.started = time.monotonic()
+        self.started, self.clock = time.monotonic(), time.time()
         self.result: Result | None = None
         line = json.dumps(file_args(task, self.report_path)) + "\n"
         try:
@@ -365,6 +379,9 @@ class Served:
             server.broken = True
 
     def poll(self) -> Result | None:
+        return _stamp(self._poll(), self.clock)
+
+    def _poll(self) -> Result | None:
         if self.result is not None:
             return self.result
         elapsed = time.monotonic() - self.started
@@ -391,6 +408,9 @@ class Served:
 
     def kill(self, status: str, message: str) -> Result:
         """Kill the server (and this file's run in it); see Run.kill."""
+        return _stamp(self._stop(status, message), self.clock)
+
+    def _stop(self, status: str, message: str) -> Result:
         self.server.kill()
         _remove_temporaries(self.task.get("output"), self.server.proc.pid)
         elapsed = time.monotonic() - self.started

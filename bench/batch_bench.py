@@ -127,6 +127,12 @@ def digest(folder: str) -> dict[str, str]:
     return out
 
 
+def most_at_once(files: list[dict]) -> int:
+    """The most files of a batch report that ran at the same time."""
+    spans = [(f["started"], f["started"] + f["seconds"]) for f in files if f.get("started")]
+    return max((sum(1 for s, e in spans if s <= a + 0.2 < e) for a, _ in spans), default=0)
+
+
 def mode(name: str) -> None:
     """Run one mode on every file; keep its wall time, load and the outputs' hashes."""
     out = f"{WORK}/out_{name}"
@@ -140,10 +146,16 @@ def mode(name: str) -> None:
     hashes = digest(out)
     failed = [ln for ln in p.stdout.splitlines() if ln.startswith("FAILED")]
     report = f"{out}/eegt_report.json"
-    counts = json.load(open(report))["counts"] if os.path.exists(report) else None
+    counts = per_file = at_once = None
+    if os.path.exists(report):
+        with open(report) as fh:
+            files = json.load(fh)["files"]
+        counts = {s: sum(f["status"] == s for f in files) for s in {f["status"] for f in files}}
+        per_file = statistics.mean(f["seconds"] for f in files)
+        at_once = most_at_once(files)
     res = {"mode": name, "wall_s": wall, "exit": p.returncode, "load_before": load0,
            "load_after": load1, "outputs": len(hashes), "hashes": hashes, "failed": failed,
-           "counts": counts, "tail": p.stdout[-1500:]}
+           "counts": counts, "file_s": per_file, "at_once": at_once, "tail": p.stdout[-1500:]}
     with open(f"{RESULTS}/{name}.json", "w") as fh:
         json.dump(res, fh, indent=1)
     shutil.rmtree(out, ignore_errors=True)
@@ -189,16 +201,18 @@ def table() -> None:
     print(f"\n{n} meshes, {info['faces_min']}-{info['faces_max']} triangles "
           f"({info['faces_total'] / n:.0f} on average), {info['blender']}, "
           f"{info['cpus']} cores\n")
-    print("| mode | wall (s) | s / file | files / s | vs shell loop | outputs | load 1 min "
-          "(before / after) |")
-    print("|---|---|---|---|---|---|---|")
+    print("| mode | wall (s) | s / file | files / s | vs shell loop | outputs | at once | "
+          "one file's run (s, mean) | load 1 min (before / after) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     ref = rows.get("loop")
     for name, r in rows.items():
         same = "" if ref is None or name == "loop" else \
             (" identical" if r["hashes"] == ref["hashes"] else " DIFFER")
         speed = f"{ref['wall_s'] / r['wall_s']:.2f}x" if ref else ""
+        own = f"{r['file_s']:.2f}" if r.get("file_s") else ""
         print(f"| {MODES[name]} | {r['wall_s']:.1f} | {r['wall_s'] / n:.2f} | "
               f"{n / r['wall_s']:.2f} | {speed} | {r['outputs']}/{n}{same} | "
+              f"{r.get('at_once') or ''} | {own} | "
               f"{r['load_before'][0]:.2f} / {r['load_after'][0]:.2f} |")
     print(f"\nStart-up of one `blender -b -c eegt --help` (Blender with the extension, parse, "
           f"quit): median {start:.2f} s of {len(info['startup_s'])} "

@@ -390,6 +390,16 @@ def hidden_files(folder):
             if n.startswith(".")]
 
 
+def most_at_once(files, slack=0.2):
+    """The most files of a report that ran at the same time (from their start times and
+    seconds; overlaps shorter than `slack` seconds are the poll's, not real)."""
+    spans = [(f["started"], f["started"] + f["seconds"]) for f in files if f.get("started")]
+    best = 0
+    for a, _ in spans:
+        best = max(best, sum(1 for s, e in spans if s <= a + slack and e > a + slack))
+    return best
+
+
 def batch_report(path):
     with open(path) as fh:
         rep = json.load(fh)
@@ -438,6 +448,7 @@ def t_batch_folder_glob_failures():
     check("timed out after 12 s" in got["hang.obj"]["message"], f"hang: {got['hang.obj']}")
     check(rep["exit_code"] == 1 and rep["counts"]["ok"] == 3 and rep["jobs"] == 2,
           f"report exit_code {rep['exit_code']}, counts {rep['counts']}")
+    check(most_at_once(rep["files"]) == 2, f"--jobs 2 ran {most_at_once(rep['files'])} at once")
     # outputs keep the relative paths; failed/unreadable/hung ones as the command decides
     expect = {"quad_hole.obj", "sub/tilted_plane.obj", "polygon_voronoi.obj",
               "two_holes_twist.obj"}
@@ -493,6 +504,7 @@ def t_batch_files_per_worker():
           pid["garbage"] == pid["hang"] == b and len({a, b, pid["empty"]}) == 3,
           f"worker Blenders (pids) per file: {pid}")
     check(rep["files_per_worker"] == 3, f"report files_per_worker {rep['files_per_worker']}")
+    check(most_at_once(rep["files"]) == 1, f"--jobs 1 ran {most_at_once(rep['files'])} at once")
     for m in ("polygon_voronoi", "tilted_plane", "quad_hole"):
         check(same_bytes(f"{outdir}/{m}.obj", single_output(m)),
               f"{m}: served output differs from the single-file run")
