@@ -25,6 +25,18 @@ _DIST_FLOOR = 1e-3  # d_j never below this fraction of the mean edge length
 _DIRECT_PAIRS = 1 << 14  # centroid/fixed-node pairs up to which distances skip the quadtree
 
 
+def edge_lengths(x: np.ndarray, y: np.ndarray, groups) -> tuple[float, float]:
+    """(lbar, smallest element mean edge length > 0) of the positions (x, y): lbar is the
+    mean over all elements of their mean edge length (the span when that is not positive)."""
+    m = np.concatenate([_edge_sum(x[g.nodes], y[g.nodes]) / g.n for g in groups])
+    lbar = float(m.mean())
+    positive = m[m > 0]
+    span = float(max(np.ptp(x), np.ptp(y))) or 1.0
+    if not np.isfinite(lbar) or lbar <= 0:
+        lbar = span
+    return lbar, float(positive.min()) if positive.size else span
+
+
 class _FixedNodeDistance:
     """Distance from element centroids to the nearest fixed node: over all pairs while they
     are few (small meshes), else by the `NearestBoundary` quadtree, built on first use and
@@ -149,16 +161,7 @@ class NumpyEngine:
 
     def _edge_lengths(self) -> tuple[float, float]:
         """(lbar, smallest element mean edge length > 0) of the current positions."""
-        means = []
-        for g in self.groups:
-            means.append(_edge_sum(*self._gather(g)) / g.n)
-        m = np.concatenate(means)
-        lbar = float(m.mean())
-        positive = m[m > 0]
-        span = float(max(np.ptp(self.x), np.ptp(self.y))) or 1.0
-        if not np.isfinite(lbar) or lbar <= 0:
-            lbar = span
-        return lbar, float(positive.min()) if positive.size else span
+        return edge_lengths(self.x, self.y, self.groups)
 
     def _refresh_distances(self, centroids: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """f_j = (lbar / d_j)^c from element vertex centroids (those of the current positions,

@@ -29,7 +29,7 @@ import numpy as np
 
 from . import fpmath
 from .boundary import SLIDE_GAP, SLIDE_REACH, BoundaryMotion
-from .engine_numpy import _DIST_FLOOR, NumpyEngine
+from .engine_numpy import _DIST_FLOOR, NumpyEngine, edge_lengths
 from .faces import FaceSet
 from .params import EEGTParams
 from .quality import Stats, corner_constants
@@ -48,6 +48,7 @@ _WG = 64  # work-group size for face and node kernels
 _BLOCK = 128  # NumPy's pairwise_sum base-case length (PW_BLOCKSIZE)
 _NCACHE = 8  # nearest boundary nodes cached per face for the distance refresh
 _NGON_MAXN = 16  # private-array size of the generic n-gon kernels (bigger faces: own build)
+_TREE_LBAR = 8  # where lbar sits in OpenCLEngine.tree_args (the distance floor follows it)
 
 _device_override: str | None = None
 _runtimes: dict[str, _Runtime] = {}
@@ -323,7 +324,9 @@ class OpenCLEngine:
         self.device_name = rt.name
         self.params = params
         self.faces = faces
+        self.free, self.motion = free, motion
         self.iteration = 0
+        self._stale = False  # the first step refreshes the distances first (`restarted`)
         # The reference engine builds the initial state: lbar, quadtree, q, distance weights.
         ref = NumpyEngine(points, faces, free, params, targets, motion)
         self.targets = targets
@@ -472,7 +475,7 @@ class OpenCLEngine:
             moves = []
             for refresh in (0, 1):  # plain move, and move with the distance refresh fused
                 km = kernel(f"move_{suf}_d" if refresh else f"move_{suf}")
-                km.set_args(
+                head = (
                     *gargs,
                     self.P,
                     self.q,
@@ -488,9 +491,9 @@ class OpenCLEngine:
                     self.tree,
                     self.bxy,
                     self.cxy,
-                    *self.tree_args,
-                    *extra,
                 )
+                self._lbar_arg = len(head) + _TREE_LBAR
+                km.set_args(*head, *self.tree_args, *extra)
                 moves.append(km)
             kk = kernel("mark_ngon" if tg is not None else f"mark_{suf}")
             kk.set_args(*gargs, self.q, self.flag)
@@ -546,6 +549,38 @@ class OpenCLEngine:
         self.k_revert.set_arg(6, self.tau)
         self.k_revert.set_arg(7, self.tau_old)
 
+    def restarted(self, points: np.ndarray) -> OpenCLEngine:
+        """A fresh engine for the same run at new positions (fixed nodes where they are
+        here), equal to a new OpenCLEngine and to NumpyEngine.restarted bit for bit: it
+        keeps the device tables and kernels (this engine must not be stepped again), uploads
+        the positions and lets its first step refresh the distances on the device instead
+        of a host query. With sliding nodes (their curve parameters come from the host) it
+        is a new engine."""
+        if self.slide is not None:
+            return OpenCLEngine(points, self.faces, self.free, self.params, self.targets,
+                                self.motion)
+        engine = OpenCLEngine.__new__(OpenCLEngine)
+        engine.__dict__.update(self.__dict__)
+        n = self.n_nodes
+        pts = np.empty((n, 2), dtype=np.float64)
+        pts[:, 0], pts[:, 1] = points[:, 0], points[:, 1]
+        engine.lbar, _ = edge_lengths(pts[:, 0], pts[:, 1], self.faces.groups)
+        lbar, floor = np.float64(engine.lbar), np.float64(_DIST_FLOOR * engine.lbar)
+        args = list(self.tree_args)
+        args[_TREE_LBAR], args[_TREE_LBAR + 1] = lbar, floor
+        engine.tree_args = tuple(args)
+        for call in self._group_calls:
+            for _gsize, km in call[1:3]:
+                km.set_arg(self._lbar_arg, lbar)
+                km.set_arg(self._lbar_arg + 1, floor)
+        self.cl.enqueue_copy(self.queue, engine.P, pts)
+        self.cl.enqueue_copy(self.queue, engine.best, engine.P)
+        engine.iteration = 0
+        engine._stale = not self.uniform
+        engine._faces(1)
+        engine._stats = engine._to_stats(engine._read_part())
+        return engine
+
     # -- enqueue helpers -----------------------------------------------------------------
     def _run(self, kernel, gsize: int) -> None:
         self.cl.enqueue_nd_range_kernel(self.queue, kernel, (gsize,), (_WG,))
@@ -580,7 +615,10 @@ class OpenCLEngine:
     def step(self, phase: str) -> Stats:
         """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back."""
         self.iteration += 1
-        refresh = self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0
+        refresh = self._stale or (
+            self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0
+        )
+        self._stale = False
         self._faces(3 if refresh and not self.uniform else 2)
         self._run(self.k_stitch, _roundup(self.n_nodes, _WG))
         if self.slide is not None:

@@ -11,11 +11,11 @@ import numpy as np
 
 from .backends import make_engine
 from .boundary import BoundaryMotion, SlideView, boundary_motion
-from .engine_numpy import NumpyEngine
 from .faces import FaceSet, as_faceset
-from .optimize import GlobalOptions, active_submesh, lift_min_quality, stops, untangle_global
+from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
 from .optimize.reference import Factors
+from .optimize.submesh import Neighbourhood
 from .params import EEGTParams
 from .quality import Stats, _check_points, group_quality, mesh_stats
 from .reference_shapes import reference_targets
@@ -129,7 +129,9 @@ def untangle_and_smooth(
     center, scale = _normalisation(p, fs)
     work = (p - center) / scale
     _check_orientation(work, fs)
-    motion = boundary_motion(work, fs, fixed, params.boundary, params.feature_angle)
+    motion = None  # "fixed": the engines' own path (free_nodes above checked the pins)
+    if params.boundary != "fixed":
+        motion = boundary_motion(work, fs, fixed, params.boundary, params.feature_angle)
     if motion is not None:
         free = motion.movable
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
@@ -233,14 +235,17 @@ def frozen_faces(p: np.ndarray, faces, free: np.ndarray) -> np.ndarray:
     and are left out of the untangling goal."""
     fs = as_faceset(faces, p.shape[0])
     out = np.zeros(fs.n_faces, dtype=bool)
+    x, y = p[:, 0], p[:, 1]
     for g in fs.groups:
-        nxt, prv = np.roll(g.nodes, -1, axis=0), np.roll(g.nodes, 1, axis=0)
-        x, y = p[:, 0], p[:, 1]
-        det = (x[nxt] - x[g.nodes]) * (y[prv] - y[g.nodes]) - (y[nxt] - y[g.nodes]) * (
-            x[prv] - x[g.nodes]
+        fixed = ~free[g.nodes]  # (n, F); only faces with a fixed node can have such a corner
+        cols = np.flatnonzero(fixed.any(axis=0))
+        nodes = g.nodes[:, cols]
+        nxt, prv = np.roll(nodes, -1, axis=0), np.roll(nodes, 1, axis=0)
+        det = (x[nxt] - x[nodes]) * (y[prv] - y[nodes]) - (y[nxt] - y[nodes]) * (
+            x[prv] - x[nodes]
         )
-        stuck = ~(free[g.nodes] | free[nxt] | free[prv]) & (det <= 0.0)
-        out[g.ids] = stuck.any(axis=0)
+        stuck = fixed[:, cols] & ~(free[nxt] | free[prv]) & (det <= 0.0)
+        out[g.ids[cols]] = stuck.any(axis=0)
     return out
 
 
@@ -372,10 +377,11 @@ class _Run:
         left = self.best.n_inverted - self.n_frozen
         if left > LOCAL_LEFT * (self.before.n_inverted - self.n_frozen):
             return current
+        near = Neighbourhood(groups, self.free, factors)
         for rings in LOCAL_RINGS:
             start = self.best_points()
             bad = self._inverted_movable(start)
-            sub, nodes, sfree, sub_f = active_submesh(groups, self.free, bad, rings, factors)
+            (sub, nodes, sfree, sub_f), _ = near.submesh(bad, rings)
             if not sfree.any() or sum(f.shape[0] for f in sub.values()) > LOCAL_SHARE * bad.size:
                 break
             base = self.n_untangle + self.n_global
@@ -482,12 +488,7 @@ class _Run:
         pts[~self.free] = self.p[~self.free]  # fixed rows bit-identical, whatever happened
         if self.best_pts is None:  # keep the earlier best as a host copy
             self.best_pts = self.engine.best_points() if start is self.p else start
-        if isinstance(self.engine, NumpyEngine):  # same mesh, same fixed nodes: reuse set-up
-            self.engine = self.engine.restarted(pts)
-        else:
-            self.engine, _ = make_engine(
-                self.backend, pts, self.fs, self.free, self.params, self.targets, self.motion
-            )
+        self.engine = self.engine.restarted(pts)  # same mesh, same fixed nodes: reuse set-up
         current = self.engine.stats()
         if current.better_than(self.best):
             self.best, self.best_pts = current, None

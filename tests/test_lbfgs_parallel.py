@@ -420,3 +420,59 @@ def test_small_problems_go_to_the_small_solver_same_result(device):
         factory = lp.device_solver()
         assert factory.small_corners == lp.SMALL_CORNERS
         assert type(factory.small).__name__ == "OpenCLLbfgs"
+
+
+def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
+    """limit_corner/finish_limit against FoldoverEnergy._step_limit and skipped_trials on a
+    jittered mesh: the same limit bits, the same first step and skip count."""
+    from core.optimize.solver import skipped_trials
+
+    p, f = read_obj(DATA / "tri_two_holes.obj")
+    p = np.ascontiguousarray(p[:, :2])
+    fs = as_faceset(f, len(p))
+    groups, free = fs.by_arity(), free_nodes(len(p), fs)
+    en = LiftEnergy(p, groups, free)
+    st = State(p, free)
+    tb = solver._tables_for(en, st)
+    rng = np.random.default_rng(5)
+    v = st.pack(st.x, st.y)
+    layout, fixed = en._packed(st)
+    cl, queue = solver.cl, solver.queue
+    for scale in (1e-4, 1e-2, 1.0):
+        q = rng.normal(0.0, scale, v.size)
+        z = np.concatenate([v, fixed])
+        dz = np.zeros(z.size)
+        dz[: v.size] = q
+        want = en._step_limit(z, dz, layout[0], 1.0)
+        s = np.zeros_like(solver._S_host)
+        s[lp._S_GUARD], s[7] = 1.0, 1.0  # guarded, first step 1
+        cl.enqueue_copy(queue, solver.S, s)
+        cl.enqueue_copy(queue, tb.v, v)
+        cl.enqueue_copy(queue, tb.q, q)
+        skip = solver._limit(tb)
+        lim = np.empty(tb.nc)
+        cl.enqueue_copy(queue, lim, tb.LIM)
+        assert float(lim.min()) == want
+        step, k = skipped_trials(1.0, want)
+        assert (skip, float(solver._rb[7])) == (k, step)
+    solver.release()
+
+
+def test_lift_on_a_large_jittered_mesh_bit_identical_with_fewer_trials(solver, monkeypatch):
+    """The case the limit is for: the lift's whole-mesh run on a just-untangled 20k mesh,
+    where unit steps fold some corner; the device run keeps the host's bits."""
+    p, fs = holed_square(20_000, seed=3)
+    groups, free = fs.by_arity(), free_nodes(len(p), fs)
+    u, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
+    trials = []
+    original = solver._trial
+    monkeypatch.setattr(solver, "_trial", lambda *a: trials.append(1) or original(*a))
+    host = Recorder(lbfgs)
+    dev = Recorder(solver)
+    opts = dict(lift_first_iter=60, lift_rounds=3, lift_chunk=10, lift_rel_tol=1e-4)
+    a, _ = lift_min_quality(u, groups, free, GlobalOptions(solver=host, **opts))
+    b, _ = lift_min_quality(u, groups, free, GlobalOptions(solver=dev, **opts))
+    assert np.array_equal(a, b)
+    assert_same_calls(host, dev)
+    its = sum(i for _, i in dev.results)
+    assert len(trials) < 2 * its, (len(trials), its)

@@ -786,3 +786,53 @@ def test_targets_pipeline_same_result_on_opencl(device):
         rb.untangle_iterations, rb.smooth_iterations)
     assert_close(ra.points, rb.points, float(np.ptp(p, axis=0).max()), "targets")
     assert ra.n_target_fallback == rb.n_target_fallback > 0
+
+
+# ---- restarts (the pipeline's `_adopt`) ---------------------------------------------------
+
+
+@pytest.mark.parametrize("name, params", [
+    ("tri_two_holes", EEGTParams()),
+    ("mixed_quad_tri", EEGTParams(distance_refresh=3)),
+    ("polygon_voronoi", EEGTParams(c=1.5, eta=2.7)),
+])
+def test_restarted_engine_equals_numpy_restart_and_fresh_engine(cpu_device, name, params):
+    """OpenCLEngine.restarted keeps its device tables and refreshes the distances on the
+    device in its first step: every later step is the bits of NumpyEngine.restarted and of a
+    new OpenCL engine built at the same points (whose distances the host computed)."""
+    p, f = load2d(name)
+    free = free_nodes(len(p), f)
+    ref = NumpyEngine(p, f, free, params)
+    eng, _ = backends.make_engine("opencl", p, f, free, params)
+    for _ in range(4):
+        ref.step("untangle")
+        eng.step("untangle")
+    moved = ref.points()
+    rng = np.random.default_rng(3)
+    scale = float(np.ptp(p, axis=0).max())
+    moved[free] += rng.uniform(-2e-3, 2e-3, (int(free.sum()), 2)) * scale  # "the optimizer"
+    ref, eng = ref.restarted(moved), eng.restarted(moved)
+    fresh, _ = backends.make_engine("opencl", moved, f, free, params)
+    assert eng.stats() == ref.stats() == fresh.stats()
+    assert eng.lbar == ref.lbar == fresh.lbar
+    for it in range(7):
+        phase = "untangle" if it < 3 else "smooth"
+        sa, sb, sc = ref.step(phase), eng.step(phase), fresh.step(phase)
+        a, b, c = ref.points(), eng.points(), fresh.points()
+        assert np.array_equal(a, b), f"step {it + 1}: restarted OpenCL engine left NumPy's bits"
+        assert np.array_equal(b, c), f"step {it + 1}: restarted and fresh OpenCL engines differ"
+        assert sa == sb == sc
+
+
+def test_restarted_engine_moves_nothing_on_a_fixed_boundary(cpu_device):
+    """Fixed rows stay the input's bits after a restart; a second restart of the restarted
+    engine works the same way."""
+    p, f = load2d("quad_hole")
+    free = free_nodes(len(p), f)
+    eng, _ = backends.make_engine("opencl", p, f, free, EEGTParams())
+    eng.step("untangle")
+    again = eng.restarted(eng.points()).restarted(p)
+    again.step("untangle")
+    out = again.points()
+    assert np.array_equal(out[~free], p[~free])
+    assert np.any(out[free] != p[free])

@@ -39,7 +39,7 @@ from .reference import (
     per_arity,
     reference_sizes,
 )
-from .solver import TICK_CORNERS, TICK_EVERY, State
+from .solver import LIMIT_MARGIN, TICK_CORNERS, TICK_EVERY, State
 
 __all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar"]
 
@@ -56,6 +56,38 @@ def chi_array(d: np.ndarray, eps: float, root: np.ndarray) -> np.ndarray:
 def chi_scalar(d: float, eps: float) -> float:
     root = float(np.sqrt(eps * eps + d * d))
     return 0.5 * (d + root) if d >= 0.0 else 0.5 * eps * eps / (root - d)
+
+
+LIMIT_PIECE = 16384  # corners per piece of `_step_limit` (its arrays stay in cache)
+
+
+def _corner_limit(c: np.ndarray, f: np.ndarray, w00: np.ndarray, w01: np.ndarray,
+                  w11: np.ndarray, s0: float) -> float:
+    """`FoldoverEnergy._step_limit` of some corners: c, f the (6, m) corner coordinates
+    (x1, y1, x2, y2, x0, y0) of the point and of the direction."""
+    e1x, e1y, e2x, e2y = c[0] - c[4], c[1] - c[5], c[2] - c[4], c[3] - c[5]
+    f1x, f1y, f2x, f2y = f[0] - f[4], f[1] - f[5], f[2] - f[4], f[3] - f[5]
+    j00, j10 = e1x * w00, e1y * w00
+    j01, j11 = e1x * w01 + e2x * w11, e1y * w01 + e2y * w11
+    k00, k10 = f1x * w00, f1y * w00
+    k01, k11 = f1x * w01 + f2x * w11, f1y * w01 + f2y * w11
+    cc = j00 * j11 - j01 * j10  # det(J + t K) = cc + bb t + aa t^2
+    bb = (j00 * k11 + k00 * j11) - (j01 * k10 + k01 * j10)
+    aa = k00 * k11 - k01 * k10
+    with np.errstate(all="ignore"):
+        pos = cc > 0.0
+        t1 = np.where(pos & (aa == 0.0) & (bb < 0.0), -cc / bb, np.inf)
+        disc = bb * bb - (4.0 * aa) * cc
+        ok = pos & (aa != 0.0) & (disc >= 0.0)
+        sq = np.sqrt(np.where(ok, disc, 0.0))
+        qq = -0.5 * (bb + np.where(bb >= 0.0, sq, -sq))
+        r1, r2 = qq / aa, cc / qq
+        lo, hi = np.where(r1 < r2, r1, r2), np.where(r1 < r2, r2, r1)
+        # aa < 0: one positive root, negative beyond it; aa > 0, bb < 0: negative between
+        t1 = np.where(ok & (aa < 0.0), hi, t1)
+        inside = ok & (aa > 0.0) & (bb < 0.0) & (hi * (1.0 - LIMIT_MARGIN) >= s0)
+        t1 = np.where(inside, lo, t1)
+    return float(np.minimum.reduce(t1)) if t1.size else np.inf
 
 
 class _Blocks:
@@ -210,6 +242,23 @@ class FoldoverEnergy:
         return self._pack[1], self._pack[2]
 
     # -- corner Jacobians ------------------------------------------------------------------
+    def _step_limit(self, z: np.ndarray, dz: np.ndarray, index: np.ndarray, s0: float) -> float:
+        """The smallest step t at which some energy corner's det, a quadratic in t along
+        z + t dz, turns non-positive and stays so up to s0 (inf: none). The line search
+        skips the trial steps above it: they would be rejected for a det <= 0 (see
+        `solver.skipped_trials`). solver_parallel.cl `limit_corner` is its twin, operation
+        for operation. Worked in cache-sized pieces: some forty passes over the corners."""
+        m, bk = self.i0.size, self._bk
+        c, f = bk.c.reshape(6, m), bk.ge.reshape(6, m)  # scratch until the next `_eval`
+        z.take(index, None, bk.c, "clip")  # = z[index]
+        dz.take(index, None, bk.ge, "clip")
+        out = np.inf
+        for lo in range(0, m, LIMIT_PIECE):
+            hi = min(m, lo + LIMIT_PIECE)
+            out = min(out, _corner_limit(c[:, lo:hi], f[:, lo:hi], self.w00[lo:hi],
+                                         self.w01[lo:hi], self.w11[lo:hi], s0))
+        return out
+
     def _jac(self, z: np.ndarray, index: np.ndarray) -> None:
         """J = [j00, j10, j01, j11] and d = det J of every corner into the blocks."""
         bk = self._bk
@@ -349,6 +398,7 @@ class LiftEnergy(FoldoverEnergy):
         ne = self.n_elem  # per-element constants (array operands: faster than floats)
         self._zero_e, self._pen_e, self._m1_e = (np.full(ne, c) for c in (0.0, LIFT_PENALTY, -1.0))
         self._qc_e = np.empty(ne)  # filled with qc, then with 2 PENALTY / qc
+        self._by_elem: tuple[np.ndarray, np.ndarray] | None = None  # corners per element
 
     def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(E,) mean ratio of each element (0 where a corner is not positive)."""
@@ -358,6 +408,32 @@ class LiftEnergy(FoldoverEnergy):
         with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
             q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
         bad = np.bincount(self.eid, d <= 0.0, minlength=self.n_elem) > 0
+        return np.where(bad, 0.0, q)
+
+    def element_quality_of(self, elems: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """`element_quality(x, y)[elems]` bit for bit (ascending element ids), from those
+        elements' corners only: a lift round on a large mesh changes a few of them."""
+        if self._by_elem is None:
+            order = np.argsort(self.eid, kind="stable")  # corners by element, in corner order
+            ptr = np.zeros(self.n_elem + 1, dtype=np.int64)
+            np.cumsum(np.bincount(self.eid, minlength=self.n_elem), out=ptr[1:])
+            self._by_elem = (ptr, order)
+        ptr, order = self._by_elem
+        cnt = ptr[elems + 1] - ptr[elems]
+        k = order[np.repeat(ptr[elems] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))]
+        i0, i1, i2 = self.i0[k], self.i1[k], self.i2[k]
+        e1x, e1y = x[i1] - x[i0], y[i1] - y[i0]
+        e2x, e2y = x[i2] - x[i0], y[i2] - y[i0]
+        w00, w01, w11 = self.w00[k], self.w01[k], self.w11[k]
+        j00, j10 = e1x * w00, e1y * w00  # the operations of `_jac` and `_frob`, in order
+        j01, j11 = e1x * w01 + e2x * w11, e1y * w01 + e2y * w11
+        d = j00 * j11 - j01 * j10
+        t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
+        u = 0.5 * t / np.where(d > 0.0, d, np.inf)
+        local = np.repeat(np.arange(elems.size), cnt)
+        with np.errstate(divide="ignore"):
+            q = np.bincount(local, 1.0 / u, minlength=elems.size) / self.n_corners[elems]
+        bad = np.bincount(local, d <= 0.0, minlength=elems.size) > 0
         return np.where(bad, 0.0, q)
 
     def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:

@@ -12,11 +12,27 @@ import numpy as np
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
 
-__all__ = ["LBFGS_MEMORY", "State", "lbfgs", "stops"]
+__all__ = ["LBFGS_MEMORY", "LIMIT_MARGIN", "TRIALS", "State", "lbfgs", "skipped_trials", "stops"]
 
 LBFGS_MEMORY = 4  # L-BFGS (s, y) pairs kept (8 was 15-20% slower, same iterations: docs)
 TICK_EVERY = 20  # progress is reported at most this many L-BFGS iterations apart ...
 TICK_CORNERS = 500_000  # ... and every TICK_CORNERS / corners iterations (big meshes: often)
+
+
+LIMIT_MARGIN = 1e-6  # trial steps within this (relative) of a det root are evaluated
+TRIALS = 40  # line-search halvings
+
+
+def skipped_trials(step: float, limit: float) -> tuple[float, int]:
+    """(first step worth evaluating, halvings skipped): a trial step above the step limit
+    (with a margin for round-off) makes some corner det <= 0, which the guarded line search
+    rejects, so the search goes on from the first step below it with the same iterate."""
+    bound = limit * (1.0 + LIMIT_MARGIN)
+    k = 0
+    while k < TRIALS and step > bound:
+        step *= 0.5
+        k += 1
+    return step, k
 
 
 def stops(answer: Any) -> bool:
@@ -106,6 +122,10 @@ def lbfgs(
     tmp = np.empty(n2)  # scratch: a product before its sum, a scaled vector
     c0 = np.empty(n2)  # scratch: a scalar factor, filled in (faster operand than a float)
     prods = np.empty((4, n2))  # s y, s s, y y, y (dpre y) of a new pair
+    # the step limit (guarded runs; not with sliding nodes, whose positions are not linear
+    # in the variables) and the direction in z's layout (fixed part 0)
+    limit = getattr(en, "_step_limit", None) if guard else None
+    dz = np.zeros(z.size) if limit is not None else z
     sy_, ss_, yy_, ydy_ = prods
     v = v0
     e, _, ok = evaluate(z, layout, eps)
@@ -116,6 +136,7 @@ def lbfgs(
     e_hist = [e]
     h0 = 0.1 * en.h_mean  # first step: the fastest node moves a tenth of a typical edge
     it = 0
+    rejected = 0  # trial steps the last iteration rejected (or skipped)
     while it < max_it:
         it += 1
         q = -g
@@ -146,7 +167,14 @@ def lbfgs(
             if not slope < 0.0:
                 break
         accepted = False
-        for _ in range(40):
+        skip = 0
+        if limit is not None and rejected:  # steps that make a det <= 0 are rejected: skip
+            # them (the limit costs about two trials: worth it after an iteration with some)
+            zv[:] = v
+            dz[:n2] = q
+            step, skip = skipped_trials(step, limit(z, dz, layout[0], step))
+        rejected = skip
+        for _ in range(TRIALS - skip):
             c0.fill(step)
             np.add(v, mul(q, c0, tmp), zv)  # vt = v + step q
             et, dmin_t, ok = evaluate(z, layout, eps)
@@ -158,6 +186,7 @@ def lbfgs(
                 accepted = True
                 break
             step *= 0.5
+            rejected += 1
         if not accepted:
             if mem:  # drop the memory and retry once from plain descent
                 mem = []

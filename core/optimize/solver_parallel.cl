@@ -44,6 +44,12 @@
 #ifndef M
 #define M 4  // LBFGS_MEMORY (the host passes it)
 #endif
+#ifndef TRIALS
+#define TRIALS 40  // solver.TRIALS: line-search halvings (the host passes it)
+#endif
+#ifndef LIMIT_MARGIN
+#define LIMIT_MARGIN 1e-06  // solver.LIMIT_MARGIN (the host passes it)
+#endif
 #ifndef LANES
 #define LANES 1  // work-items per leaf of 128 terms: 1, 2, 4 or 8 (the host passes it)
 #endif
@@ -80,6 +86,7 @@
 #define S_OK 12  // the first evaluation may have a gradient (lift: every det > 0)
 #define S_BAD 13  // the direction is not a descent direction
 #define S_COEF 14  // the second loop's coefficient al - rho y.q
+#define S_SKIP 15  // trial steps the step limit skipped (finish_limit)
 #define S_ALPHA 16  // [M]
 #define S_RHO (S_ALPHA + M)  // [SLOTS] per ring slot: 1 / s.y
 #define S_SY (S_RHO + SLOTS)  // [SLOTS] s.y
@@ -700,6 +707,92 @@ __kernel void finish_trial(__global double *S, __global const int *PIc,
         S[S_STATUS] = 0.0;
         S[S_STEP] = step * 0.5;
     }
+}
+
+// ---- the step limit (guarded runs): trial steps that would make a det <= 0 -----------------
+// FoldoverEnergy._step_limit, operation for operation: corner k of the sweep, at the point
+// [v, fixed coordinates] along [q, 0]; its det is cc + bb t + aa t^2. LIM[k] = the step t1 past
+// which the det is <= 0 up to the first trial step s0 (INFINITY: none). ZF: per place in Z,
+// the free row of its node or -1.
+__kernel void limit_corner(__global const double *S, __global const double *Z,
+                           __global const double *v, __global const double *q,
+                           __global const int *CI, __global const double *W,
+                           __global const int *ZF, __global double *LIM, const int nc,
+                           const int nf)
+{
+    const int k = get_global_id(0);
+    if (k >= nc)
+        return;
+    const int4 ci = vload4(k, CI);
+    const int pl[3] = {ci.x, ci.y, ci.z};  // i1, i2, i0
+    double px[3], py[3], dx[3], dy[3];
+    for (int j = 0; j < 3; ++j) {
+        const int f = ZF[pl[j]];
+        px[j] = (f >= 0) ? v[f] : Z[2 * pl[j]];
+        py[j] = (f >= 0) ? v[nf + f] : Z[2 * pl[j] + 1];
+        dx[j] = (f >= 0) ? q[f] : 0.0;
+        dy[j] = (f >= 0) ? q[nf + f] : 0.0;
+    }
+    __global const double *wk = W + 4 * k;
+    const double w00 = wk[0], w01 = wk[1], w11 = wk[2];
+    const double e1x = px[0] - px[2], e1y = py[0] - py[2], e2x = px[1] - px[2], e2y = py[1] - py[2];
+    const double f1x = dx[0] - dx[2], f1y = dy[0] - dy[2], f2x = dx[1] - dx[2], f2y = dy[1] - dy[2];
+    const double j00 = e1x * w00, j10 = e1y * w00;
+    const double j01 = e1x * w01 + e2x * w11, j11 = e1y * w01 + e2y * w11;
+    const double k00 = f1x * w00, k10 = f1y * w00;
+    const double k01 = f1x * w01 + f2x * w11, k11 = f1y * w01 + f2y * w11;
+    const double cc = j00 * j11 - j01 * j10;
+    const double bb = (j00 * k11 + k00 * j11) - (j01 * k10 + k01 * j10);
+    const double aa = k00 * k11 - k01 * k10;
+    const double s0 = S[S_STEP];
+    double t1 = INFINITY;
+    if (cc > 0.0 && aa == 0.0 && bb < 0.0)
+        t1 = -cc / bb;
+    const double disc = bb * bb - (4.0 * aa) * cc;
+    if (cc > 0.0 && aa != 0.0 && disc >= 0.0) {
+        const double sq = SQRT(disc);
+        const double qq = -0.5 * (bb + ((bb >= 0.0) ? sq : -sq));
+        const double r1 = qq / aa, r2 = cc / qq;
+        const double lo = (r1 < r2) ? r1 : r2, hi = (r1 < r2) ? r2 : r1;
+        if (aa < 0.0)
+            t1 = hi;
+        else if (bb < 0.0 && hi * (1.0 - LIMIT_MARGIN) >= s0)
+            t1 = lo;
+    }
+    LIM[k] = t1;
+}
+
+// The minimum of LIM over a leaf (its first lane; order does not matter for a minimum)
+__kernel void limit_leaf(__global const int *PI, __global double *PD, __global const double *LIM)
+{
+    const Plan pl = plan_of(PI, PD);
+    LEAF_HEAD(pl)
+    double mn = INFINITY;
+    if (j0 == 0)
+        for (int k = o; k < o + n; ++k)
+            mn = MIN_NAN(mn, LIM[k]);
+    pl.PMIN[w] = mn;
+}
+
+// solver.skipped_trials: the first trial step below the limit (with the margin), and how
+// many halvings that skips; nothing in unguarded runs or for a direction that is no descent
+__kernel void finish_limit(__global double *S, __global const int *PI, __global double *PD)
+{
+    if (get_global_id(0) != 0)
+        return;
+    S[S_SKIP] = 0.0;
+    if (S[S_GUARD] == 0.0 || S[S_BAD] != 0.0)
+        return;
+    const Plan pl = plan_of(PI, PD);
+    const double bound = total_min(&pl) * (1.0 + LIMIT_MARGIN);
+    double step = S[S_STEP];
+    int k = 0;
+    while (k < TRIALS && step > bound) {
+        step = step * 0.5;
+        ++k;
+    }
+    S[S_STEP] = step;
+    S[S_SKIP] = (double)k;
 }
 
 // ---- gradient gather and the memory pair ------------------------------------------------

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..engine_opencl import _runtime, bincount_csr
 from .energy import FoldoverEnergy, LiftEnergy
-from .solver import LBFGS_MEMORY, State, lbfgs, stops
+from .solver import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, lbfgs, stops
 
 __all__ = ["KERNEL_FILE", "ParallelLbfgs", "device_solver", "reduction_plan"]
 
@@ -30,7 +30,6 @@ KERNEL_FILE = Path(__file__).with_name("solver_parallel.cl")
 CHUNK = 8192  # NumPy's reduction buffer (np.getbufsize())
 BLOCK = 128  # NumPy's pairwise base block
 LOCAL_SIZE = 64  # work-group size (any value gives the same bits; 64 was fastest on pocl)
-TRIALS = 40  # line-search halvings, as in solver.lbfgs
 INDEX_LIMIT = 2**31  # the kernels' indices are 32-bit: larger tables use the host solver
 # Below this many energy corners the single-work-item kernel beats the parallel kernels on
 # the pocl CPU device (~35 launches and a read per iteration, ~0.15 ms; crossover measured
@@ -39,6 +38,7 @@ SMALL_CORNERS = 20_000
 # status block (S[0:8], see the kernel source)
 _STATUS, _ET, _DMIN, _LEN = 0, 1, 2, 3
 _S_EPS, _S_QC, _S_H0, _S_GUARD = 8, 9, 10, 11
+_SKIP = 15
 _REJECTED, _ACCEPTED, _NOT_DESCENT = 0, 1, 2
 _solvers: dict[tuple, ParallelLbfgs] = {}
 
@@ -231,6 +231,10 @@ class _Tables:
         xy = np.empty((nn, 2))
         xy[zpos, 0], xy[zpos, 1] = st.x, st.y
         self.Z = buf(xy.ravel())  # node (x, y) pairs in Z order; the free ones: trial points
+        zf = np.full(nn, -1, dtype=np.int64)
+        zf[zpos[st.fidx]] = np.arange(nf)
+        self.ZF = buf(zf)  # per place in Z: the free row of its node, or -1
+        self.LIM = empty(8 * nc)  # per corner of the sweep: its step limit
         self.v, self.g, self.q, self.gt = (empty(8 * n2) for _ in range(4))
         ring = 8 * n2 * (LBFGS_MEMORY + 1)  # M pairs and the candidate's spare slot
         self.hs, self.hy = empty(ring), empty(ring)
@@ -252,8 +256,13 @@ class _Tables:
         k["chunk_v1"].set_args(pv, dv, i32(1), i32(1))  # a dot (+ the mid's max |q|)
         k["chunk_v4"].set_args(pv, dv, i32(4), i32(0))
         k["chunk_c"].set_args(pc, dc, i32(1), i32(1))
+        k["chunk_m"].set_args(pc, dc, i32(0), i32(1))  # the step limit: a minimum only
         k["forget"].set_args(S)
         nf = i32(self.n2 // 2)
+        k["limit_corner"].set_args(S, self.Z, self.v, self.q, self.CI, self.W, self.ZF,
+                                   self.LIM, i32(self.nc), nf)
+        k["limit_leaf"].set_args(pc, dc, self.LIM)
+        k["finish_limit"].set_args(S, pc, dc)
         k["trial_point"].set_args(S, self.Z, self.v, self.q, self.zfree, nf, i32(0))
         k["place"].set_args(S, self.Z, self.v, self.q, self.zfree, nf, i32(1))
         corner = (S, self.Z, self.CI, self.W, self.TD, i32(self.nc))
@@ -306,7 +315,8 @@ class ParallelLbfgs:
         prg = rt.build(
             f"lbfgs_parallel M={LBFGS_MEMORY} LANES={self.lanes}",
             KERNEL_FILE.read_text(),
-            [f"-DM={LBFGS_MEMORY}", f"-DLANES={self.lanes}"],
+            [f"-DM={LBFGS_MEMORY}", f"-DLANES={self.lanes}", f"-DTRIALS={TRIALS}",
+             f"-DLIMIT_MARGIN={LIMIT_MARGIN!r}"],
             what="parallel L-BFGS kernels",
         )
 
@@ -320,9 +330,9 @@ class ParallelLbfgs:
         self._k["fold_corner_grad"] = kern("fold_corner")
         for name in ("mid", "finish_mid", "forget", "fold_corner", "fold_grad",
                      "lift_corner", "lift_element", "lift_grad", "update", "finish_pair",
-                     "corner_sum"):
+                     "corner_sum", "limit_corner", "limit_leaf", "finish_limit"):
             self._k[name] = kern(name)
-        for name in ("chunk_v1", "chunk_v4", "chunk_c", "chunk_e"):
+        for name in ("chunk_v1", "chunk_v4", "chunk_c", "chunk_e", "chunk_m"):
             self._k[name] = kern("chunk_sums")
         self._k["gather_grad"] = kern("gather_grad")
         self._k["gather_init"] = kern("gather_grad")
@@ -331,7 +341,7 @@ class ParallelLbfgs:
         s_len = 16 + m + 3 * (m + 1)
         self._S_host = np.zeros(s_len)
         self.S = self._empty(8 * s_len)
-        self._rb = np.zeros(8)
+        self._rb = np.zeros(16)  # S[0:16]: the status block and the skip count
         self._last: tuple[FoldoverEnergy, State, _Tables] | None = None
 
     def release(self) -> None:
@@ -428,6 +438,17 @@ class ParallelLbfgs:
         self.cl.enqueue_copy(self.queue, self._rb, self.S)
         return self._rb
 
+    def _limit(self, tb: _Tables) -> int:
+        """The step limit of the current direction (`FoldoverEnergy._step_limit`): moves the
+        first trial step below it on the device; returns the halvings skipped."""
+        self._go("limit_corner", tb.nc)
+        pc = tb.plans[1]
+        self._go("limit_leaf", pc.leaf_items)
+        self._chunks("chunk_m", pc)
+        self._one("finish_limit")
+        self.cl.enqueue_copy(self.queue, self._rb, self.S)
+        return int(self._rb[_SKIP])
+
     def _gradient(self, tb: _Tables) -> None:
         """dF/dE per corner at the last evaluated point."""
         self._go("lift_grad" if tb.lift else "fold_grad", tb.nc)
@@ -482,24 +503,31 @@ class ParallelLbfgs:
         # the accepted one: computed with the first trial while first trials get accepted
         # (one pass), else in a pass of their own after the accepted trial. Bits unchanged.
         first_ok = not tb.lift
+        rejected = 0  # trial steps the last iteration rejected (or skipped)
         while it < max_it:
             it += 1
             self._direction(tb, pairs)
             grad = first_ok
-            rb = self._trial(tb, grad)
+            skip = self._limit(tb) if guard and rejected else 0
+            if skip >= TRIALS:  # every trial step makes a det <= 0: all rejected
+                rb = self._rb
+                rb[_STATUS] = _REJECTED
+            else:
+                rb = self._trial(tb, grad)
             if rb[_STATUS] == _NOT_DESCENT:  # restart from preconditioned descent
                 self._one("forget")
                 self._direction(tb, 0)
-                pairs = 0
+                pairs, skip = 0, 0
                 rb = self._trial(tb, grad)
                 if rb[_STATUS] == _NOT_DESCENT:
                     break
             n_pairs = int(rb[_LEN])
-            trials = 1
+            trials = 1 + skip
             while rb[_STATUS] == _REJECTED and trials < TRIALS:
                 grad = False
                 rb = self._trial(tb, grad)
                 trials += 1
+            rejected = trials - 1
             first_ok = not tb.lift and trials == 1
             if rb[_STATUS] != _ACCEPTED:
                 if n_pairs:  # drop the memory and retry once from plain descent

@@ -16,7 +16,7 @@ from .options import GlobalOptions, Solver
 from .reference import Factors
 from .slide import make_state
 from .solver import State, lbfgs, stops
-from .submesh import active_submesh
+from .submesh import Neighbourhood
 
 __all__ = ["lift_min_quality", "untangle_global"]
 
@@ -279,6 +279,7 @@ def lift_min_quality(
     trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run, kept or not
     info["trail"] = trail
     cancel = False
+    near: Neighbourhood | None = None  # node -> element incidence, for the rounds
     for r in range(rounds + 1):
         en.qc = m0 if r == 0 else min(cur_m * LIFT_GROW, cur_m + LIFT_GAP * (cur_a - cur_m))
         tick = None
@@ -296,9 +297,10 @@ def lift_min_quality(
             xt, yt = st.unpack(vt)
         else:  # only near the elements under the new floor: the rest is at its optimum
             x, y = st.unpack(v)
-            sub, nodes, sfree, sub_f = active_submesh(
-                groups, free, q < LIFT_ACTIVE * en.qc, LIFT_RINGS, factors
-            )
+            if near is None:
+                near = Neighbourhood(groups, free, factors)
+            (sub, nodes, sfree, sub_f), elems = near.submesh(q < LIFT_ACTIVE * en.qc,
+                                                               LIFT_RINGS)
             if not sfree.any():
                 break
             sp = np.stack([x[nodes], y[nodes]], axis=1)
@@ -315,7 +317,11 @@ def lift_min_quality(
             xt[nodes], yt[nodes] = sx, sy
             vt = st.pack(xt, yt)
         total += its
-        qt = en.element_quality(xt, yt)
+        if r == 0:
+            qt = en.element_quality(xt, yt)
+        else:  # only the sub-mesh's elements changed
+            qt = q.copy()
+            qt[elems] = en.element_quality_of(elems, xt, yt)
         qm, qa = float(qt.min()), float(qt.mean())
         trail.append((qm, qa))
         if cancel or (progress is not None and stops(progress(total, r, cur_m, cur_a))):

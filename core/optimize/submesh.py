@@ -9,43 +9,87 @@ import numpy as np
 
 from .reference import Factors
 
-__all__ = ["active_submesh"]
+__all__ = ["Neighbourhood", "active_submesh"]
+
+SubMesh = tuple[dict[int, np.ndarray], np.ndarray, np.ndarray, "Factors | None"]
+
+
+class Neighbourhood:
+    """Node -> element incidence of a mesh, built once, so that each sub-mesh costs only its
+    own size (a lift round or a local untangle on a large mesh touches a few thousand of a
+    million elements)."""
+
+    def __init__(self, groups: Mapping[int, np.ndarray], free: np.ndarray,
+                 factors: Factors | None = None):
+        self.arities = [n for n in sorted(groups) if np.asarray(groups[n]).size]
+        self.faces = [np.asarray(groups[n], dtype=np.int64).reshape(-1, int(n))
+                      for n in self.arities]
+        self.free, self.factors = free, factors
+        sizes = [f.shape[0] for f in self.faces]
+        self.first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        self.n_elem = int(self.first[-1])
+        corner = np.concatenate([f.ravel() for f in self.faces]) if self.faces else \
+            np.zeros(0, dtype=np.int64)
+        elem = np.concatenate([
+            b + np.repeat(np.arange(f.shape[0], dtype=np.int64), f.shape[1])
+            for f, b in zip(self.faces, self.first[:-1], strict=True)
+        ]) if self.faces else np.zeros(0, dtype=np.int64)
+        order = np.argsort(corner, kind="stable")
+        self.node_elem = elem[order]
+        self.node_ptr = np.zeros(free.shape[0] + 1, dtype=np.int64)
+        np.cumsum(np.bincount(corner, minlength=free.shape[0]), out=self.node_ptr[1:])
+
+    def _elements_of(self, nodes: np.ndarray) -> np.ndarray:
+        """The distinct elements (ascending) that contain one of `nodes`."""
+        lo, hi = self.node_ptr[nodes], self.node_ptr[nodes + 1]
+        cnt = hi - lo
+        at = np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
+        return np.unique(self.node_elem[at])
+
+    def _nodes_of(self, elems: np.ndarray) -> np.ndarray:
+        """The distinct nodes (ascending) of `elems` (ascending element ids)."""
+        parts = []
+        for k, f in enumerate(self.faces):
+            lo, hi = np.searchsorted(elems, self.first[k : k + 2])
+            if hi > lo:
+                parts.append(f[elems[lo:hi] - self.first[k]].ravel())
+        return np.unique(np.concatenate(parts)) if parts else np.zeros(0, dtype=np.int64)
+
+    def submesh(self, seed: np.ndarray, rings: int) -> tuple[SubMesh, np.ndarray]:
+        """`active_submesh` of these groups, and the sub-mesh's element ids (in the order of
+        its elements: arities sorted, then the mesh's order)."""
+        seed_ids = np.flatnonzero(seed) if seed.dtype == bool else np.asarray(seed, np.int64)
+        near = self._nodes_of(np.unique(seed_ids))
+        for _ in range(rings):
+            near = self._nodes_of(self._elements_of(near))
+        move_nodes = near[self.free[near]]
+        elems = self._elements_of(move_nodes)
+        nodes = self._nodes_of(elems)
+        out, sub_factors = {}, None
+        for k, (n, f) in enumerate(zip(self.arities, self.faces, strict=True)):
+            lo, hi = np.searchsorted(elems, self.first[k : k + 2])
+            if hi <= lo:
+                continue
+            rows = elems[lo:hi] - self.first[k]
+            out[n] = np.searchsorted(nodes, f[rows])
+            if self.factors is not None:
+                sub_factors = sub_factors or {}
+                sub_factors[n] = tuple(np.asarray(u).reshape(-1, n)[rows] for u in self.factors[n])
+        move = np.zeros(nodes.size, dtype=bool)
+        move[np.searchsorted(nodes, move_nodes)] = True
+        return (out, nodes, move, sub_factors), elems
 
 
 def active_submesh(
     groups: Mapping[int, np.ndarray], free: np.ndarray, seed: np.ndarray, rings: int,
     factors: Factors | None = None,
-) -> tuple[dict[int, np.ndarray], np.ndarray, np.ndarray, Factors | None]:
+) -> SubMesh:
     """The elements that touch a free node within `rings` rings of the seed elements.
 
     seed: (E,) bool over the elements in `mesh_tables` order (arities sorted). Returns the
     sub-mesh's groups with local node numbers, the global id of each local node, the local
     free mask (the free nodes within reach; the rest of the sub-mesh is fixed), and the
-    sub-mesh's rows of the target `factors` (None without).
+    sub-mesh's rows of the target `factors` (None without). Several sub-meshes of one mesh:
+    build a `Neighbourhood` once.
     """
-    arities = [n for n in sorted(groups) if np.asarray(groups[n]).size]
-    faces = [np.asarray(groups[n], dtype=np.int64).reshape(-1, int(n)) for n in arities]
-    near = np.zeros(free.shape[0], dtype=bool)
-    base = 0
-    for f in faces:
-        near[f[seed[base : base + f.shape[0]]]] = True
-        base += f.shape[0]
-    for _ in range(rings):
-        grow = near.copy()
-        for f in faces:
-            grow[f[near[f].any(axis=1)]] = True
-        near = grow
-    move = near & free
-    rows = [move[f].any(axis=1) for f in faces]
-    sub = [f[r] for f, r in zip(faces, rows, strict=True)]
-    nodes = np.unique(np.concatenate([f.ravel() for f in sub])) if sub else np.zeros(0, int)
-    local = np.full(free.shape[0], -1, dtype=np.int64)
-    local[nodes] = np.arange(nodes.size)
-    out = {f.shape[1]: local[f] for f in sub if f.shape[0]}
-    sub_factors = None
-    if factors is not None:
-        sub_factors = {
-            n: tuple(np.asarray(u).reshape(-1, n)[r] for u in factors[n])
-            for n, r in zip(arities, rows, strict=True) if r.any()
-        }
-    return out, nodes, move[nodes], sub_factors
+    return Neighbourhood(groups, free, factors).submesh(seed, rings)[0]
