@@ -150,7 +150,7 @@ def main() -> None:
     jobs = [("tri", n) for n in args.sizes] + [("quad", n) for n in args.quads]
     for kind, n in jobs:
         for backend in args.backends:
-            r = run(kind, n, backend, params, 3 if n <= 200_000 else 1)
+            r = run(kind, n, backend, params, 3 if n <= 1_000_000 and kind == "tri" else 1)
             r["backend_asked"] = backend
             results.append(r)
             print(row(r), flush=True)

@@ -106,8 +106,10 @@ class NumpyEngine:
         return None if self._distance is _UNIFORM else self._distance.tree
 
     def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest, targets,
-               motion: BoundaryMotion | None = None) -> None:
-        """State at `points`; `nearest`: distances to these fixed nodes (None: set them up)."""
+               motion: BoundaryMotion | None = None, defer_distances: bool = False) -> None:
+        """State at `points`; `nearest`: distances to these fixed nodes (None: set them up);
+        defer_distances: leave the distance weights to whoever steps next (`inv_d_pow` None,
+        the OpenCL engine's first step computes them on the device)."""
         self.params = params
         self.faces = faces
         self.targets = targets
@@ -144,7 +146,10 @@ class NumpyEngine:
             self.slot[s.node] = np.arange(s.size)
         self.inv_d_pow: list[np.ndarray] = []
         self.iteration = 0
-        self._refresh_distances(centroids)
+        if defer_distances and self._distance is not _UNIFORM:
+            self.inv_d_pow = None
+        else:
+            self._refresh_distances(centroids)
         self.best_x = self.x.copy()
         self.best_y = self.y.copy()
 

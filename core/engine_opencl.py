@@ -327,8 +327,10 @@ class OpenCLEngine:
         self.free, self.motion = free, motion
         self.iteration = 0
         self._stale = False  # the first step refreshes the distances first (`restarted`)
-        # The reference engine builds the initial state: lbar, quadtree, q, distance weights.
-        ref = NumpyEngine(points, faces, free, params, targets, motion)
+        # The reference engine builds the initial state: lbar, quadtree, q; the first step
+        # computes the distance weights on the device (the host's bits, without a host query)
+        ref = NumpyEngine.__new__(NumpyEngine)
+        ref._setup(points, faces, free, params, None, targets, motion, defer_distances=True)
         self.targets = targets
         self.lbar = ref.lbar
         self.n_nodes = n = ref.n_nodes
@@ -351,7 +353,12 @@ class OpenCLEngine:
         cl.enqueue_copy(self.queue, self.best, self.P)
         self.n_faces = nf = sum(g.size for g in groups)
         self.q = buf(np.ascontiguousarray(np.concatenate(ref.q), dtype=np.float64))
-        self.fdist = buf(np.ascontiguousarray(np.concatenate(ref.inv_d_pow), dtype=np.float64))
+        if ref.inv_d_pow is None:
+            self.fdist = empty(8 * nf)
+            self._stale = True
+        else:
+            self.fdist = buf(np.ascontiguousarray(np.concatenate(ref.inv_d_pow),
+                                                  dtype=np.float64))
         self.wf = empty(8 * nf)
         n_corners = int(ref.corner_nodes.size)
         self.cmove = empty(16 * n_corners)

@@ -277,6 +277,7 @@ class _Run:
         self.n_untangle = self.n_smooth = self.n_global = 0
         self.polished = False  # the global stage's polish (or the lift stage) has run
         self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
+        self._near: Neighbourhood | None = None  # made by the local untangle, if it runs
         self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
 
     def report(self, it: int, phase: str, s: Stats) -> None:
@@ -372,12 +373,11 @@ class _Run:
         the input's inverted faces left, or a sub-mesh of more than LOCAL_SHARE of the faces,
         means EEGT did not do the bulk: the whole mesh is then optimized from the input
         instead (`global_stage`)."""
-        groups, factors = self._global_groups()
         current = self.best
         left = self.best.n_inverted - self.n_frozen
         if left > LOCAL_LEFT * (self.before.n_inverted - self.n_frozen):
             return current
-        near = Neighbourhood(groups, self.free, factors)
+        near = self._neighbourhood()
         for rings in LOCAL_RINGS:
             start = self.best_points()
             bad = self._inverted_movable(start)
@@ -495,6 +495,14 @@ class _Run:
             self.engine.save_best()
         return current
 
+    def _neighbourhood(self) -> Neighbourhood:
+        """The node -> element incidence of `_global_groups` (the local untangle's rings and
+        the lift's rounds share it)."""
+        if self._near is None:
+            groups, factors = self._global_groups()
+            self._near = Neighbourhood(groups, self.free, factors)
+        return self._near
+
     def _global_groups(self) -> tuple[dict[int, np.ndarray], Factors | None]:
         """The global stage's faces: all but frozen faces whose every node is fixed (constant:
         nothing to optimise, and an inverted one would block the lift's validity guard), and
@@ -522,7 +530,7 @@ class _Run:
         out, info = lift_min_quality(
             pts, groups, self.free, options,
             progress=relay if self.progress is not None else None, factors=factors,
-            slide=self.slide,
+            slide=self.slide, neighbourhood=self._near,
         )
         self.n_global += int(info["iterations"])
         if info.get("status") == "cancelled":

@@ -111,11 +111,11 @@ def reference_sizes(
     """
     n_nodes = points.shape[0]
     n_elem = arity.shape[0]
-    p0 = points.take(edges[0], axis=0)  # = points[edges[0]]
-    p1 = points.take(edges[1], axis=0)
-    d = p1 - p0
-    dx, dy = d[:, 0], d[:, 1]
+    x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
+    x0, y0, x1, y1 = x.take(edges[0]), y.take(edges[0]), x.take(edges[1]), y.take(edges[1])
+    dx, dy = x1 - x0, y1 - y0
     elen = np.sqrt(dx * dx + dy * dy)
+    del dx, dy
     positive = elen[elen > 0]
     floor = 1e-3 * (float(np.mean(positive)) if positive.size else 1.0)
     elen = np.maximum(elen, floor)
@@ -133,8 +133,6 @@ def reference_sizes(
         le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     size = fpmath.exp(le)
     ref_area = arity * size**2 / (4.0 * per_arity(arity, fpmath.tan_pi_over))
-    x0, y0 = p0.T
-    x1, y1 = p1.T
     dom_area = 0.5 * float(np.sum(x0 * y1 - x1 * y0))
     total = float(np.sum(ref_area))
     if dom_area > 0.0 and total > 0.0:

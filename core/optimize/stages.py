@@ -235,6 +235,7 @@ def lift_min_quality(
     progress: Callable[[int, int, float, float], Any] | None = None,
     factors: Factors | None = None,
     slide: SlideView | None = None,
+    neighbourhood: Neighbourhood | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Raise the worst element quality of a valid mesh without lowering its mean quality.
 
@@ -253,7 +254,8 @@ def lift_min_quality(
     second inside one, with the kept iterate's qualities; a falsy answer other than None
     cancels (`stops`) and the input is returned. options.solver runs the L-BFGS solves;
     factors: per-face target shapes (the qualities are then against them); slide: the free
-    nodes that slide along their boundary curves (the host solver then runs).
+    nodes that slide along their boundary curves (the host solver then runs); neighbourhood:
+    the `Neighbourhood` of (groups, free, factors) if the caller has one (else built here).
     """
     t_start = time.perf_counter()
     P, free = _checked_input(points, free)
@@ -279,7 +281,7 @@ def lift_min_quality(
     trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run, kept or not
     info["trail"] = trail
     cancel = False
-    near: Neighbourhood | None = None  # node -> element incidence, for the rounds
+    near = neighbourhood  # node -> element incidence, for the rounds (built on first use)
     for r in range(rounds + 1):
         en.qc = m0 if r == 0 else min(cur_m * LIFT_GROW, cur_m + LIFT_GAP * (cur_a - cur_m))
         tick = None
