@@ -44,8 +44,13 @@ def _vector_area(q: np.ndarray, fs: FaceSet) -> np.ndarray:
     a = np.concatenate([g.nodes.ravel() for g in fs.groups])
     b = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in fs.groups])
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    uniq, inverse = np.unique(lo * n + hi, return_inverse=True)
-    net = np.bincount(inverse, weights=np.where(a < b, 1.0, -1.0), minlength=uniq.size)
+    key = (lo * n + hi) * 2 + (a < b)  # one sort: runs of equal edges, their directions
+    key.sort()
+    edge = key >> 1
+    first = np.flatnonzero(np.concatenate([[True], edge[1:] != edge[:-1]]))
+    uniq = edge[first]
+    forward = np.add.reduceat(key & 1, first)
+    net = (2 * forward - np.diff(np.append(first, key.size))).astype(np.float64)
     keep = net != 0.0
     e0, e1, w = uniq[keep] // n, uniq[keep] % n, net[keep]
     c = np.cross(q[e0], q[e1])
