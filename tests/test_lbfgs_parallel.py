@@ -449,6 +449,7 @@ def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
         cl.enqueue_copy(queue, solver.S, s)
         cl.enqueue_copy(queue, tb.v, v)
         cl.enqueue_copy(queue, tb.q, q)
+        solver._go("place", tb.n2 // 2)  # the point in Z: v
         skip = solver._limit(tb)
         lim = np.empty(tb.nc)
         cl.enqueue_copy(queue, lim, tb.LIM)

@@ -13,7 +13,11 @@ Where things live (NumPy and OpenCL twins side by side):
   for small problems on CPU devices, `solver_opencl.OpenCLLbfgs` (one work-item runs the whole
   solve; `solver_opencl.cl`, whose `fold_value_grad` / `lift_value` / `lift_grad` are the
   energies written out).
-- active sub-mesh (rings around seed elements): `submesh.active_submesh`.
+- step limit (the first det root along a search direction: guarded line searches skip the
+  trial steps past it, same iterates): `energy.FoldoverEnergy._step_limit`,
+  `solver.skipped_trials`; OpenCL: `solver_parallel.cl` `limit_corner`, `finish_limit`.
+- active sub-mesh (rings around seed elements): `submesh.Neighbourhood` (node -> element
+  incidence built once, each sub-mesh costs its own size), `submesh.active_submesh`.
 - stage drivers (eps continuation and polish, the lift): `stages.untangle_global`,
   `stages.lift_min_quality`; what they are handed: `options.GlobalOptions`.
 - which solver runs: `device.solver_for`.

@@ -710,33 +710,36 @@ __kernel void finish_trial(__global double *S, __global const int *PIc,
 }
 
 // ---- the step limit (guarded runs): trial steps that would make a det <= 0 -----------------
-// FoldoverEnergy._step_limit, operation for operation: corner k of the sweep, at the point
-// [v, fixed coordinates] along [q, 0]; its det is cc + bb t + aa t^2. LIM[k] = the step t1 past
-// which the det is <= 0 up to the first trial step s0 (INFINITY: none). ZF: per place in Z,
-// the free row of its node or -1.
+// The direction q of free node f into its place zf[f] of DZ (node (x, y) pairs in Z order;
+// the fixed nodes' entries stay 0)
+__kernel void direction_z(__global const double *q, __global const int *zf,
+                          __global double *DZ, const int nf)
+{
+    const int f = get_global_id(0);
+    if (f >= nf)
+        return;
+    DZ[2 * zf[f]] = q[f];
+    DZ[2 * zf[f] + 1] = q[nf + f];
+}
+
+// FoldoverEnergy._step_limit, operation for operation: corner k of the sweep, at the point in
+// Z (the current point v: the accepted trial, or v placed again) along DZ; its det is
+// cc + bb t + aa t^2. LIM[k] = the step t1 past which the det is <= 0 up to the first trial
+// step s0 (INFINITY: none).
 __kernel void limit_corner(__global const double *S, __global const double *Z,
-                           __global const double *v, __global const double *q,
-                           __global const int *CI, __global const double *W,
-                           __global const int *ZF, __global double *LIM, const int nc,
-                           const int nf)
+                           __global const double *DZ, __global const int *CI,
+                           __global const double *W, __global double *LIM, const int nc)
 {
     const int k = get_global_id(0);
     if (k >= nc)
         return;
     const int4 ci = vload4(k, CI);
-    const int pl[3] = {ci.x, ci.y, ci.z};  // i1, i2, i0
-    double px[3], py[3], dx[3], dy[3];
-    for (int j = 0; j < 3; ++j) {
-        const int f = ZF[pl[j]];
-        px[j] = (f >= 0) ? v[f] : Z[2 * pl[j]];
-        py[j] = (f >= 0) ? v[nf + f] : Z[2 * pl[j] + 1];
-        dx[j] = (f >= 0) ? q[f] : 0.0;
-        dy[j] = (f >= 0) ? q[nf + f] : 0.0;
-    }
+    const double2 p0 = vload2(ci.z, Z), p1 = vload2(ci.x, Z), p2 = vload2(ci.y, Z);
+    const double2 d0 = vload2(ci.z, DZ), d1 = vload2(ci.x, DZ), d2 = vload2(ci.y, DZ);
     __global const double *wk = W + 4 * k;
     const double w00 = wk[0], w01 = wk[1], w11 = wk[2];
-    const double e1x = px[0] - px[2], e1y = py[0] - py[2], e2x = px[1] - px[2], e2y = py[1] - py[2];
-    const double f1x = dx[0] - dx[2], f1y = dy[0] - dy[2], f2x = dx[1] - dx[2], f2y = dy[1] - dy[2];
+    const double e1x = p1.x - p0.x, e1y = p1.y - p0.y, e2x = p2.x - p0.x, e2y = p2.y - p0.y;
+    const double f1x = d1.x - d0.x, f1y = d1.y - d0.y, f2x = d2.x - d0.x, f2y = d2.y - d0.y;
     const double j00 = e1x * w00, j10 = e1y * w00;
     const double j01 = e1x * w01 + e2x * w11, j11 = e1y * w01 + e2y * w11;
     const double k00 = f1x * w00, k10 = f1y * w00;

@@ -231,9 +231,7 @@ class _Tables:
         xy = np.empty((nn, 2))
         xy[zpos, 0], xy[zpos, 1] = st.x, st.y
         self.Z = buf(xy.ravel())  # node (x, y) pairs in Z order; the free ones: trial points
-        zf = np.full(nn, -1, dtype=np.int64)
-        zf[zpos[st.fidx]] = np.arange(nf)
-        self.ZF = buf(zf)  # per place in Z: the free row of its node, or -1
+        self.DZ = buf(np.zeros(2 * nn))  # the direction in Z's layout (fixed nodes: 0)
         self.LIM = empty(8 * nc)  # per corner of the sweep: its step limit
         self.v, self.g, self.q, self.gt = (empty(8 * n2) for _ in range(4))
         ring = 8 * n2 * (LBFGS_MEMORY + 1)  # M pairs and the candidate's spare slot
@@ -259,8 +257,8 @@ class _Tables:
         k["chunk_m"].set_args(pc, dc, i32(0), i32(1))  # the step limit: a minimum only
         k["forget"].set_args(S)
         nf = i32(self.n2 // 2)
-        k["limit_corner"].set_args(S, self.Z, self.v, self.q, self.CI, self.W, self.ZF,
-                                   self.LIM, i32(self.nc), nf)
+        k["direction_z"].set_args(self.q, self.zfree, self.DZ, nf)
+        k["limit_corner"].set_args(S, self.Z, self.DZ, self.CI, self.W, self.LIM, i32(self.nc))
         k["limit_leaf"].set_args(pc, dc, self.LIM)
         k["finish_limit"].set_args(S, pc, dc)
         k["trial_point"].set_args(S, self.Z, self.v, self.q, self.zfree, nf, i32(0))
@@ -330,7 +328,7 @@ class ParallelLbfgs:
         self._k["fold_corner_grad"] = kern("fold_corner")
         for name in ("mid", "finish_mid", "forget", "fold_corner", "fold_grad",
                      "lift_corner", "lift_element", "lift_grad", "update", "finish_pair",
-                     "corner_sum", "limit_corner", "limit_leaf", "finish_limit"):
+                     "corner_sum", "direction_z", "limit_corner", "limit_leaf", "finish_limit"):
             self._k[name] = kern(name)
         for name in ("chunk_v1", "chunk_v4", "chunk_c", "chunk_e", "chunk_m"):
             self._k[name] = kern("chunk_sums")
@@ -439,8 +437,10 @@ class ParallelLbfgs:
         return self._rb
 
     def _limit(self, tb: _Tables) -> int:
-        """The step limit of the current direction (`FoldoverEnergy._step_limit`): moves the
-        first trial step below it on the device; returns the halvings skipped."""
+        """The step limit of the current direction (`FoldoverEnergy._step_limit`) at the point
+        in Z (which must be v): moves the first trial step below it on the device; returns
+        the halvings skipped."""
+        self._go("direction_z", tb.n2 // 2)
         self._go("limit_corner", tb.nc)
         pc = tb.plans[1]
         self._go("limit_leaf", pc.leaf_items)
@@ -532,6 +532,7 @@ class ParallelLbfgs:
             if rb[_STATUS] != _ACCEPTED:
                 if n_pairs:  # drop the memory and retry once from plain descent
                     self._one("forget")
+                    self._go("place", tb.n2 // 2)  # Z = v again (the step limit reads Z)
                     pairs = 0
                     continue
                 break
