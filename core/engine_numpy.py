@@ -96,7 +96,7 @@ class NumpyEngine:
         element centroids it was refined for) instead of building another one."""
         engine = NumpyEngine.__new__(NumpyEngine)
         engine._setup(points, self.faces, self.free, self.params, self._distance, self.targets,
-                      self.motion)
+                      self.motion, defer_distances=True)  # a restart may never be stepped
         return engine
 
     @property
@@ -108,8 +108,8 @@ class NumpyEngine:
     def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest, targets,
                motion: BoundaryMotion | None = None, defer_distances: bool = False) -> None:
         """State at `points`; `nearest`: distances to these fixed nodes (None: set them up);
-        defer_distances: leave the distance weights to whoever steps next (`inv_d_pow` None,
-        the OpenCL engine's first step computes them on the device)."""
+        defer_distances: leave the distance weights to the first step (`inv_d_pow` None:
+        this engine's `step`, or the OpenCL engine's on the device), the same values later."""
         self.params = params
         self.faces = faces
         self.targets = targets
@@ -219,7 +219,9 @@ class NumpyEngine:
     def step(self, phase: str) -> Stats:
         """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back."""
         self.iteration += 1
-        if self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0:
+        if self.inv_d_pow is None or (
+            self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0
+        ):
             self._refresh_distances()
         dx, dy = self._node_moves()
         moving = self.free & ((dx != 0) | (dy != 0))
