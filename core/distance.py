@@ -21,6 +21,21 @@ __all__ = ["NearestBoundary"]
 _CHUNK_PAIRS = 1 << 21  # query/candidate pairs handled per vectorized batch
 
 
+def _morton(ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
+    """Z-order codes of integer cell coordinates (up to 30 bits each): a quadtree cell at
+    any level is one contiguous range of its finest cells' codes."""
+
+    def spread(b: np.ndarray) -> np.ndarray:  # bit k -> bit 2k
+        b = b.astype(np.uint64)
+        for shift, mask in ((16, 0x0000FFFF0000FFFF), (8, 0x00FF00FF00FF00FF),
+                            (4, 0x0F0F0F0F0F0F0F0F), (2, 0x3333333333333333),
+                            (1, 0x5555555555555555)):
+            b = (b | (b << np.uint64(shift))) & np.uint64(mask)
+        return b
+
+    return spread(ix) | (spread(iy) << np.uint64(1))
+
+
 def _ragged_arange(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     """Concatenation of arange(s, s + l) for each (s, l), without a Python loop."""
     total = int(lengths.sum())
@@ -59,11 +74,10 @@ class NearestBoundary:
         finest = min_cell if min_cell > 0 else self.side / 4096
         m, e = math.frexp(self.side / finest)  # ceil(log2(ratio)), exactly (no libm)
         self.depth = int(min(max(e - (m == 0.5), 1), 30))
-        if hint_x is None:
-            hx = hy = None
-        else:
-            hx, hy = self._cell_coords(np.asarray(hint_x), np.asarray(hint_y))
-        self._build(leaf_size, leaf_hints, hx, hy)
+        codes = None  # the hints' finest cells in Z order, sorted: counts per cell by range
+        if hint_x is not None:
+            codes = np.sort(_morton(*self._cell_coords(np.asarray(hint_x), np.asarray(hint_y))))
+        self._build(leaf_size, leaf_hints, codes)
 
     def _cell_coords(self, qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Integer cell coordinates at the finest level (clipped into the root square)."""
@@ -73,10 +87,9 @@ class NearestBoundary:
         iy = np.clip(np.floor((qy - self.origin[1]) * scale), 0, top).astype(np.int64)
         return ix, iy
 
-    def _build(
-        self, leaf_size: int, leaf_hints: int, hx: np.ndarray | None, hy: np.ndarray | None
-    ) -> None:
-        """Split cells with more than `leaf_size` candidates and more than `leaf_hints` hints."""
+    def _build(self, leaf_size: int, leaf_hints: int, codes: np.ndarray | None) -> None:
+        """Split cells with more than `leaf_size` candidates and more than `leaf_hints` hints
+        (codes: the hints' sorted Z-order codes at the finest level; None: no hints)."""
         nb = self.bx.size
         cell_ix = np.zeros(1, dtype=np.int64)
         cell_iy = np.zeros(1, dtype=np.int64)
@@ -90,14 +103,11 @@ class NearestBoundary:
         for level in range(self.depth + 1):
             seg_first = np.cumsum(seg_len) - seg_len
             split = seg_len > leaf_size if level < self.depth else np.zeros(seg_len.size, bool)
-            if hx is not None and split.any():
-                shift = self.depth - level
-                keys = cell_iy * (1 << level) + cell_ix
-                order = np.argsort(keys)
-                hk = (hy >> shift) * (1 << level) + (hx >> shift)
-                pos = np.minimum(np.searchsorted(keys[order], hk), keys.size - 1)
-                hit = keys[order][pos] == hk
-                n_hints = np.bincount(order[pos[hit]], minlength=seg_len.size)
+            if codes is not None and split.any():
+                shift = np.uint64(2 * (self.depth - level))
+                first = _morton(cell_ix, cell_iy) << shift  # each cell's range of codes
+                n_hints = (np.searchsorted(codes, first + (np.uint64(1) << shift))
+                           - np.searchsorted(codes, first))
                 split &= n_hints > leaf_hints
             child = np.full(seg_len.size, -1, dtype=np.int64)
             child[split] = 4 * np.arange(int(split.sum()))
