@@ -437,7 +437,8 @@ class LiftEnergy(FoldoverEnergy):
         return np.where(bad, 0.0, q)
 
     def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
-        return self.value_grad(x, y, eps)[0]
+        """F (inf where a corner det is not positive), without the gradient."""
+        return self._eval(np.concatenate([x, y]), self._full_layout(), eps)[0]
 
     def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
         bk = self._bk
