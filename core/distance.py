@@ -16,33 +16,11 @@ from itertools import pairwise
 
 import numpy as np
 
+from .csr import morton, ragged_arange
+
 __all__ = ["NearestBoundary"]
 
 _CHUNK_PAIRS = 1 << 21  # query/candidate pairs handled per vectorized batch
-
-
-def _morton(ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
-    """Z-order codes of integer cell coordinates (up to 30 bits each): a quadtree cell at
-    any level is one contiguous range of its finest cells' codes."""
-
-    def spread(b: np.ndarray) -> np.ndarray:  # bit k -> bit 2k
-        b = b.astype(np.uint64)
-        for shift, mask in ((16, 0x0000FFFF0000FFFF), (8, 0x00FF00FF00FF00FF),
-                            (4, 0x0F0F0F0F0F0F0F0F), (2, 0x3333333333333333),
-                            (1, 0x5555555555555555)):
-            b = (b | (b << np.uint64(shift))) & np.uint64(mask)
-        return b
-
-    return spread(ix) | (spread(iy) << np.uint64(1))
-
-
-def _ragged_arange(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-    """Concatenation of arange(s, s + l) for each (s, l), without a Python loop."""
-    total = int(lengths.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.int64)
-    seg_first = np.cumsum(lengths) - lengths
-    return np.arange(total, dtype=np.int64) + np.repeat(starts - seg_first, lengths)
 
 
 class NearestBoundary:
@@ -76,7 +54,7 @@ class NearestBoundary:
         self.depth = int(min(max(e - (m == 0.5), 1), 30))
         codes = None  # the hints' finest cells in Z order, sorted: counts per cell by range
         if hint_x is not None:
-            codes = np.sort(_morton(*self._cell_coords(np.asarray(hint_x), np.asarray(hint_y))))
+            codes = np.sort(morton(*self._cell_coords(np.asarray(hint_x), np.asarray(hint_y))))
         self._build(leaf_size, leaf_hints, codes)
 
     def _cell_coords(self, qx: np.ndarray, qy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -105,7 +83,7 @@ class NearestBoundary:
             split = seg_len > leaf_size if level < self.depth else np.zeros(seg_len.size, bool)
             if codes is not None and split.any():
                 shift = np.uint64(2 * (self.depth - level))
-                first = _morton(cell_ix, cell_iy) << shift  # each cell's range of codes
+                first = morton(cell_ix, cell_iy) << shift  # each cell's range of codes
                 n_hints = (np.searchsorted(codes, first + (np.uint64(1) << shift))
                            - np.searchsorted(codes, first))
                 split &= n_hints > leaf_hints
@@ -115,7 +93,7 @@ class NearestBoundary:
             leaf = ~split
             leaf_start[leaf] = n_leaf_pairs + np.cumsum(seg_len[leaf]) - seg_len[leaf]
             n_leaf_pairs += int(seg_len[leaf].sum())
-            leaf_parts.append(cand[_ragged_arange(seg_first[leaf], seg_len[leaf])])
+            leaf_parts.append(cand[ragged_arange(seg_first[leaf], seg_len[leaf])])
             self.child.append(child)
             self.leaf_start.append(leaf_start)
             self.leaf_len.append(np.where(leaf, seg_len, 0))
@@ -127,7 +105,7 @@ class NearestBoundary:
             c_ix = np.repeat(cell_ix[split], 4) * 2 + (quad & 1)
             c_iy = np.repeat(cell_iy[split], 4) * 2 + (quad >> 1)
             c_len = np.repeat(p_len, 4)
-            pc = cand[_ragged_arange(np.repeat(p_first, 4), c_len)]
+            pc = cand[ragged_arange(np.repeat(p_first, 4), c_len)]
             owner = np.repeat(np.arange(c_ix.size), c_len)
             h = self.side / (1 << (level + 1))
             x0 = self.origin[0] + c_ix[owner] * h
@@ -189,7 +167,7 @@ class NearestBoundary:
         edges = np.unique(np.concatenate([[0], cuts, [qin.size]]))
         for a, b in pairwise(edges):
             ln = lens[a:b]
-            pc = self.cand[_ragged_arange(starts[a:b], ln)]
+            pc = self.cand[ragged_arange(starts[a:b], ln)]
             dx = self.bx[pc] - np.repeat(qx[qin[a:b]], ln)
             dy = self.by[pc] - np.repeat(qy[qin[a:b]], ln)
             d2 = dx * dx + dy * dy

@@ -29,6 +29,7 @@ import numpy as np
 
 from . import fpmath
 from .boundary import SLIDE_GAP, SLIDE_REACH, BoundaryMotion
+from .csr import bincount_csr
 from .engine_numpy import _DIST_FLOOR, NumpyEngine, edge_lengths
 from .faces import FaceSet
 from .params import EEGTParams
@@ -210,14 +211,6 @@ def _runtime() -> _Runtime:
         rt = _Runtime(cl, dev, f"{dev.name.strip()} [{dev_id}]", ctx, cl.CommandQueue(ctx))
         _runtimes[key] = rt
     return rt
-
-
-def bincount_csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(row pointer, positions): each key's entries in ascending position, the order in
-    which `np.bincount(keys, w)` adds them, so a kernel's gather sums like NumPy."""
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
-    return ptr, np.argsort(keys, kind="stable")
 
 
 def fpmath_options() -> list[str]:

@@ -31,6 +31,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from .. import fpmath
+from ..csr import bincount_csr, ragged_arange
 from .reference import (
     Factors,
     corner_factor_values,
@@ -413,14 +414,11 @@ class LiftEnergy(FoldoverEnergy):
     def element_quality_of(self, elems: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """`element_quality(x, y)[elems]` bit for bit (ascending element ids), from those
         elements' corners only: a lift round on a large mesh changes a few of them."""
-        if self._by_elem is None:
-            order = np.argsort(self.eid, kind="stable")  # corners by element, in corner order
-            ptr = np.zeros(self.n_elem + 1, dtype=np.int64)
-            np.cumsum(np.bincount(self.eid, minlength=self.n_elem), out=ptr[1:])
-            self._by_elem = (ptr, order)
+        if self._by_elem is None:  # corners by element, in corner order
+            self._by_elem = bincount_csr(self.eid, self.n_elem)
         ptr, order = self._by_elem
         cnt = ptr[elems + 1] - ptr[elems]
-        k = order[np.repeat(ptr[elems] - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))]
+        k = order[ragged_arange(ptr[elems], cnt)]
         i0, i1, i2 = self.i0[k], self.i1[k], self.i2[k]
         e1x, e1y = x[i1] - x[i0], y[i1] - y[i0]
         e2x, e2y = x[i2] - x[i0], y[i2] - y[i0]

@@ -125,7 +125,7 @@ def lbfgs(
     # the step limit (guarded runs; not with sliding nodes, whose positions are not linear
     # in the variables) and the direction in z's layout (fixed part 0)
     limit = getattr(en, "_step_limit", None) if guard else None
-    dz = np.zeros(z.size) if limit is not None else z
+    dz = np.zeros(z.size) if limit is not None else None
     sy_, ss_, yy_, ydy_ = prods
     v = v0
     e, _, ok = evaluate(z, layout, eps)

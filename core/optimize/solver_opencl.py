@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..engine_opencl import _runtime, bincount_csr
+from ..csr import bincount_csr
+from ..engine_opencl import _runtime
 from .energy import FoldoverEnergy, LiftEnergy
 from .solver import LBFGS_MEMORY, State, lbfgs, stops
 

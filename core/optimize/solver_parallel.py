@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..engine_opencl import _runtime, bincount_csr
+from ..csr import bincount_csr, morton
+from ..engine_opencl import _runtime
 from .energy import FoldoverEnergy, LiftEnergy
 from .solver import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, lbfgs, stops
 
@@ -107,13 +108,7 @@ def _morton(c: np.ndarray) -> np.ndarray:
     lo = c.min(axis=0)
     span = float((c.max(axis=0) - lo).max()) or 1.0
     cells = ((c - lo) * (65535.0 / span)).astype(np.uint64)
-
-    def spread(b: np.ndarray) -> np.ndarray:  # bit k -> bit 2k
-        for shift, mask in ((8, 0x00FF00FF), (4, 0x0F0F0F0F), (2, 0x33333333), (1, 0x55555555)):
-            b = (b | (b << np.uint64(shift))) & np.uint64(mask)
-        return b
-
-    return spread(cells[:, 0]) | (spread(cells[:, 1]) << np.uint64(1))
+    return morton(cells[:, 0], cells[:, 1])
 
 
 def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..csr import bincount_csr, ragged_arange
 from .reference import Factors
 
 __all__ = ["Neighbourhood", "active_submesh"]
@@ -34,17 +35,13 @@ class Neighbourhood:
             b + np.repeat(np.arange(f.shape[0], dtype=np.int64), f.shape[1])
             for f, b in zip(self.faces, self.first[:-1], strict=True)
         ]) if self.faces else np.zeros(0, dtype=np.int64)
-        order = np.argsort(corner, kind="stable")
+        self.node_ptr, order = bincount_csr(corner, free.shape[0])
         self.node_elem = elem[order]
-        self.node_ptr = np.zeros(free.shape[0] + 1, dtype=np.int64)
-        np.cumsum(np.bincount(corner, minlength=free.shape[0]), out=self.node_ptr[1:])
 
     def _elements_of(self, nodes: np.ndarray) -> np.ndarray:
         """The distinct elements (ascending) that contain one of `nodes`."""
-        lo, hi = self.node_ptr[nodes], self.node_ptr[nodes + 1]
-        cnt = hi - lo
-        at = np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(int(cnt.sum()))
-        return np.unique(self.node_elem[at])
+        lo = self.node_ptr[nodes]
+        return np.unique(self.node_elem[ragged_arange(lo, self.node_ptr[nodes + 1] - lo)])
 
     def _nodes_of(self, elems: np.ndarray) -> np.ndarray:
         """The distinct nodes (ascending) of `elems` (ascending element ids)."""

@@ -1,0 +1,40 @@
+"""Index helpers for ragged (CSR) arrays and Z-order keys, shared by the engines, the
+distance search and the global stage. NumPy only; every result is exact integers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["bincount_csr", "morton", "ragged_arange"]
+
+
+def ragged_arange(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Concatenation of arange(s, s + l) for each (s, l), without a Python loop."""
+    total = int(lengths.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    seg_first = np.cumsum(lengths) - lengths
+    return np.arange(total, dtype=np.int64) + np.repeat(starts - seg_first, lengths)
+
+
+def bincount_csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(row pointer, positions): each key's entries in ascending position, the order in
+    which `np.bincount(keys, w)` adds them, so a kernel's gather sums like NumPy."""
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
+    return ptr, np.argsort(keys, kind="stable")
+
+
+def morton(ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
+    """Z-order codes (uint64) of integer cell coordinates of up to 30 bits each: a quadtree
+    cell at any level is one contiguous range of its finest cells' codes."""
+
+    def spread(b: np.ndarray) -> np.ndarray:  # bit k -> bit 2k
+        b = b.astype(np.uint64)
+        for shift, mask in ((16, 0x0000FFFF0000FFFF), (8, 0x00FF00FF00FF00FF),
+                            (4, 0x0F0F0F0F0F0F0F0F), (2, 0x3333333333333333),
+                            (1, 0x5555555555555555)):
+            b = (b | (b << np.uint64(shift))) & np.uint64(mask)
+        return b
+
+    return spread(ix) | (spread(iy) << np.uint64(1))
