@@ -51,10 +51,15 @@ class FaceSet:
         self.indices = indices
         self.counts = counts
         groups = []
-        for n in np.unique(counts):
-            ids = np.flatnonzero(counts == n)
-            cols = offsets[ids][None, :] + np.arange(n)[:, None]
-            groups.append(ArityGroup(int(n), ids, np.ascontiguousarray(indices[cols])))
+        arities = np.unique(counts)
+        for n in arities:
+            if arities.size == 1:  # one arity: corner k of every face is a strided row
+                ids = np.arange(counts.size)
+                nodes = np.ascontiguousarray(indices.reshape(-1, int(n)).T)
+            else:
+                ids = np.flatnonzero(counts == n)
+                nodes = np.ascontiguousarray(indices[offsets[ids][None, :] + np.arange(n)[:, None]])
+            groups.append(ArityGroup(int(n), ids, nodes))
         self.groups: tuple[ArityGroup, ...] = tuple(groups)
         if n_nodes is not None:
             self.check(n_nodes)
@@ -69,11 +74,18 @@ class FaceSet:
                 f"but there are only {n_nodes} nodes"
             )
         for g in self.groups:
-            srt = np.sort(g.nodes, axis=0)
-            dup = np.flatnonzero((srt[1:] == srt[:-1]).any(axis=0))
+            if g.n <= 4:  # every pair of corners: cheaper than a sorted copy
+                same = np.zeros(g.size, dtype=bool)
+                for i in range(g.n):
+                    for k in range(i + 1, g.n):
+                        same |= g.nodes[i] == g.nodes[k]
+            else:
+                srt = np.sort(g.nodes, axis=0)
+                same = (srt[1:] == srt[:-1]).any(axis=0)
+            dup = np.flatnonzero(same)
             if dup.size:
                 j = int(dup[0])
-                col = srt[:, j]
+                col = np.sort(g.nodes[:, j])
                 node = int(col[1:][col[1:] == col[:-1]][0])
                 raise ValueError(f"face {int(g.ids[j])} repeats node {node}")
 

@@ -22,7 +22,7 @@ from .faces import FaceSet, as_faceset
 from .quality import _check_points
 from .topology import free_nodes
 
-__all__ = ["PlaneFrame"]
+__all__ = ["PlaneFrame", "open_edges", "open_edges_from_table"]
 
 
 def _dot3(q: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -36,11 +36,11 @@ def _norm3(w: np.ndarray) -> float:
     return math.sqrt(x * x + y * y + z * z)
 
 
-def _vector_area(q: np.ndarray, fs: FaceSet) -> np.ndarray:
-    """Vector area 0.5 * sum of q_a x q_b over the faces' directed edges a -> b, summed per
-    undirected edge with its net direction count: interior edges (once each way) drop out
-    exactly, so only boundary and non-manifold nodes enter, in sorted-edge order."""
-    n = q.shape[0]
+def open_edges(fs: FaceSet, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The edges whose directed uses do not cancel (boundary and non-manifold edges): their
+    nodes lo < hi (or lo = hi for a repeated node) in ascending ``lo * n + hi`` order and
+    their net count of lo -> hi walks (float64). Interior edges, walked once each way, are
+    not in it."""
     a = np.concatenate([g.nodes.ravel() for g in fs.groups])
     b = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in fs.groups])
     lo, hi = np.minimum(a, b), np.maximum(a, b)
@@ -52,7 +52,46 @@ def _vector_area(q: np.ndarray, fs: FaceSet) -> np.ndarray:
     forward = np.add.reduceat(key & 1, first)
     net = (2 * forward - np.diff(np.append(first, key.size))).astype(np.float64)
     keep = net != 0.0
-    e0, e1, w = uniq[keep] // n, uniq[keep] % n, net[keep]
+    return uniq[keep] // n, uniq[keep] % n, net[keep]
+
+
+def _packed(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Each pair (x, y) of int32-range ids as one int64 (the bytes of two int32s)."""
+    out = np.empty((x.size, 2), dtype=np.int32)
+    out[:, 0], out[:, 1] = x, y
+    return out.view(np.int64).ravel()
+
+
+def open_edges_from_table(
+    a: np.ndarray, b: np.ndarray, edge_of: np.ndarray, edge_nodes: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``open_edges`` from the faces' directed edges a -> b (every corner's, any order, node
+    ids below n < 2**31) and the edge of an (E, 2) table each one is (``edge_of``), by one
+    count per table edge instead of a sort of all corners. None when the table does not
+    fit the faces (an edge that is not {a, b}, a repeated node, two table edges joining
+    the same nodes): the caller then uses ``open_edges``."""
+    table = np.ascontiguousarray(edge_nodes, dtype=np.int32)
+    if a.size == 0 or n >= 2**31 or table.ndim != 2 or table.shape[1] != 2:
+        return None
+    named = table.view(np.int64).ravel()[edge_of]  # one gather: both ends of each edge
+    if np.any(a == b) or not np.all((named == _packed(a, b)) | (named == _packed(b, a))):
+        return None
+    net = np.bincount(edge_of, weights=np.where(a < b, 1.0, -1.0), minlength=table.shape[0])
+    ids = np.flatnonzero(net)
+    lo = np.minimum(table[ids, 0], table[ids, 1]).astype(np.int64)
+    hi = np.maximum(table[ids, 0], table[ids, 1]).astype(np.int64)
+    key = lo * n + hi
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    if np.any(key[1:] == key[:-1]):
+        return None
+    return lo[order], hi[order], net[ids][order]
+
+
+def _vector_area(q: np.ndarray, edges: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+    """Vector area 0.5 * sum of net * (q_lo x q_hi) over the open edges, in their order:
+    only boundary and non-manifold nodes enter."""
+    e0, e1, w = edges
     c = np.cross(q[e0], q[e1])
     return np.array([0.5 * float(np.sum(w * c[:, k])) for k in range(3)])
 
@@ -71,7 +110,8 @@ class PlaneFrame:
 
     @classmethod
     def fit(cls, points3d, faces, used=None, tol: float = 1e-5, project: bool = False,
-            fixed=None) -> PlaneFrame:
+            fixed=None, edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+            ) -> PlaneFrame:
         """Fit the plane; without ``project``, refuse (ValueError) a node farther than
         ``tol * size`` from it.
 
@@ -91,6 +131,9 @@ class PlaneFrame:
         tolerance and is exactly reproducible. Fixed nodes off that plane stay where they
         are (they never move, SPEC 4); ``fixed_offset`` says how far the farthest one is,
         for the caller to report.
+
+        ``edges``: the faces' ``open_edges`` when the caller has them without a sort (a
+        Blender mesh's edge table); they must be exactly what ``open_edges`` returns.
         """
         p = _check_points(points3d, 3)
         fs = as_faceset(faces, p.shape[0])
@@ -102,7 +145,7 @@ class PlaneFrame:
                 anchor = used
         origin = p[anchor].mean(axis=0)
         q = p - origin
-        area = _vector_area(q, fs)
+        area = _vector_area(q, open_edges(fs, p.shape[0]) if edges is None else edges)
         norm = _norm3(area)
         span = np.ptp(p[used], axis=0)
         size = _norm3(span)

@@ -2,8 +2,11 @@
 """Bulk NumPy reads and writes of Blender mesh data (no per-element Python loops).
 
 Positions go through ``attributes["position"]`` with float32 buffers, topology through the
-polygons' ``loop_start``/``loop_total`` and the ``.corner_vert`` attribute (falling back to
-``loops.vertex_index`` where that internal name is missing).
+polygons' ``loop_start`` and the ``.corner_vert``, ``.corner_edge`` and ``.edge_verts``
+attributes, selection and hiding through ``.select_vert``, ``.select_poly`` and
+``.hide_poly`` (falling back to the items' properties where an internal name is missing or
+of another type): the attributes are read as one block, the properties item by item
+(0.05-0.2 s per million items).
 """
 
 from __future__ import annotations
@@ -44,10 +47,13 @@ def read_topology(me: bpy.types.Mesh) -> MeshArrays:
     """Face offsets and corner vertices of ``me``."""
     nf = len(me.polygons)
     loop_start = np.empty(nf, dtype=np.int32)
-    loop_total = np.empty(nf, dtype=np.int32)
     me.polygons.foreach_get("loop_start", loop_start)
-    me.polygons.foreach_get("loop_total", loop_total)
     corner_verts = _read_corner_ints(me, ".corner_vert", "vertex_index")
+    # Blender stores faces as offsets (face i: corners start[i] to start[i + 1]), so the
+    # sizes are their differences; read them only when the starts do not say so.
+    loop_total = np.diff(loop_start, append=np.int32(corner_verts.size)).astype(np.int32)
+    if nf and (loop_start[0] != 0 or loop_total.min() < 1):
+        me.polygons.foreach_get("loop_total", loop_total)
     return MeshArrays(len(me.vertices), loop_start, loop_total, corner_verts)
 
 
@@ -79,27 +85,37 @@ def write_key_positions(key_block: bpy.types.ShapeKey, co: np.ndarray) -> None:
     key_block.data.foreach_set("co", np.ascontiguousarray(co, dtype=np.float32).ravel())
 
 
-def _read_flags(collection, prop: str) -> np.ndarray:
-    """A boolean property of every item of a mesh collection, in one bulk read."""
+def _read_flags(me: bpy.types.Mesh, collection, prop: str, attr_name: str,
+                domain: str) -> np.ndarray:
+    """A boolean property of every item of a mesh collection, in one bulk read: from the
+    internal attribute Blender keeps it in (an absent one means False everywhere), else
+    from the items' property."""
     out = np.zeros(len(collection), dtype=bool)
-    if out.size:
+    if out.size == 0:
+        return out
+    attr = me.attributes.get(attr_name)
+    if attr is None:
+        return out
+    if attr.domain == domain and attr.data_type == "BOOLEAN":
+        attr.data.foreach_get("value", out)
+    else:
         collection.foreach_get(prop, out)
     return out
 
 
 def read_vertex_selection(me: bpy.types.Mesh) -> np.ndarray:
     """Selected vertices (bool (N,))."""
-    return _read_flags(me.vertices, "select")
+    return _read_flags(me, me.vertices, "select", ".select_vert", "POINT")
 
 
 def read_face_selection(me: bpy.types.Mesh) -> np.ndarray:
     """Selected faces (bool (F,))."""
-    return _read_flags(me.polygons, "select")
+    return _read_flags(me, me.polygons, "select", ".select_poly", "FACE")
 
 
 def read_face_hidden(me: bpy.types.Mesh) -> np.ndarray:
     """Hidden faces (bool (F,))."""
-    return _read_flags(me.polygons, "hide")
+    return _read_flags(me, me.polygons, "hide", ".hide_poly", "FACE")
 
 
 def vertex_group_pins(obj: bpy.types.Object, n_verts: int) -> np.ndarray | None:
@@ -181,18 +197,36 @@ def corner_faces(topo: MeshArrays) -> np.ndarray:
     return out
 
 
-def loose_edge_vertices(me: bpy.types.Mesh) -> np.ndarray | None:
-    """Vertices of edges used by no face (bool (N,)), or None when there is no loose edge."""
+@dataclass
+class EdgeArrays:
+    """Blender's edge table and the edge of every corner (the edge to the next corner)."""
+
+    corner_edges: np.ndarray  # (L,) int32
+    edge_verts: np.ndarray  # (E, 2) int32
+
+
+def read_edges(me: bpy.types.Mesh) -> EdgeArrays:
+    """The edge table and the corners' edges of ``me``."""
     ne = len(me.edges)
+    edge_verts = np.empty(2 * ne, dtype=np.int32)
+    attr = me.attributes.get(".edge_verts")
+    if ne and attr is not None and attr.domain == "EDGE" and attr.data_type == "INT32_2D":
+        attr.data.foreach_get("value", edge_verts)
+    elif ne:
+        me.edges.foreach_get("vertices", edge_verts)
+    return EdgeArrays(_read_corner_ints(me, ".corner_edge", "edge_index"),
+                      edge_verts.reshape(-1, 2))
+
+
+def loose_edge_vertices(n_verts: int, edges: EdgeArrays) -> np.ndarray | None:
+    """Vertices of edges used by no face (bool (N,)), or None when there is no loose edge."""
+    ne = edges.edge_verts.shape[0]
     if ne == 0:
         return None
-    corner_edges = _read_corner_ints(me, ".corner_edge", "edge_index")
     used = np.zeros(ne, dtype=bool)
-    used[corner_edges] = True
+    used[edges.corner_edges] = True
     if used.all():
         return None
-    edge_verts = np.empty(2 * ne, dtype=np.int32)
-    me.edges.foreach_get("vertices", edge_verts)
-    out = np.zeros(len(me.vertices), dtype=bool)
-    out[edge_verts.reshape(-1, 2)[~used].ravel()] = True
+    out = np.zeros(n_verts, dtype=bool)
+    out[edges.edge_verts[~used].ravel()] = True
     return out

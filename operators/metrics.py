@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..core import MEASURE_NAMES, summaries
+from . import runner
 
 
 def parse_names(text: str) -> tuple[str, ...]:
@@ -37,6 +38,6 @@ def run_metrics(job: Any, result: Any, names: tuple[str, ...]) -> dict[str, Any]
     before = summaries(job.points2d, job.faces, names)
     after = before
     if result.written and job.new_co is not None:
-        pts = job.frame.to_2d(job.new_co[job.nodes].astype(np.float64))
+        pts = job.frame.to_2d(runner.node_rows(job, job.new_co).astype(np.float64))
         after = summaries(pts, job.faces, names)
     return {n: {"before": before[n].as_dict(), "after": after[n].as_dict()} for n in names}

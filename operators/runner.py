@@ -18,7 +18,7 @@ import numpy as np
 
 from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
 from ..core.pipeline import frozen_note
-from ..core.plane import PlaneFrame
+from ..core.plane import PlaneFrame, open_edges_from_table
 from ..core.reference_shapes import reference_targets, reference_to_2d
 from . import mesh_io, reference_input
 from .reference_input import ReferenceSource
@@ -199,8 +199,6 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         face_mask = mesh_io.read_face_selection(me)
         if not face_mask.any():
             return _fail(job, "no faces selected")
-    corner_face = mesh_io.corner_faces(topo)
-    corner_in = face_mask[corner_face]
     order = np.argsort(topo.loop_start[face_mask], kind="stable")
     starts = topo.loop_start[face_mask][order]
     totals = topo.loop_total[face_mask][order]
@@ -208,18 +206,28 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     if topo.corner_verts.size and (topo.corner_verts.min() < 0
                                    or topo.corner_verts.max() >= n_all):
         return _fail(job, "a face uses a vertex index out of range")
-    # Corner vertex lists of the chosen faces, face by face (offsets are sorted in Blender).
-    idx = np.repeat(starts, totals) + (np.arange(int(totals.sum()))
-                                       - np.repeat(np.cumsum(totals) - totals, totals))
+    offsets = np.zeros(totals.size + 1, dtype=np.int64)
+    np.cumsum(totals, out=offsets[1:])
+    # Corner numbers of the chosen faces, face by face (offsets are sorted in Blender): all
+    # corners in order when every face is chosen.
+    if np.array_equal(starts, offsets[:-1]):
+        idx = slice(0, int(offsets[-1]))
+    else:
+        idx = np.repeat(starts - offsets[:-1], totals) + np.arange(int(offsets[-1]))
     sub_corners = topo.corner_verts[idx].astype(np.int64)
     used = np.zeros(n_all, dtype=bool)
     used[sub_corners] = True
-    nodes = np.flatnonzero(used)  # = np.unique(sub_corners), by a lookup instead of a sort
-    lut = np.zeros(n_all, dtype=np.int64)
-    lut[nodes] = np.arange(nodes.size)
-    local = lut[sub_corners]
+    if used.all():  # every vertex in a chosen face: nodes are the vertices
+        nodes = lut = np.arange(n_all)
+        local = sub_corners
+        pts3d = job.co.astype(np.float64)
+    else:
+        nodes = np.flatnonzero(used)  # = np.unique(sub_corners), by a lookup, not a sort
+        lut = np.zeros(n_all, dtype=np.int64)
+        lut[nodes] = np.arange(nodes.size)
+        local = lut[sub_corners]
+        pts3d = job.co[nodes].astype(np.float64)
     job.nodes = nodes
-    pts3d = job.co[nodes].astype(np.float64)
     if not np.isfinite(pts3d).all():
         bad = int(np.count_nonzero(~np.isfinite(pts3d).all(axis=1)))
         return _fail(job, f"{bad} vertices have NaN or infinite coordinates")
@@ -230,17 +238,17 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         except ValueError as exc:
             return _fail(job, str(exc))
     if selected_only:
-        fixed_all[topo.corner_verts[~corner_in]] = True
-    loose = mesh_io.loose_edge_vertices(me)
+        fixed_all[topo.corner_verts[~face_mask[mesh_io.corner_faces(topo)]]] = True
+    edges = mesh_io.read_edges(me)
+    loose = mesh_io.loose_edge_vertices(n_all, edges)
     if loose is not None:
         fixed_all |= loose
     job.fixed = fixed_all[nodes]
     try:
-        offsets = np.zeros(totals.size + 1, dtype=np.int64)
-        np.cumsum(totals, out=offsets[1:])
         job.faces = faces_from_csr(offsets[:-1], totals, local.reshape(-1))
         job.frame = PlaneFrame.fit(pts3d, job.faces, tol=PLANE_TOL, project=project,
-                                   fixed=job.fixed)
+                                   fixed=job.fixed,
+                                   edges=_open_edges(idx, offsets, topo, edges, lut))
         job.points2d = job.frame.to_2d(pts3d)
     except ValueError as exc:
         return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
@@ -258,6 +266,28 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         job.notes.append(f"boundary/pinned vertices up to {job.frame.fixed_offset:.3g} off the "
                          f"plane were kept where they are (they never move)")
     return job
+
+
+def _open_edges(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.MeshArrays,
+                edges: mesh_io.EdgeArrays, lut: np.ndarray):
+    """The chosen faces' open edges (in node numbers) from Blender's edge table
+    (``open_edges_from_table``: no sort of every corner), or None to let the plane fit find
+    them. ``corners``: the chosen faces' corners face by face (``offsets``); ``lut`` maps
+    mesh vertices to nodes, in the same order."""
+    ev, ce = edges.edge_verts, edges.corner_edges
+    if offsets[-1] == 0 or ev.size == 0 or ev.min() < 0 or ev.max() >= lut.size:
+        return None
+    edge_of = ce[corners]
+    if edge_of.min() < 0 or edge_of.max() >= ev.shape[0]:
+        return None
+    a = topo.corner_verts[corners]
+    nxt = np.arange(1, a.size + 1, dtype=np.int64 if a.size >= 2**31 else np.int32)
+    nxt[offsets[1:] - 1] = offsets[:-1]  # a face's last corner goes back to its first
+    found = open_edges_from_table(a, a[nxt], edge_of, ev, lut.size)
+    if found is None:
+        return None
+    lo, hi, net = found  # mesh vertices; lut keeps their order, so the edges' order too
+    return lut[lo], lut[hi], net
 
 
 def select_opencl_device(device: str | None) -> None:
@@ -318,16 +348,22 @@ def _positions_to_write(job: Job, res: Any) -> tuple[np.ndarray | None, Any]:
     if moved.any():
         out = _placed(job, res.points, moved, free)
         if out is not None:
-            written = mesh_stats(job.frame.to_2d(out[job.nodes].astype(np.float64)), job.faces,
+            written = mesh_stats(job.frame.to_2d(node_rows(job, out).astype(np.float64)), job.faces,
                                  targets=job.targets)
             if improves(written, before):
                 return out, written
     if job.project:  # the projection alone
         out = _placed(job, res.points, np.zeros_like(moved), free)
         if out is not None:
-            return out, mesh_stats(job.frame.to_2d(out[job.nodes].astype(np.float64)),
+            return out, mesh_stats(job.frame.to_2d(node_rows(job, out).astype(np.float64)),
                                    job.faces, targets=job.targets)
     return None, None
+
+
+def node_rows(job: Job, co: np.ndarray) -> np.ndarray:
+    """The rows of a per-vertex array that are the job's nodes (the array itself when every
+    vertex is one: no copy)."""
+    return co if job.nodes.size == co.shape[0] else co[job.nodes]
 
 
 def _placed(job: Job, points2d: np.ndarray, moved: np.ndarray,
@@ -335,13 +371,14 @@ def _placed(job: Job, points2d: np.ndarray, moved: np.ndarray,
     """A copy of ``job.co`` with the ``moved`` nodes at their 2D result on the plane (and,
     with ``project``, the other free nodes projected onto it), or None if no float32
     position changes."""
-    target = job.co[job.nodes].astype(np.float64)
+    given = node_rows(job, job.co)
+    target = given.astype(np.float64)
     target[moved] = job.frame.to_3d(np.asarray(points2d)[moved])
     if job.project:
         rest = free & ~moved
         target[rest] = job.frame.foot(target[rest])
     new3d = target.astype(np.float32)
-    changed = np.any(new3d != job.co[job.nodes], axis=1)
+    changed = np.any(new3d != given, axis=1)
     if not changed.any():
         return None
     out = job.co.copy()

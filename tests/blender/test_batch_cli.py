@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import importlib
 import json
 import os
 import shutil
@@ -24,7 +25,9 @@ def cli(ext):
 
 
 def batch(ext):
-    return ext.operators.batch
+    # the command imports its batch module on first use: import it here too, so a test
+    # run alone does not depend on one that ran before it
+    return importlib.import_module(f"{ext.__name__}.operators.batch")
 
 
 @pytest.fixture

@@ -72,6 +72,48 @@ def test_project_puts_every_vertex_on_the_plane_of_the_fixed_ones(bpy, ext):
     assert "projected onto the plane of the fixed vertices (largest offset 0.0" in lr.message
 
 
+@pytest.mark.parametrize("selected_only", [False, True])
+def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy, ext,
+                                                                             selected_only):
+    """The operator finds the open edges from Blender's edge table (no sort of every
+    corner); a loose edge and a face selection change nothing: same edges, same frame."""
+    runner, plane = ext.operators.runner, ext.core.plane
+    obj = import_obj(bpy, "tri_two_holes")
+    me = obj.data
+    co = positions(obj).astype(np.float64) @ tilt().T + [1.0, 2.0, -3.0]
+    me.attributes["position"].data.foreach_set("vector", co.astype(np.float32).ravel())
+    n0 = len(me.vertices)
+    me.vertices.add(2)
+    me.edges.add(1)
+    me.edges[-1].vertices = (n0, n0 + 1)  # a loose edge: its vertices are pinned, not faces
+    if selected_only:
+        sel = np.zeros(len(me.polygons), dtype=bool)
+        sel[: len(sel) // 2] = True
+        me.polygons.foreach_set("select", sel)
+    me.update()
+    job = runner.prepare(obj, selected_only=selected_only, project=True)
+    assert job.error is None
+    n = job.nodes.size
+    topo = ext.operators.mesh_io.read_topology(me)
+    faces = np.flatnonzero(np.asarray([p.select for p in me.polygons])) if selected_only \
+        else np.arange(len(me.polygons))
+    idx = np.concatenate([np.arange(topo.loop_start[f], topo.loop_start[f] + topo.loop_total[f])
+                          for f in faces])
+    lut = np.zeros(len(me.vertices), dtype=np.int64)
+    lut[job.nodes] = np.arange(n)
+    offsets = np.concatenate([[0], np.cumsum(topo.loop_total[faces])])
+    got = runner._open_edges(idx, offsets, topo, ext.operators.mesh_io.read_edges(me), lut)
+    want = plane.open_edges(job.faces, n)
+    assert got is not None and want[0].size > 50
+    for g, w in zip(got, want):
+        assert g.tobytes() == w.tobytes()
+    pts = job.co[job.nodes].astype(np.float64)
+    ref = plane.PlaneFrame.fit(pts, job.faces, tol=runner.PLANE_TOL, project=True,
+                               fixed=job.fixed)
+    for attr in ("origin", "u", "v", "normal"):
+        assert getattr(job.frame, attr).tobytes() == getattr(ref, attr).tobytes()
+
+
 def test_project_keeps_a_pinned_vertex_off_the_plane_and_says_so(bpy, ext):
     """A pinned vertex 0.05 off a tilted plane stays (bit for bit); the others land on the
     plane through the fixed vertices' centroid (1/25 of the lift away from the boundary's)."""
