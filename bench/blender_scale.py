@@ -20,6 +20,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 _SANDBOX = tempfile.mkdtemp(prefix="eegt_bench_user_")
+# The OpenCL driver keeps its compiled kernels under the user's cache, as it does for a user
+# who ran the extension before; a sandboxed HOME alone would compile them again.
+os.environ.setdefault("XDG_CACHE_HOME", str(Path.home() / ".cache"))
 os.environ["HOME"] = os.environ["BLENDER_USER_RESOURCES"] = _SANDBOX
 
 

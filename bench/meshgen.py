@@ -32,13 +32,15 @@ HOLES = ((0.3, 0.3, 0.12), (0.7, 0.35, 0.1), (0.45, 0.72, 0.11))  # (x, y, radiu
 
 
 def holed_square(
-    n_triangles: int, jitter: float = 0.47, seed: int = 0
+    n_triangles: int, jitter: float = 0.525, seed: int = 0, shake: float = 0.25
 ) -> tuple[np.ndarray, FaceSet]:
     """Unit square with three round holes, an unstructured Delaunay mesh of about
     `n_triangles` triangles (nodes: the sides and hole circles sampled at the edge length h,
-    inside a triangular lattice moved by up to 0.35 h, triangulated by matplotlib's qhull); then
-    interior nodes moved by uniform noise of `jitter` h (0.47 inverts about 5 % of the
-    triangles)."""
+    inside a triangular lattice moved by up to `shake` h, triangulated by matplotlib's qhull);
+    then interior nodes moved by uniform noise of `jitter` h (0.525 inverts about 5 % of the
+    triangles). With `shake` 0.25 interior nodes have degree 4 to 8 as a mesher's output
+    would; from about 0.3 on, Delaunay makes nodes of degree 3, whose three triangles cap the
+    reachable q_min near 0.60."""
     from matplotlib.tri import Triangulation
 
     rng = np.random.default_rng(seed)
@@ -55,7 +57,7 @@ def holed_square(
     rows = round(1.0 / (h * np.sqrt(3.0) / 2.0))
     i, j = np.mgrid[1:rows, 0 : k + 1]
     lat = np.column_stack([((j + 0.5 * (i % 2)) / k).ravel(), (i / rows).ravel()])
-    lat += rng.uniform(-0.35 * h, 0.35 * h, lat.shape)
+    lat += rng.uniform(-shake * h, shake * h, lat.shape)
     inside = np.all((lat > 0.5 * h) & (lat < 1 - 0.5 * h), axis=1)
     for hx, hy, r in HOLES:
         inside &= np.hypot(lat[:, 0] - hx, lat[:, 1] - hy) > r + 0.5 * h

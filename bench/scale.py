@@ -31,14 +31,24 @@ PEER = {"label": "foldover-free untangler (C++, 1 thread; issue 11)", "elements"
         "seconds": 45.0, "q_min": 0.654, "q_avg": 0.968}
 
 
+MESH_TAG = {"tri": "shake25", "tri-deg3": "shake35", "quad": "grid"}  # in the cache names
+
+
 def mesh_file(kind: str, n: int) -> Path:
-    """The cached mesh `kind` ('tri' or 'quad') of about n elements, made on first use."""
+    """The cached mesh `kind` of about n elements, made on first use: 'tri' (a mesher-like
+    Delaunay mesh, interior nodes of degree 4 to 8), 'tri-deg3' (its lattice shaken more
+    before the triangulation: nodes of degree 3 to 9, whose degree-3 nodes cap q_min near
+    0.60) or 'quad' (a grid)."""
     from bench.meshgen import holed_quads, holed_square
 
-    path = CACHE / f"{kind}_{n}.npz"
+    path = CACHE / f"{kind}_{n}_{MESH_TAG[kind]}.npz"
     if not path.exists():
         CACHE.mkdir(parents=True, exist_ok=True)
-        p, fs = (holed_square if kind == "tri" else holed_quads)(n)
+        if kind == "quad":
+            p, fs = holed_quads(n)
+        else:
+            p, fs = holed_square(n, **({"shake": 0.35, "jitter": 0.47} if kind == "tri-deg3"
+                                       else {}))
         tmp = path.with_suffix(".tmp.npz")
         np.savez(tmp, points=p, offsets=fs.offsets, indices=fs.indices)
         tmp.replace(path)
@@ -121,6 +131,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[100_000, 1_000_000, 4_000_000])
     ap.add_argument("--quads", type=int, nargs="*", default=[1_000_000])
+    ap.add_argument("--deg3", type=int, nargs="*", default=[1_000_000],
+                    help="sizes of the mesh with degree-3 nodes (q_min capped near 0.60)")
     ap.add_argument("--backends", nargs="+", default=["numpy", "auto"])
     ap.add_argument("--params", default="{}", help="EEGTParams fields as JSON")
     ap.add_argument("--plot", type=Path, help="write the time-against-size picture here")
@@ -147,10 +159,11 @@ def main() -> None:
           "(untangle / global / smooth) | peak RSS MB | ns/element |")
     print("|---|---|---|---|---|---|---|---|---|")
     results = []
-    jobs = [("tri", n) for n in args.sizes] + [("quad", n) for n in args.quads]
+    jobs = [("tri", n) for n in args.sizes] + [("tri-deg3", n) for n in args.deg3] + \
+        [("quad", n) for n in args.quads]
     for kind, n in jobs:
         for backend in args.backends:
-            r = run(kind, n, backend, params, 3 if n <= 1_000_000 and kind == "tri" else 1)
+            r = run(kind, n, backend, params, 3 if n <= 1_000_000 and kind != "quad" else 1)
             r["backend_asked"] = backend
             results.append(r)
             print(row(r), flush=True)
