@@ -19,6 +19,7 @@ from .optimize.submesh import Neighbourhood
 from .params import EEGTParams
 from .quality import Stats, _check_points, group_quality, mesh_stats
 from .reference_shapes import reference_targets
+from .reorder import REORDER_MIN_FACES, z_order
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import free_nodes
 
@@ -137,7 +138,14 @@ def untangle_and_smooth(
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
     frozen = frozen_faces(_as_given(p, fs, center, scale), fs, free)
-    run = _Run(work, fs, free, params, backend, progress, frozen, tg, motion)
+    order = None  # large meshes run renumbered in Z order (core.reorder): memory locality
+    if fs.n_faces >= REORDER_MIN_FACES and tg is None and motion is None:
+        order, run_fs = z_order(work, fs)
+        work = work[order.nodes]  # the run's numbering from here on (one copy, not two)
+        run = _Run(work, run_fs, free[order.nodes], params, backend, progress,
+                   frozen[order.faces])
+    else:
+        run = _Run(work, fs, free, params, backend, progress, frozen, tg, motion)
     try:
         status, message = run.execute()
     except _CancelRun:
@@ -148,7 +156,9 @@ def untangle_and_smooth(
     out, after = p.copy(), before
     if status != "cancelled":
         best = run.best_pts if run.best_pts is not None else run.engine.best_points()
-        changed = np.any(best != work, axis=1) & free  # fixed rows stay the input's, always
+        changed = np.any(best != work, axis=1) & run.free  # fixed rows stay the input's
+        if order is not None:
+            best, changed = order.back(best), order.back(changed)
         out[changed] = best[changed] * scale + center
         after = _stats_as_given(out, fs, center, scale, tg) if changed.any() else before
         if not (after == before or after.better_than(before)):  # judged in the caller's units
@@ -512,7 +522,12 @@ class _Run:
             all_factors = None if self.targets is None else corner_factors(self.targets, self.fs)
             for g in self.fs.groups:
                 keep = ~(self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0))
-                groups[g.n] = np.ascontiguousarray(g.nodes[:, keep].T)
+                if g.size == self.fs.n_faces and keep.all():  # the faces' own rows, no copy
+                    rows = self.fs.indices.reshape(-1, g.n).view()
+                    rows.flags.writeable = False
+                    groups[g.n] = rows
+                else:
+                    groups[g.n] = np.ascontiguousarray(g.nodes[:, keep].T)
                 if all_factors is not None:
                     factors = factors or {}
                     factors[g.n] = tuple(u[keep] for u in all_factors[g.n])

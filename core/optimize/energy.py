@@ -404,11 +404,16 @@ class LiftEnergy(FoldoverEnergy):
     def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(E,) mean ratio of each element (0 where a corner is not positive)."""
         self._jac(np.concatenate([x, y]), self._full_layout()[0])
-        d = self._bk.d
-        u = 0.5 * self._frob() / np.where(d > 0.0, d, np.inf)  # 1 / q_k; inf: q_k = 0
+        bk = self._bk  # its scratch arrays: no corner-sized temporaries on a large mesh
+        d = bk.d
+        u = np.multiply(bk.half, self._frob(), bk.u)
+        np.copyto(bk.tmp, np.inf)
+        np.copyto(bk.tmp, d, where=d > 0.0)
+        np.divide(u, bk.tmp, u)  # 1 / q_k = 0.5 t / d; d <= 0: 0, so q_k = inf
         with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
-            q = np.bincount(self.eid, 1.0 / u, minlength=self.n_elem) / self.n_corners
-        bad = np.bincount(self.eid, d <= 0.0, minlength=self.n_elem) > 0
+            q = np.bincount(self.eid, np.divide(bk.one, u, bk.tmp), self.n_elem) / self.n_corners
+        bad = np.zeros(self.n_elem, dtype=bool)
+        bad[self.eid[d <= 0.0]] = True
         return np.where(bad, 0.0, q)
 
     def element_quality_of(self, elems: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:

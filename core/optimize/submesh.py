@@ -29,6 +29,10 @@ class Neighbourhood:
         sizes = [f.shape[0] for f in self.faces]
         self.first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.n_elem = int(self.first[-1])
+        if len(self.faces) == 1:  # one arity: corner c is in element c // n (no copies)
+            self.node_ptr, order = bincount_csr(self.faces[0].ravel(), free.shape[0])
+            self.node_elem = order // self.faces[0].shape[1]
+            return
         corner = np.concatenate([f.ravel() for f in self.faces]) if self.faces else \
             np.zeros(0, dtype=np.int64)
         elem = np.concatenate([
