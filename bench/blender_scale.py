@@ -3,16 +3,22 @@
 Builds the extension zip, installs it into a sandboxed user folder, makes a mesh object of
 `bench.scale`'s cached mesh and times (1) `mesh.eegt_untangle_smooth` from call to return
 against the core's own seconds (so the difference is reading and writing the Blender mesh),
-(2) the `eegt` command's run on a saved .blend (`cli.run`, without the .blend load and save,
-which are timed apart). Prints a markdown table.
+(2) the `eegt` command's run on a saved .blend (`cli.run`: .blend load, run, checked save),
+both in this process, after one another; (3) with --fresh N, the command in N fresh
+processes against the core (`untangle_and_smooth` on the same mesh) in N fresh processes,
+alternating: each pays its own first-run costs (OpenCL start-up, fresh memory), as a
+`blender -b` call or a Python script does. Prints markdown tables.
 
-Run: `python -m bench.blender_scale [--faces 1000000] [--backend numpy]`.
+Run: `python -m bench.blender_scale [--faces 1000000] [--backend numpy] [--fresh 3]`.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -64,12 +70,57 @@ def mesh_object(bpy, kind: str, n: int):
     return obj
 
 
+def command_child(blend: str, backend: str) -> None:
+    """One `eegt` command run on `blend` in this fresh process; prints a JSON line."""
+    _, ext = install()
+    cli = sys.modules[f"{ext.__name__}.operators.cli"]
+    out = str(Path(tempfile.mkdtemp(prefix="eegt_bench_cli_")) / "out.blend")
+    t = time.perf_counter()
+    code, rep = cli.run([blend, "-o", out, "--backend", backend, "--quiet"])
+    total = time.perf_counter() - t
+    print(json.dumps({"code": code, "total": total, "core": rep["objects"][0]["seconds"]}))
+
+
+def fresh(args, blend: str) -> None:
+    """The command and the core, each in fresh processes, alternating."""
+    from bench.scale import mesh_file
+
+    path = str(mesh_file(args.kind, args.faces))
+    cmd, core = [], []
+    for _ in range(args.fresh):
+        out = subprocess.run(
+            [sys.executable, "-m", "bench.scale", "--child", path, args.backend, "{}"],
+            cwd=ROOT, check=True, capture_output=True, text=True).stdout
+        core.append(json.loads(out.strip().splitlines()[-1])["seconds"])
+        out = subprocess.run(
+            [sys.executable, "-m", "bench.blender_scale", "--command-child", blend, args.backend],
+            cwd=ROOT, check=True, capture_output=True, text=True).stdout
+        cmd.append(json.loads(out.strip().splitlines()[-1]))
+    a, b = statistics.median(r["total"] for r in cmd), statistics.median(core)
+    cmd_s = ", ".join(f"{r['total']:.2f}" for r in cmd)
+    core_s = ", ".join(f"{c:.2f}" for c in core)
+    own = ", ".join(f"{r['core']:.2f}" for r in cmd)
+    print(f"\nfresh processes, {args.backend}, medians of {args.fresh}, alternating\n")
+    print("| run | seconds | median | against the core |")
+    print("|---|---|---|---|")
+    print(f"| core (`untangle_and_smooth`, Python) | {core_s} | {b:.2f} | |")
+    print(f"| `eegt` command (.blend load, run, checked save) | {cmd_s} | {a:.2f} | "
+          f"{100 * (a / b - 1):+.0f} % |")
+    print(f"\n(the command's own core seconds: {own})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--faces", type=int, default=1_000_000)
     ap.add_argument("--kind", choices=("tri", "quad"), default="tri")
     ap.add_argument("--backend", default="numpy", choices=("numpy", "auto", "opencl"))
+    ap.add_argument("--fresh", type=int, default=0, metavar="N",
+                    help="also time the command and the core in N fresh processes each")
+    ap.add_argument("--command-child", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.command_child:
+        command_child(*args.command_child)
+        return
     bpy, ext = install()
     cli = sys.modules[f"{ext.__name__}.operators.cli"]
     rows = []
@@ -107,6 +158,8 @@ def main() -> None:
     for name, nf, tot, core, qmin, qavg, inv in rows:
         print(f"| {name} | {nf:,} | {tot:.2f} | {core:.2f} | {100 * (tot / core - 1):+.0f} % | "
               f"{qmin:.3f} | {qavg:.4f} | {inv} |")
+    if args.fresh:
+        fresh(args, str(src))
 
 
 if __name__ == "__main__":

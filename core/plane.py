@@ -147,7 +147,8 @@ class PlaneFrame:
         q = p - origin
         area = _vector_area(q, open_edges(fs, p.shape[0]) if edges is None else edges)
         norm = _norm3(area)
-        span = np.ptp(p[used], axis=0)
+        all_used = bool(used.all())
+        span = np.ptp(p if all_used else p[used], axis=0)
         size = _norm3(span)
         if size == 0 or norm <= 1e-12 * size * size:
             raise ValueError("mesh has zero total area: cannot tell its plane or orientation")
@@ -157,9 +158,12 @@ class PlaneFrame:
         u = u / _norm3(u)
         v = np.cross(normal, u)
         offsets = np.abs(_dot3(q, normal))
-        max_offset = float(offsets[used].max())
-        check = np.flatnonzero(anchor)
-        worst = int(check[np.argmax(offsets[check])])
+        max_offset = float((offsets if all_used else offsets[used]).max())
+        if anchor is used and all_used:
+            worst = int(np.argmax(offsets))
+        else:
+            check = np.flatnonzero(anchor)
+            worst = int(check[np.argmax(offsets[check])])
         if project:
             return cls(origin, u, v, normal, max_offset, float(offsets[worst]), size)
         if offsets[worst] > tol * size:

@@ -46,11 +46,14 @@ def _read_corner_ints(me: bpy.types.Mesh, attr_name: str, loop_prop: str) -> np.
 def read_topology(me: bpy.types.Mesh) -> MeshArrays:
     """Face offsets and corner vertices of ``me``."""
     nf = len(me.polygons)
-    loop_start = np.empty(nf, dtype=np.int32)
-    me.polygons.foreach_get("loop_start", loop_start)
     corner_verts = _read_corner_ints(me, ".corner_vert", "vertex_index")
+    if corner_verts.size == 3 * nf:  # faces have 3 corners or more: all triangles
+        loop_start = np.arange(0, 3 * nf, 3, dtype=np.int32)
+    else:
+        loop_start = np.empty(nf, dtype=np.int32)
+        me.polygons.foreach_get("loop_start", loop_start)
     # Blender stores faces as offsets (face i: corners start[i] to start[i + 1]), so the
-    # sizes are their differences; read them only when the starts do not say so.
+    # starts of triangles and the sizes are known; read them only when not.
     loop_total = np.diff(loop_start, append=np.int32(corner_verts.size)).astype(np.int32)
     if nf and (loop_start[0] != 0 or loop_total.min() < 1):
         me.polygons.foreach_get("loop_total", loop_total)
