@@ -19,7 +19,7 @@ from .optimize.submesh import Neighbourhood
 from .params import EEGTParams
 from .quality import Stats, _check_points, group_quality, mesh_stats
 from .reference_shapes import reference_targets
-from .reorder import REORDER_MIN_FACES, z_order
+from .reorder import REORDER_MIN_FACES, scattered, z_order
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import free_nodes
 
@@ -139,7 +139,8 @@ def untangle_and_smooth(
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
     frozen = frozen_faces(_as_given(p, fs, center, scale), fs, free)
     order = None  # large meshes run renumbered in Z order (core.reorder): memory locality
-    if fs.n_faces >= REORDER_MIN_FACES and tg is None and motion is None:
+    if fs.n_faces >= REORDER_MIN_FACES and tg is None and motion is None and \
+            scattered(fs, p.shape[0]):
         order, run_fs = z_order(work, fs)
         work = work[order.nodes]  # the run's numbering from here on (one copy, not two)
         run = _Run(work, run_fs, free[order.nodes], params, backend, progress,

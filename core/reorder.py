@@ -6,7 +6,8 @@ the order a mesher or an edit left them (qhull's, for instance, is nearly random
 accesses jump over the whole node arrays, and once they outgrow the caches each costs a
 memory round trip: a 4M-triangle run took 1.5x the time per element of a 1M one. Nodes are
 renumbered along the Z-order curve of their positions and faces by their lowest new node;
-the run works on the renumbered mesh and its points are mapped back.
+the run works on the renumbered mesh and its points are mapped back. Meshes already
+numbered with locality (row by row, or in Z order) keep their numbering.
 """
 
 from __future__ import annotations
@@ -18,10 +19,29 @@ import numpy as np
 from .csr import morton, ragged_arange
 from .faces import FaceSet
 
-__all__ = ["REORDER_MIN_FACES", "Renumbering", "z_order"]
+__all__ = ["REORDER_MIN_FACES", "Renumbering", "scattered", "z_order"]
 
 REORDER_MIN_FACES = 50_000  # smaller meshes fit the caches in any order
 _CELLS = 65535.0  # grid cells per side for the Z-order codes (16 bits)
+_FAR = 8.0  # a face spanning more than this times sqrt(N) node numbers is scattered
+_STEP = 16  # consecutive faces whose lowest nodes lie further apart share no cache line
+
+
+def scattered(fs: FaceSet, n_nodes: int) -> bool:
+    """Whether the numbering makes the runs jump in memory: the median step from a face's
+    lowest node to the next face's is over `_STEP` (consecutive faces then touch different
+    cache lines), or the median face spans over `_FAR` sqrt(N) node numbers. A mesh
+    numbered row by row (a grid: steps of 1, spans of about sqrt(N)) or already in Z order
+    is left as it is: it would gain nothing, a grid even loses."""
+    far = _FAR * np.sqrt(max(n_nodes, 1))
+    span, step = [], []
+    for g in fs.groups:
+        lo = g.nodes.min(axis=0)
+        span.append(g.nodes.max(axis=0) - lo)
+        step.append(np.abs(np.diff(lo)))
+    steps = np.concatenate(step)
+    return bool(np.median(np.concatenate(span)) > far
+                or (steps.size > 0 and np.median(steps) > _STEP))
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from meshdata import load2d
 import core.pipeline as pipeline
 from core import EEGTParams, mesh_stats, untangle_and_smooth
 from core.faces import FaceSet
-from core.reorder import z_order
+from core.reorder import scattered, z_order
 
 
 def _shuffled(p: np.ndarray, fs: FaceSet, seed: int = 0) -> tuple[np.ndarray, FaceSet]:
@@ -79,13 +79,42 @@ def test_large_mesh_runs_as_its_z_ordered_renumbering_bit_for_bit(monkeypatch, b
     assert res.after.q_min > 0.5 and res.after.q_avg > 0.95
 
 
-def test_meshes_below_the_limit_and_slide_runs_keep_their_numbering(monkeypatch):
+def _grid(m: int) -> tuple[np.ndarray, FaceSet]:
+    """An m x m quad grid numbered row by row (as a grid primitive is)."""
+    ys, xs = np.mgrid[0 : m + 1, 0 : m + 1]
+    p = np.column_stack([xs.ravel(), ys.ravel()]).astype(np.float64)
+    i, j = np.mgrid[0:m, 0:m]
+    a = (i * (m + 1) + j).ravel()
+    quads = np.column_stack([a, a + 1, a + m + 2, a + m + 1])
+    return p, FaceSet(np.arange(quads.shape[0] + 1) * 4, quads.ravel())
+
+
+def test_only_scattered_numberings_are_renumbered():
+    """A grid numbered row by row loses time in Z order (its rows already stream through
+    the caches); a shuffled one and qhull-like face orders gain."""
+    p, fs = _grid(120)
+    assert not scattered(fs, p.shape[0])
+    assert scattered(*_swap(_shuffled(p, fs)))
+    _, out = z_order(*_shuffled(p, fs))
+    assert not scattered(out, p.shape[0])
+
+
+def _swap(mesh):
+    p, fs = mesh
+    return fs, p.shape[0]
+
+
+def test_meshes_below_the_limit_well_numbered_or_sliding_keep_their_numbering(monkeypatch):
     p, fs = load2d("quad_hole")
     calls = []
     monkeypatch.setattr(pipeline, "z_order", lambda *a: calls.append(1) or z_order(*a))
-    untangle_and_smooth(p, fs)
+    sp, sfs = _shuffled(p, fs)
+    untangle_and_smooth(sp, sfs)  # under the size limit
     monkeypatch.setattr(pipeline, "REORDER_MIN_FACES", 10)
-    untangle_and_smooth(p, fs, params=EEGTParams(boundary="slide"))
+    untangle_and_smooth(sp, sfs, params=EEGTParams(boundary="slide"))
+    gp, gfs = _grid(12)
+    gp[(gp[:, 0] % 12 > 0) & (gp[:, 1] % 12 > 0)] += 0.3  # interior moved: some folds
+    untangle_and_smooth(gp, gfs)  # numbered row by row
     assert calls == []
-    untangle_and_smooth(p, fs)
+    untangle_and_smooth(sp, sfs)
     assert calls == [1]
