@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["bincount_csr", "morton", "ragged_arange"]
+__all__ = ["bincount_csr", "morton", "point_morton", "ragged_arange"]
 
 
 def ragged_arange(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -38,3 +38,13 @@ def morton(ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
         return b
 
     return spread(ix) | (spread(iy) << np.uint64(1))
+
+
+def point_morton(xy: np.ndarray) -> np.ndarray:
+    """Z-order codes of 2D points (N, 2): 16 bits per axis over their bounding square
+    (non-finite coordinates count as 0)."""
+    c = np.nan_to_num(xy, nan=0.0, posinf=0.0, neginf=0.0)
+    lo = c.min(axis=0)
+    span = float((c.max(axis=0) - lo).max()) or 1.0
+    cells = ((c - lo) * (65535.0 / span)).astype(np.uint64)
+    return morton(cells[:, 0], cells[:, 1])

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .csr import ragged_arange
+
 __all__ = ["ArityGroup", "FaceSet", "as_faceset", "faces_from_csr"]
 
 
@@ -125,8 +127,7 @@ def faces_from_csr(loop_start, loop_total, corner_verts, n_nodes: int | None = N
     if loop_start.size and np.array_equal(loop_start, offsets[:-1]):
         indices = corner_verts[: offsets[-1]]
     else:  # faces not stored in corner order: gather them
-        pos = np.repeat(loop_start - offsets[:-1], loop_total) + np.arange(offsets[-1])
-        indices = corner_verts[pos]
+        indices = corner_verts[ragged_arange(loop_start, loop_total)]
     return FaceSet(offsets, indices, n_nodes)
 
 

@@ -16,13 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .csr import morton, ragged_arange
+from .csr import point_morton, ragged_arange
 from .faces import FaceSet
 
 __all__ = ["REORDER_MIN_FACES", "Renumbering", "scattered", "z_order"]
 
 REORDER_MIN_FACES = 50_000  # smaller meshes fit the caches in any order
-_CELLS = 65535.0  # grid cells per side for the Z-order codes (16 bits)
 _FAR = 8.0  # a face spanning more than this times sqrt(N) node numbers is scattered
 _STEP = 16  # consecutive faces whose lowest nodes lie further apart share no cache line
 
@@ -61,13 +60,7 @@ class Renumbering:
 
 def z_order(points: np.ndarray, fs: FaceSet) -> tuple[Renumbering, FaceSet]:
     """The renumbering and the renumbered faces (each face keeps its corner order)."""
-    x, y = points[:, 0], points[:, 1]
-    x0, y0 = float(x.min()), float(y.min())
-    span = max(float(x.max()) - x0, float(y.max()) - y0)
-    k = _CELLS / span if span > 0.0 else 0.0
-    ix = np.minimum((x - x0) * k, _CELLS).astype(np.int64)
-    iy = np.minimum((y - y0) * k, _CELLS).astype(np.int64)
-    nodes = np.argsort(morton(ix, iy), kind="stable")
+    nodes = np.argsort(point_morton(points), kind="stable")
     new = np.empty(nodes.size, dtype=np.int64)
     new[nodes] = np.arange(nodes.size)
     lowest = np.empty(fs.n_faces, dtype=np.int64)

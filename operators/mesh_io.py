@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
+from ..core.csr import ragged_arange
+
 PIN_NAME = "eegt_pinned"
 QUALITY_NAME = "eegt_quality"
 QUALITY_COLOR_NAME = "eegt_quality_color"
@@ -193,10 +195,8 @@ def corner_faces(topo: MeshArrays) -> np.ndarray:
     nf = topo.loop_start.size
     if nf == 0:
         return out
-    faces = np.repeat(np.arange(nf), topo.loop_total)
-    within = np.arange(faces.size) - np.repeat(np.cumsum(topo.loop_total) - topo.loop_total,
-                                               topo.loop_total)
-    out[np.repeat(topo.loop_start, topo.loop_total) + within] = faces
+    out[ragged_arange(topo.loop_start, topo.loop_total)] = np.repeat(np.arange(nf),
+                                                                     topo.loop_total)
     return out
 
 

@@ -9,8 +9,6 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-import numpy as np
-
 from ..core import MEASURE_NAMES, summaries
 from . import runner
 
@@ -38,6 +36,6 @@ def run_metrics(job: Any, result: Any, names: tuple[str, ...]) -> dict[str, Any]
     before = summaries(job.points2d, job.faces, names)
     after = before
     if result.written and job.new_co is not None:
-        pts = job.frame.to_2d(runner.node_rows(job, job.new_co).astype(np.float64))
+        pts = runner.written_2d(job, job.new_co)
         after = summaries(pts, job.faces, names)
     return {n: {"before": before[n].as_dict(), "after": after[n].as_dict()} for n in names}

@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 
 from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
+from ..core.csr import ragged_arange
 from ..core.pipeline import frozen_note
 from ..core.plane import PlaneFrame, open_edges_from_table
 from ..core.reference_shapes import reference_targets, reference_to_2d
@@ -213,7 +214,7 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     if np.array_equal(starts, offsets[:-1]):
         idx = slice(0, int(offsets[-1]))
     else:
-        idx = np.repeat(starts - offsets[:-1], totals) + np.arange(int(offsets[-1]))
+        idx = ragged_arange(starts, totals)
     sub_corners = topo.corner_verts[idx].astype(np.int64)
     used = np.zeros(n_all, dtype=bool)
     used[sub_corners] = True
@@ -348,15 +349,13 @@ def _positions_to_write(job: Job, res: Any) -> tuple[np.ndarray | None, Any]:
     if moved.any():
         out = _placed(job, res.points, moved, free)
         if out is not None:
-            written = mesh_stats(job.frame.to_2d(node_rows(job, out).astype(np.float64)), job.faces,
-                                 targets=job.targets)
+            written = _written_stats(job, out)
             if improves(written, before):
                 return out, written
     if job.project:  # the projection alone
         out = _placed(job, res.points, np.zeros_like(moved), free)
         if out is not None:
-            return out, mesh_stats(job.frame.to_2d(node_rows(job, out).astype(np.float64)),
-                                   job.faces, targets=job.targets)
+            return out, _written_stats(job, out)
     return None, None
 
 
@@ -364,6 +363,16 @@ def node_rows(job: Job, co: np.ndarray) -> np.ndarray:
     """The rows of a per-vertex array that are the job's nodes (the array itself when every
     vertex is one: no copy)."""
     return co if job.nodes.size == co.shape[0] else co[job.nodes]
+
+
+def written_2d(job: Job, co: np.ndarray) -> np.ndarray:
+    """The job's nodes of float32 vertex positions ``co``, in its plane's 2D coordinates."""
+    return job.frame.to_2d(node_rows(job, co).astype(np.float64))
+
+
+def _written_stats(job: Job, co: np.ndarray) -> Any:
+    """Stats of the positions ``co`` as they would be written."""
+    return mesh_stats(written_2d(job, co), job.faces, targets=job.targets)
 
 
 def _placed(job: Job, points2d: np.ndarray, moved: np.ndarray,

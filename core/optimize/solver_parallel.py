@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..csr import bincount_csr, morton
+from ..csr import bincount_csr, point_morton
 from ..engine_opencl import _runtime
 from .energy import FoldoverEnergy, LiftEnergy
 from .solver import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, lbfgs, stops
@@ -102,15 +102,6 @@ def reduction_plan(n: int) -> tuple[np.ndarray, np.ndarray]:
 RUN_BREAK = 30.0  # a run of the sweep ends where a corner lies this many median steps away
 
 
-def _morton(c: np.ndarray) -> np.ndarray:
-    """Z-order (Morton) keys of 2D points: 16 bits per axis, interleaved."""
-    c = np.nan_to_num(c, nan=0.0, posinf=0.0, neginf=0.0)
-    lo = c.min(axis=0)
-    span = float((c.max(axis=0) - lo).max()) or 1.0
-    cells = ((c - lo) * (65535.0 / span)).astype(np.uint64)
-    return morton(cells[:, 0], cells[:, 1])
-
-
 def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
     """A permutation of the corners that keeps neighbours in space near each other in the
     sequence and keeps the mesh's own order where it is already local: the corners are cut
@@ -127,7 +118,7 @@ def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
     breaks = np.flatnonzero(~(step2 <= far)) + 1  # NaN: a break
     first = np.concatenate([[0], breaks])
     length = np.diff(np.append(first, c.shape[0]))
-    by_key = np.argsort(_morton(c[first]), kind="stable")
+    by_key = np.argsort(point_morton(c[first]), kind="stable")
     start, length = first[by_key], length[by_key]
     to = np.cumsum(length) - length  # where each run goes
     return np.arange(c.shape[0]) + np.repeat(start - to, length)  # runs in their own order

@@ -94,14 +94,10 @@ def test_only_scattered_numberings_are_renumbered():
     the caches); a shuffled one and qhull-like face orders gain."""
     p, fs = _grid(120)
     assert not scattered(fs, p.shape[0])
-    assert scattered(*_swap(_shuffled(p, fs)))
-    _, out = z_order(*_shuffled(p, fs))
+    sp, sfs = _shuffled(p, fs)
+    assert scattered(sfs, sp.shape[0])
+    _, out = z_order(sp, sfs)
     assert not scattered(out, p.shape[0])
-
-
-def _swap(mesh):
-    p, fs = mesh
-    return fs, p.shape[0]
 
 
 def test_meshes_below_the_limit_well_numbered_or_sliding_keep_their_numbering(monkeypatch):
