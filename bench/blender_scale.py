@@ -5,9 +5,11 @@ Builds the extension zip, installs it into a sandboxed user folder, makes a mesh
 against the core's own seconds (so the difference is reading and writing the Blender mesh),
 (2) the `eegt` command's run on a saved .blend (`cli.run`: .blend load, run, checked save),
 both in this process, after one another; (3) with --fresh N, the command in N fresh
-processes against the core (`untangle_and_smooth` on the same mesh) in N fresh processes,
-alternating: each pays its own first-run costs (OpenCL start-up, fresh memory), as a
-`blender -b` call or a Python script does. Prints markdown tables.
+processes against the core in N fresh Python processes, alternating: each pays its own
+first-run costs (OpenCL start-up, fresh memory), as a `blender -b` call or a Python script
+does. The core's processes run `untangle_and_smooth` on exactly the command's input (the
+mesh's float32 positions in the plane frame the command fits: the same 2D bits), so the two
+do the same work. Prints markdown tables.
 
 Run: `python -m bench.blender_scale [--faces 1000000] [--backend numpy] [--fresh 3]`.
 """
@@ -78,35 +80,78 @@ def command_child(blend: str, backend: str) -> None:
     t = time.perf_counter()
     code, rep = cli.run([blend, "-o", out, "--backend", backend, "--quiet"])
     total = time.perf_counter() - t
-    print(json.dumps({"code": code, "total": total, "core": rep["objects"][0]["seconds"]}))
+    o = rep["objects"][0]
+    print(json.dumps({"code": code, "total": total, "core": o["seconds"],
+                      "global": o["global_iterations"]}))
+
+
+def command_input(core, kind: str, n: int):
+    """(2D points, faces) the command's core call gets for the cached mesh: its float32
+    positions (z = 0, as `mesh_object` stores them) in the plane frame the command's mesh
+    preparation fits (the same bits). `core`: the core package to build them with."""
+    import numpy as np
+
+    from bench.scale import mesh_file
+
+    PlaneFrame, faces_from_csr = core.PlaneFrame, core.faces_from_csr
+    data = np.load(mesh_file(kind, n))
+    offsets = data["offsets"]
+    fs = faces_from_csr(offsets[:-1], np.diff(offsets), data["indices"])
+    p3 = np.zeros((data["points"].shape[0], 3), dtype=np.float32)
+    p3[:, :2] = data["points"]
+    p3 = p3.astype(np.float64)
+    return PlaneFrame.fit(p3, fs, tol=1e-5).to_2d(p3), fs
+
+
+def run_core(core, p2, fs, backend: str) -> dict:
+    """One core call on the command's input: seconds, global iterations, quality."""
+    import numpy as np
+
+    t = time.perf_counter()
+    res = core.untangle_and_smooth(p2, fs, fixed=np.zeros(p2.shape[0], dtype=bool), backend=backend)
+    return {"seconds": time.perf_counter() - t, "global": res.global_iterations,
+            "q_min": res.after.q_min, "q_avg": res.after.q_avg}
+
+
+def core_child(kind: str, n: int, backend: str) -> None:
+    """The core on the command's input in this fresh Python process (no bpy); prints a
+    JSON line."""
+    import core
+
+    p2, fs = command_input(core, kind, n)
+    print(json.dumps(run_core(core, p2, fs, backend)))
 
 
 def fresh(args, blend: str) -> None:
-    """The command and the core, each in fresh processes, alternating."""
-    from bench.scale import mesh_file
-
-    path = str(mesh_file(args.kind, args.faces))
+    """The command and the core on the same input, each in fresh processes, alternating."""
     cmd, core = [], []
     for _ in range(args.fresh):
         out = subprocess.run(
-            [sys.executable, "-m", "bench.scale", "--child", path, args.backend, "{}"],
+            [sys.executable, "-m", "bench.blender_scale", "--core-child", args.kind,
+             str(args.faces), args.backend],
             cwd=ROOT, check=True, capture_output=True, text=True).stdout
-        core.append(json.loads(out.strip().splitlines()[-1])["seconds"])
+        core.append(json.loads(out.strip().splitlines()[-1]))
         out = subprocess.run(
             [sys.executable, "-m", "bench.blender_scale", "--command-child", blend, args.backend],
             cwd=ROOT, check=True, capture_output=True, text=True).stdout
         cmd.append(json.loads(out.strip().splitlines()[-1]))
-    a, b = statistics.median(r["total"] for r in cmd), statistics.median(core)
-    cmd_s = ", ".join(f"{r['total']:.2f}" for r in cmd)
-    core_s = ", ".join(f"{c:.2f}" for c in core)
-    own = ", ".join(f"{r['core']:.2f}" for r in cmd)
-    print(f"\nfresh processes, {args.backend}, medians of {args.fresh}, alternating\n")
+    total = statistics.median(r["total"] for r in cmd)
+    own = statistics.median(r["core"] for r in cmd)
+    base = statistics.median(r["seconds"] for r in core)
+    print(f"\nfresh processes, {args.backend}, medians of {args.fresh}, alternating "
+          f"(global iterations: core {core[0]['global']}, command {cmd[0]['global']})\n")
+
+    def secs(rows, key):
+        return ", ".join(f"{r[key]:.2f}" for r in rows)
+
     print("| run | seconds | median | against the core |")
     print("|---|---|---|---|")
-    print(f"| core (`untangle_and_smooth`, Python) | {core_s} | {b:.2f} | |")
-    print(f"| `eegt` command (.blend load, run, checked save) | {cmd_s} | {a:.2f} | "
-          f"{100 * (a / b - 1):+.0f} % |")
-    print(f"\n(the command's own core seconds: {own})")
+    print(f"| core (`untangle_and_smooth` on the command's input, Python) | "
+          f"{secs(core, 'seconds')} | {base:.2f} | |")
+    print(f"| `eegt` command (.blend load, run, checked save) | {secs(cmd, 'total')} | "
+          f"{total:.2f} | {100 * (total / base - 1):+.0f} % |")
+    print(f"| the command's own core call | {secs(cmd, 'core')} | {own:.2f} | "
+          f"(the command is {100 * (total / own - 1):+.0f} % of it) |")
 
 
 def main() -> None:
@@ -116,15 +161,37 @@ def main() -> None:
     ap.add_argument("--backend", default="numpy", choices=("numpy", "auto", "opencl"))
     ap.add_argument("--fresh", type=int, default=0, metavar="N",
                     help="also time the command and the core in N fresh processes each")
+    ap.add_argument("--repeat", type=int, default=3, metavar="N",
+                    help="in this process: the command and the core on its input N times each, "
+                         "alternating (medians)")
+    ap.add_argument("--fresh-only", action="store_true",
+                    help="with --fresh: skip the in-process runs")
     ap.add_argument("--command-child", nargs=2, help=argparse.SUPPRESS)
+    ap.add_argument("--core-child", nargs=3, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.command_child:
         command_child(*args.command_child)
         return
+    if args.core_child:
+        kind, n, backend = args.core_child
+        core_child(kind, int(n), backend)
+        return
     bpy, ext = install()
     cli = sys.modules[f"{ext.__name__}.operators.cli"]
-    rows = []
+    work = Path(tempfile.mkdtemp(prefix="eegt_bench_cli_"))
+    src, out = work / "in.blend", work / "out.blend"
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mesh_object(bpy, args.kind, args.faces)
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    if not (args.fresh and args.fresh_only):
+        in_process(bpy, cli, args, src, out)
+    if args.fresh:
+        fresh(args, str(src))
 
+
+def in_process(bpy, cli, args, src: Path, out: Path) -> None:
+    """The operator, then the command, in this process; the .blend load and save alone."""
+    rows = []
     bpy.ops.wm.read_homefile(use_empty=True)
     obj = mesh_object(bpy, args.kind, args.faces)
     t = time.perf_counter()
@@ -133,33 +200,38 @@ def main() -> None:
     lr = obj.eegt_last_run
     rows.append(("operator (Object Mode, one undo step)", len(obj.data.polygons), total,
                  lr.seconds, lr.q_min_after, lr.q_avg_after, lr.inverted_after))
-
-    work = Path(tempfile.mkdtemp(prefix="eegt_bench_cli_"))
-    bpy.ops.wm.read_homefile(use_empty=True)
-    obj = mesh_object(bpy, args.kind, args.faces)
-    src, out = work / "in.blend", work / "out.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(src))
-    t = time.perf_counter()
-    code, rep = cli.run([str(src), "-o", str(out), "--backend", args.backend, "--quiet"])
-    total = time.perf_counter() - t
-    o = rep["objects"][0]
+    core_pkg = sys.modules[f"{cli.__package__.rsplit('.', 1)[0]}.core"]  # the extension's
+    p2, fs = command_input(core_pkg, args.kind, args.faces)
+    cmd, core = [], []
+    for _ in range(args.repeat):
+        t = time.perf_counter()
+        code, rep = cli.run([str(src), "-o", str(out), "--backend", args.backend, "--quiet"])
+        cmd.append((time.perf_counter() - t, rep["objects"][0]))
+        core.append(run_core(core_pkg, p2, fs, args.backend))
+    total = statistics.median(c[0] for c in cmd)
+    own = statistics.median(c[1]["seconds"] for c in cmd)
+    o = cmd[-1][1]
     rows.append((f"eegt command (exit {code}; incl. .blend load + save)", o["n_faces"], total,
-                 o["seconds"], o["after"]["q_min"], o["after"]["q_avg"], o["after"]["n_inverted"]))
+                 own, o["after"]["q_min"], o["after"]["q_avg"], o["after"]["n_inverted"]))
+    base = statistics.median(c["seconds"] for c in core)
     t = time.perf_counter()
     bpy.ops.wm.open_mainfile(filepath=str(src))
     load = time.perf_counter() - t
     t = time.perf_counter()
-    bpy.ops.wm.save_as_mainfile(filepath=str(work / "again.blend"))
+    bpy.ops.wm.save_as_mainfile(filepath=str(out.with_name("again.blend")))
     save = time.perf_counter() - t
 
     print(f"\nbackend {args.backend}; .blend load {load:.2f} s, save {save:.2f} s\n")
     print("| run | faces | total s | core s | overhead | q_min | q_avg | inverted |")
     print("|---|---|---|---|---|---|---|---|")
-    for name, nf, tot, core, qmin, qavg, inv in rows:
-        print(f"| {name} | {nf:,} | {tot:.2f} | {core:.2f} | {100 * (tot / core - 1):+.0f} % | "
-              f"{qmin:.3f} | {qavg:.4f} | {inv} |")
-    if args.fresh:
-        fresh(args, str(src))
+    for name, nf, tot, own_core, qmin, qavg, inv in rows:
+        print(f"| {name} | {nf:,} | {tot:.2f} | {own_core:.2f} | "
+              f"{100 * (tot / own_core - 1):+.0f} % | {qmin:.3f} | {qavg:.4f} | {inv} |")
+    cmd_s = ", ".join(f"{c[0]:.2f}" for c in cmd)
+    core_s = ", ".join(f"{c['seconds']:.2f}" for c in core)
+    print(f"\nthe command against the core on its input, this process, alternating, medians of "
+          f"{args.repeat}: command {cmd_s} s, core {core_s} s: {100 * (total / base - 1):+.0f} % "
+          f"(global iterations {o['global_iterations']} / {core[-1]['global']})")
 
 
 if __name__ == "__main__":

@@ -15,7 +15,8 @@ from .faces import FaceSet
 from .params import EEGTParams
 from .targets import Targets
 
-__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine"]
+__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine",
+           "warm_up"]
 
 BACKENDS = ("numpy", "opencl", "auto")
 AUTO_ENGINE_MIN_FACES = 4000  # 'auto': the OpenCL engine from this many faces on
@@ -38,6 +39,30 @@ def _device_is_cpu() -> bool:
     from .engine_opencl import _runtime
 
     return _runtime().is_cpu
+
+
+def warm_up(backend: str, max_face_size: int = 4) -> str | None:
+    """Get the OpenCL device of `backend` ready before a run: its context, the EEGT kernels
+    for faces of up to `max_face_size` corners and the global stage's solver, made now
+    instead of inside the next run (made once per process either way). A caller may run
+    this in a thread while it reads its input; a run that asks for the device meanwhile
+    waits for it. Nothing to do for 'numpy'. Never raises: returns why the device is not
+    ready (the run then reports it as usual), or None."""
+    if backend not in ("opencl", "auto"):
+        return None
+    cls, why = _opencl_engine_class()
+    if cls is None:
+        return why
+    try:
+        from . import engine_opencl
+        from .optimize.solver_parallel import device_solver
+
+        rt = engine_opencl._runtime()
+        rt.program(engine_opencl.program_size(max_face_size))
+        device_solver()
+    except Exception as exc:  # the run meets the same failure and reports it
+        return str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+    return None
 
 
 def make_engine(

@@ -31,7 +31,7 @@ import numpy as np
 from . import fpmath
 from .faces import FaceSet, as_faceset
 from .params import BOUNDARY_MODES
-from .topology import free_nodes
+from .topology import EdgeInfo, free_nodes
 
 __all__ = [
     "BOUNDARY_MODES",
@@ -408,18 +408,19 @@ class BoundaryMotion:
 
 
 def boundary_motion(points: np.ndarray, faces: FaceSet, fixed=None, mode: str = "fixed",
-                    feature_angle: float = 30.0) -> BoundaryMotion | None:
+                    feature_angle: float = 30.0,
+                    edges: EdgeInfo | None = None) -> BoundaryMotion | None:
     """The movable nodes of a boundary mode (None for ``fixed``: the engines' own path).
 
     `points` (N, 2) are the input positions the curves and anchors are taken from; `fixed`
     pins extra nodes as in `free_nodes`. A boundary node is a corner when its turning angle
     (between the incoming and the outgoing boundary edge) exceeds `feature_angle` degrees, or
-    when one of these edges has zero length."""
+    when one of these edges has zero length. `edges`: the faces' EdgeInfo, if known."""
     if mode not in BOUNDARY_MODES:
         raise ValueError(f"unknown boundary mode {mode!r} (choose from "
                          f"{', '.join(BOUNDARY_MODES)})")
     n = points.shape[0]
-    interior = free_nodes(n, faces, fixed)  # also checks the pins and the orientation
+    interior = free_nodes(n, faces, fixed, edges=edges)  # also checks pins and orientation
     if mode == "fixed":
         return None
     fs = as_faceset(faces, n)

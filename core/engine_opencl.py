@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import re
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,6 +54,9 @@ _TREE_LBAR = 8  # where lbar sits in OpenCLEngine.tree_args (the distance floor 
 
 _device_override: str | None = None
 _runtimes: dict[str, _Runtime] = {}
+# Runtimes, programs and solvers are made once per process; a warm-up thread
+# (backends.warm_up) may be making them while a run asks for them: the run waits.
+LOCK = threading.RLock()
 
 
 def _import_cl():
@@ -166,13 +170,14 @@ class _Runtime:
     def build(self, key: str, source: str, options: list[str], what: str = "kernel"):
         """`source` built for this device once per process and `key`; a failed build is
         remembered too, so it is reported, not retried, on later runs (RuntimeError)."""
-        prg = self.programs.get(key)
-        if prg is None:
-            try:
-                prg = self.cl.Program(self.ctx, source).build(options=options)
-            except Exception as exc:
-                prg = RuntimeError(f"{what} build failed on {self.name}: {_build_error(exc)}")
-            self.programs[key] = prg
+        with LOCK:
+            prg = self.programs.get(key)
+            if prg is None:
+                try:
+                    prg = self.cl.Program(self.ctx, source).build(options=options)
+                except Exception as exc:
+                    prg = RuntimeError(f"{what} build failed on {self.name}: {_build_error(exc)}")
+                self.programs[key] = prg
         if isinstance(prg, RuntimeError):
             raise prg
         return prg
@@ -181,6 +186,12 @@ class _Runtime:
         """The EEGT kernels, built once per n-gon size class."""
         options = [f"-DMAXN={maxn}", f"-DNCACHE={_NCACHE}", *fpmath_options()]
         return self.build(f"eegt MAXN={maxn}", kernel_source(), options)
+
+
+def program_size(max_face_size: int) -> int:
+    """The MAXN the EEGT kernels are built with for faces of up to this many corners."""
+    n = int(max_face_size)
+    return _NGON_MAXN if n <= _NGON_MAXN else 1 << (n - 1).bit_length()
 
 
 def _build_error(exc: Exception) -> str:
@@ -205,11 +216,12 @@ def _runtime() -> _Runtime:
         raise RuntimeError(why)
     dev_id, plat, dev = entry
     key = f"{dev_id} {dev.name} {plat.name}"
-    rt = _runtimes.get(key)
-    if rt is None:
-        ctx = cl.Context([dev])
-        rt = _Runtime(cl, dev, f"{dev.name.strip()} [{dev_id}]", ctx, cl.CommandQueue(ctx))
-        _runtimes[key] = rt
+    with LOCK:
+        rt = _runtimes.get(key)
+        if rt is None:
+            ctx = cl.Context([dev])
+            rt = _Runtime(cl, dev, f"{dev.name.strip()} [{dev_id}]", ctx, cl.CommandQueue(ctx))
+            _runtimes[key] = rt
     return rt
 
 
@@ -328,8 +340,7 @@ class OpenCLEngine:
         self.lbar = ref.lbar
         self.n_nodes = n = ref.n_nodes
         groups = faces.groups
-        maxn = max(g.n for g in groups)
-        self.prg = rt.program(_NGON_MAXN if maxn <= _NGON_MAXN else 1 << (maxn - 1).bit_length())
+        self.prg = rt.program(program_size(max(g.n for g in groups)))
         mf = cl.mem_flags
 
         def buf(a: np.ndarray):

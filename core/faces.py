@@ -63,11 +63,15 @@ class FaceSet:
                 nodes = np.ascontiguousarray(indices[offsets[ids][None, :] + np.arange(n)[:, None]])
             groups.append(ArityGroup(int(n), ids, nodes))
         self.groups: tuple[ArityGroup, ...] = tuple(groups)
+        self._valid_from: int | None = None  # smallest node count a check has passed for
         if n_nodes is not None:
             self.check(n_nodes)
 
     def check(self, n_nodes: int) -> None:
-        """Raise ValueError for an index outside [0, n_nodes) or a face repeating a node."""
+        """Raise ValueError for an index outside [0, n_nodes) or a face repeating a node.
+        Checked once: every stage checks the faces it is given, and they do not change."""
+        if self._valid_from is not None and n_nodes >= self._valid_from:
+            return
         if self.indices.size and (self.indices.min() < 0 or self.indices.max() >= n_nodes):
             bad = np.flatnonzero((self.indices < 0) | (self.indices >= n_nodes))[0]
             face = int(np.searchsorted(self.offsets, bad, side="right") - 1)
@@ -90,6 +94,7 @@ class FaceSet:
                 col = np.sort(g.nodes[:, j])
                 node = int(col[1:][col[1:] == col[:-1]][0])
                 raise ValueError(f"face {int(g.ids[j])} repeats node {node}")
+        self._valid_from = int(self.indices.max()) + 1 if self.indices.size else 0
 
     @property
     def n_corners(self) -> int:

@@ -21,7 +21,7 @@ from .quality import Stats, _check_points, group_quality, mesh_stats
 from .reference_shapes import reference_targets
 from .reorder import REORDER_MIN_FACES, scattered, z_order
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
-from .topology import free_nodes
+from .topology import EdgeInfo, checked_edges, free_nodes
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
 
@@ -81,6 +81,7 @@ def untangle_and_smooth(
     progress: Progress | None = None,
     targets=None,
     reference_points=None,
+    edges: EdgeInfo | None = None,
 ) -> EEGTResult:
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
@@ -109,6 +110,10 @@ def untangle_and_smooth(
     `params.boundary`: "fixed" (boundary nodes never move), "slide" (they move along the
     input boundary polyline; corners above `params.feature_angle`, pinned and non-manifold
     nodes stay), "free" (only pinned and non-manifold nodes stay); see core.boundary.
+
+    `edges`: the faces' edge analysis (core.topology.EdgeInfo) when the caller has it
+    cheaper than the run's own sort of every corner (a mesh's edge table:
+    `EdgeInfo.from_table`); it must describe these faces. None: computed.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
@@ -124,7 +129,8 @@ def untangle_and_smooth(
         raise ValueError("reference_points given but target is 'regular': set "
                          "target='reference' to use them")
     tg = prepare_targets(targets, fs)
-    free = free_nodes(p.shape[0], fs, fixed)
+    edges = checked_edges(edges, fs, p.shape[0])
+    free = free_nodes(p.shape[0], fs, fixed, edges=edges)
     if params.boundary == "fixed" and not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
     center, scale = _normalisation(p, fs)
@@ -132,7 +138,8 @@ def untangle_and_smooth(
     _check_orientation(work, fs)
     motion = None  # "fixed": the engines' own path (free_nodes above checked the pins)
     if params.boundary != "fixed":
-        motion = boundary_motion(work, fs, fixed, params.boundary, params.feature_angle)
+        motion = boundary_motion(work, fs, fixed, params.boundary, params.feature_angle,
+                                 edges=edges)
     if motion is not None:
         free = motion.movable
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;

@@ -10,7 +10,7 @@ from .pipeline import EEGTResult, Progress, _normalisation, untangle_and_smooth
 from .plane import PlaneFrame
 from .quality import _check_points
 from .reference_shapes import reference_to_2d
-from .topology import free_nodes
+from .topology import EdgeInfo, free_nodes
 
 __all__ = ["untangle_and_smooth_3d"]
 
@@ -44,16 +44,18 @@ def untangle_and_smooth_3d(
     original = _check_points(points3d, 3)
     fs = as_faceset(faces, original.shape[0])
     # centred on the fixed nodes, which define the plane: a plane z = 0 stays exactly z = 0
-    rim = fs.used_nodes(original.shape[0]) & ~free_nodes(original.shape[0], fs, fixed)
+    edges = EdgeInfo(fs, original.shape[0])  # one analysis for the rim, the plane and the run
+    rim = fs.used_nodes(original.shape[0]) & ~free_nodes(original.shape[0], fs, fixed,
+                                                         edges=edges)
     center, scale = _normalisation(original, fs, centre_on=rim)
     work = (original - center) / scale
-    frame = PlaneFrame.fit(work, faces, tol=tol, project=project, fixed=fixed)
+    frame = PlaneFrame.fit(work, faces, tol=tol, project=project, fixed=fixed, edges=edges)
     flat = frame.to_2d(work)
     if reference_points is not None and np.ndim(reference_points) == 2 and \
             np.shape(reference_points)[1] == 3:
         reference_points = reference_to_2d(reference_points, fs, original.shape[0], tol)
     res = untangle_and_smooth(flat, faces, fixed, params, backend, progress, targets,
-                              reference_points)
+                              reference_points, edges)
     out = original.copy()
     if res.status != "cancelled":
         moved = res.moved & np.any(res.points != flat, axis=1)

@@ -20,9 +20,9 @@ import numpy as np
 
 from .faces import FaceSet, as_faceset
 from .quality import _check_points
-from .topology import free_nodes
+from .topology import EdgeInfo, checked_edges, free_nodes
 
-__all__ = ["PlaneFrame", "open_edges", "open_edges_from_table"]
+__all__ = ["PlaneFrame", "open_edges"]
 
 
 def _dot3(q: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -38,54 +38,9 @@ def _norm3(w: np.ndarray) -> float:
 
 def open_edges(fs: FaceSet, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The edges whose directed uses do not cancel (boundary and non-manifold edges): their
-    nodes lo < hi (or lo = hi for a repeated node) in ascending ``lo * n + hi`` order and
-    their net count of lo -> hi walks (float64). Interior edges, walked once each way, are
-    not in it."""
-    a = np.concatenate([g.nodes.ravel() for g in fs.groups])
-    b = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in fs.groups])
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = (lo * n + hi) * 2 + (a < b)  # one sort: runs of equal edges, their directions
-    key.sort()
-    edge = key >> 1
-    first = np.flatnonzero(np.concatenate([[True], edge[1:] != edge[:-1]]))
-    uniq = edge[first]
-    forward = np.add.reduceat(key & 1, first)
-    net = (2 * forward - np.diff(np.append(first, key.size))).astype(np.float64)
-    keep = net != 0.0
-    return uniq[keep] // n, uniq[keep] % n, net[keep]
-
-
-def _packed(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Each pair (x, y) of int32-range ids as one int64 (the bytes of two int32s)."""
-    out = np.empty((x.size, 2), dtype=np.int32)
-    out[:, 0], out[:, 1] = x, y
-    return out.view(np.int64).ravel()
-
-
-def open_edges_from_table(
-    a: np.ndarray, b: np.ndarray, edge_of: np.ndarray, edge_nodes: np.ndarray, n: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """``open_edges`` from the faces' directed edges a -> b (every corner's, any order, node
-    ids below n < 2**31) and the edge of an (E, 2) table each one is (``edge_of``), by one
-    count per table edge instead of a sort of all corners. None when the table does not
-    fit the faces (an edge that is not {a, b}, a repeated node, two table edges joining
-    the same nodes): the caller then uses ``open_edges``."""
-    table = np.ascontiguousarray(edge_nodes, dtype=np.int32)
-    if a.size == 0 or n >= 2**31 or table.ndim != 2 or table.shape[1] != 2:
-        return None
-    named = table.view(np.int64).ravel()[edge_of]  # one gather: both ends of each edge
-    if np.any(a == b) or not np.all((named == _packed(a, b)) | (named == _packed(b, a))):
-        return None
-    net = np.bincount(edge_of, weights=np.where(a < b, 1.0, -1.0), minlength=table.shape[0])
-    ids = np.flatnonzero(net)
-    lo = np.minimum(table[ids, 0], table[ids, 1]).astype(np.int64)
-    hi = np.maximum(table[ids, 0], table[ids, 1]).astype(np.int64)
-    key = lo * n + hi
-    order = np.argsort(key, kind="stable")
-    key = key[order]
-    if np.any(key[1:] == key[:-1]):
-        return None
-    return lo[order], hi[order], net[ids][order]
+    nodes lo < hi in ascending ``lo * n + hi`` order and their net count of lo -> hi walks
+    (float64). Interior edges, walked once each way, are not in it."""
+    return EdgeInfo(fs, n).open_edges()
 
 
 def _vector_area(q: np.ndarray, edges: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
@@ -110,8 +65,7 @@ class PlaneFrame:
 
     @classmethod
     def fit(cls, points3d, faces, used=None, tol: float = 1e-5, project: bool = False,
-            fixed=None, edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-            ) -> PlaneFrame:
+            fixed=None, edges: EdgeInfo | None = None) -> PlaneFrame:
         """Fit the plane; without ``project``, refuse (ValueError) a node farther than
         ``tol * size`` from it.
 
@@ -132,20 +86,21 @@ class PlaneFrame:
         are (they never move, SPEC 4); ``fixed_offset`` says how far the farthest one is,
         for the caller to report.
 
-        ``edges``: the faces' ``open_edges`` when the caller has them without a sort (a
-        Blender mesh's edge table); they must be exactly what ``open_edges`` returns.
+        ``edges``: the faces' EdgeInfo when the caller has it (from a Blender mesh's edge
+        table: ``EdgeInfo.from_table``); None: computed here.
         """
         p = _check_points(points3d, 3)
         fs = as_faceset(faces, p.shape[0])
+        edges = checked_edges(edges, fs, p.shape[0])
         used = fs.used_nodes(p.shape[0]) if used is None else np.asarray(used, dtype=bool)
         anchor = used
-        if project:
-            anchor = used & ~free_nodes(p.shape[0], fs, fixed)  # fixed: boundary, pins
+        if project:  # fixed: boundary, pins
+            anchor = used & ~free_nodes(p.shape[0], fs, fixed, edges=edges)
             if not anchor.any():  # a closed surface pinned nowhere: fall back to all nodes
                 anchor = used
         origin = p[anchor].mean(axis=0)
         q = p - origin
-        area = _vector_area(q, open_edges(fs, p.shape[0]) if edges is None else edges)
+        area = _vector_area(q, edges.open_edges())
         norm = _norm3(area)
         all_used = bool(used.all())
         span = np.ptp(p if all_used else p[used], axis=0)
@@ -179,9 +134,14 @@ class PlaneFrame:
         return np.column_stack([_dot3(q, self.u), _dot3(q, self.v)])
 
     def to_3d(self, points2d) -> np.ndarray:
-        """(N, 3) points of the plane: origin + x u + y v."""
+        """(N, 3) points of the plane: origin + x u + y v (each coordinate (o + x u) + y v)."""
         p = np.asarray(points2d, dtype=np.float64)
-        return self.origin + p[:, :1] * self.u + p[:, 1:2] * self.v
+        out = np.empty((p.shape[0], 3))
+        x, y = p[:, 0], p[:, 1]
+        for k in range(3):
+            out[:, k] = self.origin[k] + x * self.u[k]
+            out[:, k] += y * self.v[k]
+        return out
 
     def foot(self, points3d) -> np.ndarray:
         """(N, 3) orthogonal projections onto the plane: p - ((p - origin) . n) n.

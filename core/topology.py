@@ -1,4 +1,12 @@
-"""Edge analysis: which nodes are on the boundary or on non-manifold edges (always fixed)."""
+"""Edge analysis: which nodes are on the boundary or on non-manifold edges (always fixed).
+
+`EdgeInfo` is the analysis of a face set: its undirected edges, how many faces use each
+and how many of those walk it from its lower to its higher node. It is built by one sort
+of every corner's edge, or, for a mesh that keeps an edge table (Blender does), from that
+table by one count per edge (`EdgeInfo.from_table`). Both give the same edges with the same
+counts, so the same boundary, conflicts and open edges; only the order of the edges in the
+arrays differs, and what depends on an order (`open_edges`, `first_conflict`) sorts.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +18,19 @@ __all__ = ["EdgeInfo", "boundary_nodes", "edge_info", "free_nodes"]
 
 
 class EdgeInfo:
-    """Undirected edges of a face set with their use counts and orientation conflicts."""
+    """Undirected edges of a face set with their use counts and orientation conflicts.
+
+    Per edge: its nodes ``lo < hi``, ``counts`` (faces using it), ``net`` (walks lo -> hi
+    minus walks hi -> lo) and ``conflict`` (two faces walk it the same way).
+    """
+
+    n_nodes: int
+    lo: np.ndarray
+    hi: np.ndarray
+    counts: np.ndarray
+    net: np.ndarray
+    conflict: np.ndarray
+    in_key_order: bool  # edges in ascending lo * n_nodes + hi
 
     def __init__(self, faces: FaceSet, n_nodes: int):
         a = np.concatenate([g.nodes.ravel() for g in faces.groups])
@@ -23,14 +43,81 @@ class EdgeInfo:
         first = np.flatnonzero(np.concatenate([[True], edge[1:] != edge[:-1]]))
         uniq = edge[first]
         counts = np.diff(np.append(first, key.size))
-        self.n_nodes = n_nodes
-        self.lo = uniq // n_nodes
-        self.hi = uniq % n_nodes
-        self.counts = counts
+        forward = np.add.reduceat(key & 1, first)
+        self._set(n_nodes, uniq // n_nodes, uniq % n_nodes, counts, forward, True)
+
+    def _set(self, n_nodes: int, lo: np.ndarray, hi: np.ndarray, counts: np.ndarray,
+             forward: np.ndarray, in_key_order: bool) -> None:
+        self.n_nodes = int(n_nodes)
+        self.lo, self.hi, self.counts = lo, hi, counts
+        self.net = 2 * forward - counts
         # An interior edge of a consistently oriented surface is used once in each
         # direction; twice in the same direction means neighbouring faces disagree.
-        forward = np.add.reduceat(key & 1, first)
-        self.conflict = (counts == 2) & (forward != 1)
+        self.conflict = (counts == 2) & (self.net != 0)
+        self.in_key_order = in_key_order
+
+    @classmethod
+    def from_table(cls, a: np.ndarray, b: np.ndarray, edge_of: np.ndarray,
+                   edge_nodes: np.ndarray, n_nodes: int) -> EdgeInfo | None:
+        """The analysis of faces whose directed edges are a -> b (every corner's, any
+        order, node ids below n_nodes < 2**31), given the edge of an (E, 2) table each one
+        walks (``edge_of``): one count per table edge instead of a sort of every corner.
+        The edges are the used table edges, in table order. None when the table does not
+        fit the faces (a corner whose edge is not {a, b}, a repeated node, two used table
+        edges joining the same nodes): the caller then builds ``EdgeInfo(faces, n)``."""
+        table = np.ascontiguousarray(edge_nodes, dtype=np.int32)
+        if a.size == 0 or n_nodes >= 2**31 or table.ndim != 2 or table.shape[1] != 2 \
+                or table.shape[0] == 0:
+            return None
+        if edge_of.min() < 0 or edge_of.max() >= table.shape[0]:
+            return None
+        named = table.view(np.int64).ravel()[edge_of]  # one gather: both ends of each edge
+        if np.any(a == b) or not np.all((named == _packed(a, b)) | (named == _packed(b, a))):
+            return None
+        del named
+        # uses of each edge, and how many walk it lo -> hi: one count of 2 * edge + (a < b)
+        walks = np.bincount(2 * edge_of.astype(np.int64) + (a < b), minlength=2 * table.shape[0])
+        counts = walks[0::2] + walks[1::2]
+        ids = np.flatnonzero(counts)
+        x, y = table[ids, 0], table[ids, 1]
+        lo = np.minimum(x, y).astype(np.int64)
+        hi = np.maximum(x, y).astype(np.int64)
+        key = lo * n_nodes + hi
+        key.sort()
+        if np.any(key[1:] == key[:-1]):
+            return None
+        info = cls.__new__(cls)
+        info._set(n_nodes, lo, hi, counts[ids], walks[1::2][ids], False)
+        return info
+
+    def renumbered(self, lut: np.ndarray, n_nodes: int) -> EdgeInfo:
+        """The same analysis with node i renamed lut[i] (an increasing map of the used
+        nodes onto 0..n_nodes-1: edge ends keep their order)."""
+        out = EdgeInfo.__new__(EdgeInfo)
+        out.__dict__.update(self.__dict__)
+        out.n_nodes, out.lo, out.hi = int(n_nodes), lut[self.lo], lut[self.hi]
+        return out
+
+    def _by_key(self, mask: np.ndarray) -> np.ndarray:
+        """Indices of the masked edges in ascending key order."""
+        ids = np.flatnonzero(mask)
+        if self.in_key_order:
+            return ids
+        return ids[np.argsort(self.lo[ids] * self.n_nodes + self.hi[ids], kind="stable")]
+
+    def open_edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The edges whose directed uses do not cancel (boundary and non-manifold edges):
+        their nodes lo < hi in ascending ``lo * n + hi`` order and their net count of
+        lo -> hi walks (float64). Interior edges, walked once each way, are not in it."""
+        ids = self._by_key(self.net != 0)
+        return self.lo[ids], self.hi[ids], self.net[ids].astype(np.float64)
+
+    def first_conflict(self) -> tuple[int, int] | None:
+        """The conflicting edge (lo, hi) of smallest key, or None."""
+        if not self.conflict.any():
+            return None
+        k = int(self._by_key(self.conflict)[0])
+        return int(self.lo[k]), int(self.hi[k])
 
     def boundary_mask(self) -> np.ndarray:
         """(n_nodes,) bool: nodes of edges used by one face or by more than two."""
@@ -39,6 +126,13 @@ class EdgeInfo:
         mask[self.lo[open_edge]] = True
         mask[self.hi[open_edge]] = True
         return mask
+
+
+def _packed(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Each pair (x, y) of int32-range ids as one int64 (the bytes of two int32s)."""
+    out = np.empty((x.size, 2), dtype=np.int32)
+    out[:, 0], out[:, 1] = x, y
+    return out.view(np.int64).ravel()
 
 
 def edge_info(faces, n_nodes: int) -> EdgeInfo:
@@ -50,14 +144,25 @@ def boundary_nodes(n_nodes: int, faces) -> np.ndarray:
     return edge_info(faces, n_nodes).boundary_mask()
 
 
-def free_nodes(n_nodes: int, faces, fixed=None) -> np.ndarray:
-    """(N,) bool: nodes the method may move (not boundary, non-manifold, pinned or loose)."""
+def checked_edges(edges: EdgeInfo | None, faces: FaceSet, n_nodes: int) -> EdgeInfo:
+    """``edges`` when given (a caller's analysis of these faces, e.g. from a mesh's edge
+    table), else the faces' own."""
+    if edges is None:
+        return EdgeInfo(faces, n_nodes)
+    if not isinstance(edges, EdgeInfo) or edges.n_nodes != n_nodes:
+        raise ValueError(f"edges must be the EdgeInfo of these faces over {n_nodes} nodes")
+    return edges
+
+
+def free_nodes(n_nodes: int, faces, fixed=None, edges: EdgeInfo | None = None) -> np.ndarray:
+    """(N,) bool: nodes the method may move (not boundary, non-manifold, pinned or loose).
+    ``edges``: the faces' EdgeInfo when the caller has it (None: computed here)."""
     fs = as_faceset(faces, n_nodes)
-    edges = EdgeInfo(fs, n_nodes)
-    if edges.conflict.any():
-        k = int(np.flatnonzero(edges.conflict)[0])
+    edges = checked_edges(edges, fs, n_nodes)
+    bad = edges.first_conflict()
+    if bad is not None:
         raise ValueError(
-            f"faces are not consistently oriented: edge ({int(edges.lo[k])}, {int(edges.hi[k])}) "
+            f"faces are not consistently oriented: edge ({bad[0]}, {bad[1]}) "
             f"is used twice in the same direction ({int(edges.conflict.sum())} such edges; "
             "recalculate normals)"
         )

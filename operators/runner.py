@@ -19,8 +19,9 @@ import numpy as np
 from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
 from ..core.csr import ragged_arange
 from ..core.pipeline import frozen_note
-from ..core.plane import PlaneFrame, open_edges_from_table
+from ..core.plane import PlaneFrame
 from ..core.reference_shapes import reference_targets, reference_to_2d
+from ..core.topology import EdgeInfo
 from . import mesh_io, reference_input
 from .reference_input import ReferenceSource
 
@@ -138,6 +139,7 @@ class Job:
     key_name: str | None = None
     nodes: np.ndarray | None = None  # (n,) global indices of the nodes used by the faces
     faces: Any = None  # core FaceSet over local node numbers
+    edges: EdgeInfo | None = None  # their edge analysis from the mesh's edge table (or None)
     fixed: np.ndarray | None = None  # (n,) extra pinned nodes (boundary is added by the core)
     frame: Any = None
     points2d: np.ndarray | None = None
@@ -247,9 +249,9 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     job.fixed = fixed_all[nodes]
     try:
         job.faces = faces_from_csr(offsets[:-1], totals, local.reshape(-1))
+        job.edges = _edge_info(idx, offsets, topo, edges, lut, nodes.size)
         job.frame = PlaneFrame.fit(pts3d, job.faces, tol=PLANE_TOL, project=project,
-                                   fixed=job.fixed,
-                                   edges=_open_edges(idx, offsets, topo, edges, lut))
+                                   fixed=job.fixed, edges=job.edges)
         job.points2d = job.frame.to_2d(pts3d)
     except ValueError as exc:
         return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
@@ -269,26 +271,22 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     return job
 
 
-def _open_edges(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.MeshArrays,
-                edges: mesh_io.EdgeArrays, lut: np.ndarray):
-    """The chosen faces' open edges (in node numbers) from Blender's edge table
-    (``open_edges_from_table``: no sort of every corner), or None to let the plane fit find
-    them. ``corners``: the chosen faces' corners face by face (``offsets``); ``lut`` maps
-    mesh vertices to nodes, in the same order."""
+def _edge_info(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.MeshArrays,
+               edges: mesh_io.EdgeArrays, lut: np.ndarray, n_nodes: int) -> EdgeInfo | None:
+    """The chosen faces' edge analysis (in node numbers) from Blender's edge table
+    (``EdgeInfo.from_table``: one count per edge, no sort of every corner), or None to let
+    the plane fit and the core analyse the faces themselves. ``corners``: the chosen faces'
+    corners face by face (``offsets``); ``lut`` maps mesh vertices to nodes, in order."""
     ev, ce = edges.edge_verts, edges.corner_edges
     if offsets[-1] == 0 or ev.size == 0 or ev.min() < 0 or ev.max() >= lut.size:
-        return None
-    edge_of = ce[corners]
-    if edge_of.min() < 0 or edge_of.max() >= ev.shape[0]:
         return None
     a = topo.corner_verts[corners]
     nxt = np.arange(1, a.size + 1, dtype=np.int64 if a.size >= 2**31 else np.int32)
     nxt[offsets[1:] - 1] = offsets[:-1]  # a face's last corner goes back to its first
-    found = open_edges_from_table(a, a[nxt], edge_of, ev, lut.size)
-    if found is None:
-        return None
-    lo, hi, net = found  # mesh vertices; lut keeps their order, so the edges' order too
-    return lut[lo], lut[hi], net
+    info = EdgeInfo.from_table(a, a[nxt], ce[corners], ev, lut.size)
+    if info is None or n_nodes == lut.size:  # every vertex is a node: lut is the identity
+        return info
+    return info.renumbered(lut, n_nodes)
 
 
 def select_opencl_device(device: str | None) -> None:
@@ -310,7 +308,7 @@ def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Prog
     try:
         res = untangle_and_smooth(job.points2d, job.faces, fixed=job.fixed, params=params,
                                   backend=backend, progress=progress,
-                                  reference_points=job.reference2d)
+                                  reference_points=job.reference2d, edges=job.edges)
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return
@@ -342,7 +340,8 @@ def _positions_to_write(job: Job, res: Any) -> tuple[np.ndarray | None, Any]:
     one of them was off the plane, even when the optimization gained nothing.
     """
     free = np.asarray(res.moved, dtype=bool)
-    moved = free & np.any(np.asarray(res.points) != job.points2d, axis=1)
+    pts = np.asarray(res.points)
+    moved = free & ((pts[:, 0] != job.points2d[:, 0]) | (pts[:, 1] != job.points2d[:, 1]))
     if not res.after.better_than(res.before):
         moved[:] = False
     before = res.before  # the core's stats of job.points2d as given (= mesh_stats of them)
@@ -381,15 +380,22 @@ def _placed(job: Job, points2d: np.ndarray, moved: np.ndarray,
     with ``project``, the other free nodes projected onto it), or None if no float32
     position changes."""
     given = node_rows(job, job.co)
-    target = given.astype(np.float64)
-    target[moved] = job.frame.to_3d(np.asarray(points2d)[moved])
     if job.project:
+        target = given.astype(np.float64)
+        target[moved] = job.frame.to_3d(np.asarray(points2d)[moved])
         rest = free & ~moved
         target[rest] = job.frame.foot(target[rest])
-    new3d = target.astype(np.float32)
-    changed = np.any(new3d != given, axis=1)
+        new3d = target.astype(np.float32)
+    else:  # the others keep their float32 input, as the float64 round trip would
+        rows = np.flatnonzero(moved)
+        new3d = given.copy()
+        new3d[rows] = job.frame.to_3d(np.asarray(points2d)[rows])
+    changed = (new3d[:, 0] != given[:, 0]) | (new3d[:, 1] != given[:, 1]) | \
+        (new3d[:, 2] != given[:, 2])
     if not changed.any():
         return None
+    if given is job.co:  # every vertex is a node: new3d is the whole copy
+        return new3d
     out = job.co.copy()
     out[job.nodes[changed]] = new3d[changed]
     return out

@@ -702,6 +702,52 @@ def test_kernels_built_once_per_device(device):
     assert device in e1.device_name or e1.device_name == device
 
 
+def test_warm_up_builds_what_a_run_uses_and_the_run_reuses_it(device, monkeypatch):
+    """warm_up makes the context, the EEGT kernels and the global stage's solver of a fresh
+    process; the run that follows builds nothing more and gives the same bits."""
+    import core.optimize.solver_parallel as sp
+
+    p, f = load2d("tri_two_holes")
+    ref = untangle_and_smooth(p, f, backend="auto")
+    monkeypatch.setattr(eo, "_runtimes", {})
+    monkeypatch.setattr(sp, "_solvers", {})
+    assert backends.warm_up("numpy") is None and eo._runtimes == {}
+    assert backends.warm_up("auto") is None
+    (rt,) = eo._runtimes.values()
+    built = dict(rt.programs)
+    # EEGT and parallel L-BFGS kernels, and on a CPU device the single-work-item one
+    assert len(built) == (3 if rt.is_cpu else 2) and len(sp._solvers) == 1
+    res = untangle_and_smooth(p, f, backend="auto")
+    assert rt.programs == built and len(sp._solvers) == 1
+    assert res.points.tobytes() == ref.points.tobytes() and res.after == ref.after
+
+
+def test_warm_up_in_a_thread_while_a_run_starts_gives_the_same_run(device, monkeypatch):
+    """A run that asks for the device while the warm-up thread is building waits for it:
+    one runtime, each program built once, the run's bits unchanged."""
+    import threading
+
+    import core.optimize.solver_parallel as sp
+
+    p, f = load2d("quad_hole")
+    ref = untangle_and_smooth(p, f, backend="opencl")
+    monkeypatch.setattr(eo, "_runtimes", {})
+    monkeypatch.setattr(sp, "_solvers", {})
+    thread = threading.Thread(target=backends.warm_up, args=("opencl",))
+    thread.start()
+    res = untangle_and_smooth(p, f, backend="opencl")
+    thread.join()
+    assert len(eo._runtimes) == 1 and len(sp._solvers) == 1
+    assert res.points.tobytes() == ref.points.tobytes()
+
+
+def test_warm_up_says_why_without_raising(monkeypatch):
+    monkeypatch.setenv(eo.ENV_DEVICE, "no-such-device-xyz")
+    assert "no-such-device-xyz" in backends.warm_up("opencl")
+    monkeypatch.setitem(sys.modules, "pyopencl", None)
+    assert "pyopencl" in backends.warm_up("auto")
+
+
 # ---- per-face targets --------------------------------------------------------------------
 
 

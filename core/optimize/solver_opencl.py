@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..csr import bincount_csr
-from ..engine_opencl import _runtime
+from ..engine_opencl import LOCK, _runtime
 from .energy import FoldoverEnergy, LiftEnergy
 from .solver import LBFGS_MEMORY, State, lbfgs, stops
 
@@ -35,9 +35,10 @@ def device_solver() -> OpenCLLbfgs | None:
     rt = _runtime()
     if not rt.is_cpu:
         return None
-    solver = _solvers.get(rt.name)
-    if solver is None:
-        solver = _solvers[rt.name] = OpenCLLbfgs()
+    with LOCK:
+        solver = _solvers.get(rt.name)
+        if solver is None:
+            solver = _solvers[rt.name] = OpenCLLbfgs()
     return solver
 
 

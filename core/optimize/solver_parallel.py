@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..csr import bincount_csr, point_morton
-from ..engine_opencl import _runtime
+from ..engine_opencl import LOCK, _runtime
 from .energy import FoldoverEnergy, LiftEnergy
 from .solver import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, lbfgs, stops
 
@@ -59,15 +59,16 @@ def device_solver(
     if small_corners is None:
         small_corners = SMALL_CORNERS if rt.is_cpu else 0
     key = (rt.name, lanes, local_size, small_corners)
-    solver = _solvers.get(key)
-    if solver is None:
-        small = None
-        if small_corners > 0:
-            from .solver_opencl import OpenCLLbfgs
+    with LOCK:
+        solver = _solvers.get(key)
+        if solver is None:
+            small = None
+            if small_corners > 0:
+                from .solver_opencl import OpenCLLbfgs
 
-            small = OpenCLLbfgs()
-        solver = ParallelLbfgs(lanes, local_size, small=small, small_corners=small_corners)
-        _solvers[key] = solver
+                small = OpenCLLbfgs()
+            solver = ParallelLbfgs(lanes, local_size, small=small, small_corners=small_corners)
+            _solvers[key] = solver
     return solver
 
 

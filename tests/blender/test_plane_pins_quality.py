@@ -75,8 +75,9 @@ def test_project_puts_every_vertex_on_the_plane_of_the_fixed_ones(bpy, ext):
 @pytest.mark.parametrize("selected_only", [False, True])
 def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy, ext,
                                                                              selected_only):
-    """The operator finds the open edges from Blender's edge table (no sort of every
-    corner); a loose edge and a face selection change nothing: same edges, same frame."""
+    """The operator analyses the edges from Blender's edge table (no sort of every corner);
+    a loose edge and a face selection change nothing: the same edges, counts and open
+    edges as the sorted analysis of the chosen faces, the same frame."""
     runner, plane = ext.operators.runner, ext.core.plane
     obj = import_obj(bpy, "tri_two_holes")
     me = obj.data
@@ -102,11 +103,18 @@ def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy,
     lut = np.zeros(len(me.vertices), dtype=np.int64)
     lut[job.nodes] = np.arange(n)
     offsets = np.concatenate([[0], np.cumsum(topo.loop_total[faces])])
-    got = runner._open_edges(idx, offsets, topo, ext.operators.mesh_io.read_edges(me), lut)
-    want = plane.open_edges(job.faces, n)
-    assert got is not None and want[0].size > 50
-    for g, w in zip(got, want):
-        assert g.tobytes() == w.tobytes()
+    got = runner._edge_info(idx, offsets, topo, ext.operators.mesh_io.read_edges(me), lut, n)
+    assert got is not None and job.edges is not None
+    sorted_info = ext.core.topology.EdgeInfo(job.faces, n)
+    for info in (got, job.edges):
+        assert np.array_equal(info.boundary_mask(), sorted_info.boundary_mask())
+        assert sorted(zip(info.lo.tolist(), info.hi.tolist(), info.counts.tolist())) == \
+            sorted(zip(sorted_info.lo.tolist(), sorted_info.hi.tolist(),
+                       sorted_info.counts.tolist()))
+        want = plane.open_edges(job.faces, n)
+        assert want[0].size > 50
+        for g, w in zip(info.open_edges(), want):
+            assert g.tobytes() == w.tobytes()
     pts = job.co[job.nodes].astype(np.float64)
     ref = plane.PlaneFrame.fit(pts, job.faces, tol=runner.PLANE_TOL, project=True,
                                fixed=job.fixed)
