@@ -98,12 +98,13 @@ class PlaneFrame:
             anchor = used & ~free_nodes(p.shape[0], fs, fixed, edges=edges)
             if not anchor.any():  # a closed surface pinned nowhere: fall back to all nodes
                 anchor = used
-        origin = p[anchor].mean(axis=0)
+        every = bool(anchor.all()) and p.flags.c_contiguous  # no copy: the same sum
+        origin = (p if every else p[anchor]).mean(axis=0)
         q = p - origin
         area = _vector_area(q, edges.open_edges())
         norm = _norm3(area)
         all_used = bool(used.all())
-        span = np.ptp(p if all_used else p[used], axis=0)
+        span = np.array([np.ptp(p[:, k] if all_used else p[used, k]) for k in range(3)])
         size = _norm3(span)
         if size == 0 or norm <= 1e-12 * size * size:
             raise ValueError("mesh has zero total area: cannot tell its plane or orientation")

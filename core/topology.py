@@ -1,11 +1,11 @@
 """Edge analysis: which nodes are on the boundary or on non-manifold edges (always fixed).
 
-`EdgeInfo` is the analysis of a face set: its undirected edges, how many faces use each
-and how many of those walk it from its lower to its higher node. It is built by one sort
-of every corner's edge, or, for a mesh that keeps an edge table (Blender does), from that
-table by one count per edge (`EdgeInfo.from_table`). Both give the same edges with the same
-counts, so the same boundary, conflicts and open edges; only the order of the edges in the
-arrays differs, and what depends on an order (`open_edges`, `first_conflict`) sorts.
+`EdgeInfo` is the analysis of a face set: which faces use each undirected edge, and which
+way round. It is built by one sort of every corner's edge, or, for a mesh that keeps an
+edge table (Blender does), from that table by one count per edge (`EdgeInfo.from_table`).
+Both keep the same edges with the same counts, so the same boundary, conflicts and open
+edges; only their order in the arrays differs, and what depends on an order
+(`open_edges`, `first_conflict`) sorts.
 """
 
 from __future__ import annotations
@@ -16,12 +16,17 @@ from .faces import FaceSet, as_faceset
 
 __all__ = ["EdgeInfo", "boundary_nodes", "edge_info", "free_nodes"]
 
+_CHUNK = 1 << 16  # corners per block of the table check (small, reused temporaries)
+
 
 class EdgeInfo:
-    """Undirected edges of a face set with their use counts and orientation conflicts.
+    """The edges of a face set that are not plain interior edges: used by one face or by
+    more than two (open, non-manifold), or by two faces walking them the same way
+    (conflicting). An interior edge of a consistently oriented surface (two faces, one each
+    way) fixes nothing and is not kept.
 
-    Per edge: its nodes ``lo < hi``, ``counts`` (faces using it), ``net`` (walks lo -> hi
-    minus walks hi -> lo) and ``conflict`` (two faces walk it the same way).
+    Per kept edge: its nodes ``lo < hi``, ``counts`` (faces using it), ``net`` (walks
+    lo -> hi minus walks hi -> lo) and ``conflict`` (two faces walk it the same way).
     """
 
     n_nodes: int
@@ -33,18 +38,29 @@ class EdgeInfo:
     in_key_order: bool  # edges in ascending lo * n_nodes + hi
 
     def __init__(self, faces: FaceSet, n_nodes: int):
-        a = np.concatenate([g.nodes.ravel() for g in faces.groups])
-        b = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in faces.groups])
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
         # one sort of (edge key, direction bit): runs of equal keys are the uses of an edge
-        key = (lo * n_nodes + hi) * 2 + (a < b)
+        key = np.empty(faces.n_corners, dtype=np.int64)
+        at = 0
+        for g in faces.groups:
+            for k in range(g.n):
+                x, y = g.nodes[k], g.nodes[(k + 1) % g.n]
+                part = key[at:at + g.size]
+                np.minimum(x, y, out=part)
+                part *= n_nodes
+                part += np.maximum(x, y)
+                part *= 2
+                part += x < y
+                at += g.size
         key.sort()
         edge = key >> 1
         first = np.flatnonzero(np.concatenate([[True], edge[1:] != edge[:-1]]))
         uniq = edge[first]
+        del edge
         counts = np.diff(np.append(first, key.size))
         forward = np.add.reduceat(key & 1, first)
-        self._set(n_nodes, uniq // n_nodes, uniq % n_nodes, counts, forward, True)
+        keep = np.flatnonzero((counts != 2) | (forward != 1))
+        uniq = uniq[keep]
+        self._set(n_nodes, uniq // n_nodes, uniq % n_nodes, counts[keep], forward[keep], True)
 
     def _set(self, n_nodes: int, lo: np.ndarray, hi: np.ndarray, counts: np.ndarray,
              forward: np.ndarray, in_key_order: bool) -> None:
@@ -62,32 +78,39 @@ class EdgeInfo:
         """The analysis of faces whose directed edges are a -> b (every corner's, any
         order, node ids below n_nodes < 2**31), given the edge of an (E, 2) table each one
         walks (``edge_of``): one count per table edge instead of a sort of every corner.
-        The edges are the used table edges, in table order. None when the table does not
-        fit the faces (a corner whose edge is not {a, b}, a repeated node, two used table
-        edges joining the same nodes): the caller then builds ``EdgeInfo(faces, n)``."""
+        The kept edges are in table order. None when the table does not fit the faces (a
+        corner whose edge is not {a, b}, a repeated node, two used table edges joining the
+        same nodes): the caller then builds ``EdgeInfo(faces, n)``."""
         table = np.ascontiguousarray(edge_nodes, dtype=np.int32)
-        if a.size == 0 or n_nodes >= 2**31 or table.ndim != 2 or table.shape[1] != 2 \
-                or table.shape[0] == 0:
+        n_edges = table.shape[0] if table.ndim == 2 else 0
+        if a.size == 0 or n_nodes >= 2**31 or n_edges == 0 or table.shape[1] != 2:
             return None
-        if edge_of.min() < 0 or edge_of.max() >= table.shape[0]:
+        if edge_of.min() < 0 or edge_of.max() >= n_edges:
             return None
-        named = table.view(np.int64).ravel()[edge_of]  # one gather: both ends of each edge
-        if np.any(a == b) or not np.all((named == _packed(a, b)) | (named == _packed(b, a))):
-            return None
-        del named
-        # uses of each edge, and how many walk it lo -> hi: one count of 2 * edge + (a < b)
-        walks = np.bincount(2 * edge_of.astype(np.int64) + (a < b), minlength=2 * table.shape[0])
-        counts = walks[0::2] + walks[1::2]
-        ids = np.flatnonzero(counts)
-        x, y = table[ids, 0], table[ids, 1]
-        lo = np.minimum(x, y).astype(np.int64)
-        hi = np.maximum(x, y).astype(np.int64)
-        key = lo * n_nodes + hi
+        ends = table.view(np.int64).ravel()  # both ends of an edge as one int64
+        for at in range(0, a.size, _CHUNK):
+            x, y, e = a[at:at + _CHUNK], b[at:at + _CHUNK], edge_of[at:at + _CHUNK]
+            named = ends[e]
+            if np.any(x == y) or not np.all((named == _packed(x, y)) | (named == _packed(y, x))):
+                return None
+        counts = np.bincount(edge_of, minlength=n_edges)
+        forward = np.bincount(edge_of[a < b], minlength=n_edges)
+        used = counts > 0
+        first, second = table[:, 0], table[:, 1]
+        if not used.all():
+            first, second = first[used], second[used]
+        key = np.minimum(first, second).astype(np.int64)
+        key *= n_nodes
+        key += np.maximum(first, second)
         key.sort()
-        if np.any(key[1:] == key[:-1]):
+        if np.any(key[1:] == key[:-1]):  # a node pair named twice: the counts are split
             return None
+        del key
+        keep = np.flatnonzero(used & ((counts != 2) | (forward != 1)))
+        x, y = table[keep, 0], table[keep, 1]
         info = cls.__new__(cls)
-        info._set(n_nodes, lo, hi, counts[ids], walks[1::2][ids], False)
+        info._set(n_nodes, np.minimum(x, y).astype(np.int64), np.maximum(x, y).astype(np.int64),
+                  counts[keep], forward[keep], False)
         return info
 
     def renumbered(self, lut: np.ndarray, n_nodes: int) -> EdgeInfo:

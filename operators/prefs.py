@@ -72,6 +72,18 @@ def get_prefs(context: bpy.types.Context | None = None) -> Any | None:
     return addon.preferences if addon is not None else None
 
 
+def _device_choice(prefs: Any) -> str | None:
+    """The preferences' OpenCL device; "AUTO" when it was never set, without listing the
+    devices (reading the enum lists them: that imports pyopencl and asks every driver, a
+    tenth of a second that a fresh ``blender -b`` process then spends before its work)."""
+    if not prefs.is_property_set("opencl_device"):
+        return "AUTO"
+    try:
+        return prefs.opencl_device
+    except (TypeError, ValueError):
+        return None
+
+
 def resolve_backend(
     choice: str, context: bpy.types.Context | None = None
 ) -> tuple[str, str | None]:
@@ -81,10 +93,7 @@ def resolve_backend(
         choice = prefs.default_backend if prefs is not None else "NUMPY"
     device = None
     if prefs is not None and choice in ("OPENCL", "AUTO"):
-        try:
-            device = prefs.opencl_device
-        except (TypeError, ValueError):
-            device = None
+        device = _device_choice(prefs)
     return {"NUMPY": "numpy", "OPENCL": "opencl", "AUTO": "auto"}.get(choice, "numpy"), device
 
 

@@ -408,6 +408,30 @@ def test_linked_library_mesh_is_refused(bpy, ext, tmp_path):
     assert "linked from a library" in ext.operators.ops_untangle.LAST_RESULTS[0].line()
 
 
+def test_backend_choice_does_not_list_devices_while_the_device_was_never_chosen(bpy, ext,
+                                                                               monkeypatch):
+    """Listing OpenCL devices imports pyopencl and asks every driver: a fresh `blender -b`
+    command does not pay for it before its work when the device preference is Automatic
+    by default; a chosen device is read as before."""
+    prefs_mod = ext.operators.prefs
+    prefs = bpy.context.preferences.addons[MODULE].preferences
+    if prefs.is_property_set("opencl_device"):
+        prefs.property_unset("opencl_device")
+
+    def no_listing():
+        raise AssertionError("devices listed")
+
+    monkeypatch.setattr(prefs_mod, "_list_devices", no_listing)
+    assert prefs_mod.resolve_backend("AUTO") == ("auto", "AUTO")
+    assert prefs_mod.resolve_backend("OPENCL") == ("opencl", "AUTO")
+    monkeypatch.setattr(prefs_mod, "_list_devices", lambda: [("0:0", "Some device")])
+    prefs.opencl_device = "0:0"
+    try:
+        assert prefs_mod.resolve_backend("AUTO") == ("auto", "0:0")
+    finally:
+        prefs.property_unset("opencl_device")
+
+
 def test_preferences_and_backend_choice(bpy, ext):
     prefs = bpy.context.preferences.addons[MODULE].preferences
     assert prefs.default_backend == "NUMPY"
@@ -415,6 +439,7 @@ def test_preferences_and_backend_choice(bpy, ext):
     assert items[0][0] == "AUTO" and prefs.opencl_device == "AUTO"
     resolve = ext.operators.prefs.resolve_backend
     assert resolve("PREFS")[0] == "numpy"
+    assert resolve("AUTO") == ("auto", "AUTO") and resolve("NUMPY") == ("numpy", None)
     assert resolve("AUTO")[0] == "auto" and resolve("OPENCL")[0] == "opencl"
     prefs.default_backend = "AUTO"
     try:

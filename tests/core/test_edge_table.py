@@ -30,7 +30,8 @@ def _table(fs: FaceSet, n: int, seed: int = 0):
 
 
 def _rows(info: EdgeInfo) -> list[tuple[int, int, int, int, bool]]:
-    """Every edge as (lo, hi, count, net, conflict), in key order."""
+    """Every kept edge (open, non-manifold, conflicting) as (lo, hi, count, net, conflict),
+    in key order."""
     order = np.lexsort((info.hi, info.lo))
     return list(zip(info.lo[order].tolist(), info.hi[order].tolist(),
                     info.counts[order].tolist(), info.net[order].tolist(),
@@ -53,7 +54,7 @@ def test_table_analysis_equals_the_sorted_one_on_shared_meshes(name):
     a, b, edge_of, table = _table(fs, n)
     got, want = EdgeInfo.from_table(a, b, edge_of, table, n), EdgeInfo(fs, n)
     assert got is not None and not got.in_key_order
-    assert _rows(got) == _rows(want) and len(_rows(want)) > 100
+    assert _rows(got) == _rows(want) and len(_rows(want)) > 20
     assert np.array_equal(got.boundary_mask(), want.boundary_mask())
     assert want.open_edges()[0].size > 0 and np.all(want.open_edges()[2] != 0)
     _same(got.open_edges(), want.open_edges())
