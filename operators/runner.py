@@ -139,7 +139,7 @@ class Job:
     key_name: str | None = None
     nodes: np.ndarray | None = None  # (n,) global indices of the nodes used by the faces
     faces: Any = None  # core FaceSet over local node numbers
-    edges: EdgeInfo | None = None  # their edge analysis from the mesh's edge table (or None)
+    edges: EdgeInfo | None = None  # their edge analysis (from the mesh's edge table if it fits)
     fixed: np.ndarray | None = None  # (n,) extra pinned nodes (boundary is added by the core)
     frame: Any = None
     points2d: np.ndarray | None = None
@@ -248,8 +248,10 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         fixed_all |= loose
     job.fixed = fixed_all[nodes]
     try:
-        job.faces = faces_from_csr(offsets[:-1], totals, local.reshape(-1))
+        job.faces = faces_from_csr(offsets[:-1], totals, local.reshape(-1), nodes.size)
         job.edges = _edge_info(idx, offsets, topo, edges, lut, nodes.size)
+        if job.edges is None:  # a table that does not fit: one sorted analysis for both
+            job.edges = EdgeInfo(job.faces, nodes.size)
         job.frame = PlaneFrame.fit(pts3d, job.faces, tol=PLANE_TOL, project=project,
                                    fixed=job.fixed, edges=job.edges)
         job.points2d = job.frame.to_2d(pts3d)

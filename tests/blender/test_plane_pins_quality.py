@@ -122,6 +122,40 @@ def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy,
         assert getattr(job.frame, attr).tobytes() == getattr(ref, attr).tobytes()
 
 
+def test_an_edge_table_naming_an_interior_edge_twice_falls_back_to_the_sorted_analysis(bpy,
+                                                                                         ext):
+    """A corrupt mesh whose two faces walk one interior edge through two copies of it in
+    the edge table: the table's counts would call it an open edge (its nodes fixed); the
+    operator sees the table does not fit and analyses the faces themselves, so the result
+    is the intact mesh's, bit for bit."""
+    runner, topology = ext.operators.runner, ext.core.topology
+    good, _ = grid_object(bpy, "intact", jitter=0.7)
+    bad, _ = grid_object(bpy, "split", jitter=0.7)
+    me = bad.data
+    ev = np.empty(2 * len(me.edges), dtype=np.int32)
+    me.edges.foreach_get("vertices", ev)
+    ce = np.empty(len(me.loops), dtype=np.int32)
+    me.loops.foreach_get("edge_index", ce)
+    uses = np.bincount(ce, minlength=len(me.edges))
+    inner = int(np.flatnonzero(uses == 2)[0])  # an interior edge: two corners walk it
+    me.edges.add(1)
+    me.edges[-1].vertices = tuple(int(v) for v in ev.reshape(-1, 2)[inner])
+    ce[np.flatnonzero(ce == inner)[0]] = len(me.edges) - 1  # one walk on the copy
+    me.loops.foreach_set("edge_index", ce)
+    job = runner.prepare(bad)
+    assert job.error is None and job.edges.in_key_order  # the sorted analysis, not the table's
+    want = topology.EdgeInfo(job.faces, job.nodes.size)
+    assert np.array_equal(job.edges.boundary_mask(), want.boundary_mask())
+    assert job.edges.boundary_mask().sum() == 4 * N
+    for obj in (good, bad):
+        bpy.context.view_layer.objects.active = obj
+        for o in bpy.context.selected_objects:
+            o.select_set(False)
+        obj.select_set(True)
+        assert bpy.ops.mesh.eegt_untangle_smooth() == {"FINISHED"}
+    assert positions(good).tobytes() == positions(bad)[: len(good.data.vertices)].tobytes()
+
+
 def test_project_keeps_a_pinned_vertex_off_the_plane_and_says_so(bpy, ext):
     """A pinned vertex 0.05 off a tilted plane stays (bit for bit); the others land on the
     plane through the fixed vertices' centroid (1/25 of the lift away from the boundary's)."""
