@@ -40,16 +40,18 @@ class EdgeInfo:
     def __init__(self, faces: FaceSet, n_nodes: int):
         # one sort of (edge key, direction bit): runs of equal keys are the uses of an edge
         key = np.empty(faces.n_corners, dtype=np.int64)
+        less = np.empty(max(g.size for g in faces.groups), dtype=bool)
         at = 0
-        for g in faces.groups:
+        for g in faces.groups:  # written in place: no corner-sized temporaries
             for k in range(g.n):
                 x, y = g.nodes[k], g.nodes[(k + 1) % g.n]
                 part = key[at:at + g.size]
                 np.minimum(x, y, out=part)
-                part *= n_nodes
-                part += np.maximum(x, y)
+                part *= n_nodes - 1
+                part += x
+                part += y  # min * n + max
                 part *= 2
-                part += x < y
+                part += np.less(x, y, out=less[:g.size])
                 at += g.size
         key.sort()
         edge = key >> 1
