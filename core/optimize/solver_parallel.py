@@ -461,8 +461,10 @@ class ParallelLbfgs:
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
         if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernels: the host's
+            self._last = None  # a problem solved elsewhere: the last one's tables are done
             return lbfgs(en, st, v0, eps, **kw)
         if en.i0.size < self.small_corners:
+            self._last = None  # (the lift's rounds after its whole-mesh run, for instance)
             return self.small(en, st, v0, eps, **kw)
         try:
             tb = self._tables_for(en, st)
