@@ -85,6 +85,11 @@ def command_child(blend: str, backend: str) -> None:
                       "global": o["global_iterations"]}))
 
 
+def _secs(values) -> str:
+    """Seconds as a comma list."""
+    return ", ".join(f"{v:.2f}" for v in values)
+
+
 def command_input(core, kind: str, n: int):
     """(2D points, faces) the command's core call gets for the cached mesh: its float32
     positions (z = 0, as `mesh_object` stores them) in the plane frame the command's mesh
@@ -141,16 +146,13 @@ def fresh(args, blend: str) -> None:
     print(f"\nfresh processes, {args.backend}, medians of {args.fresh}, alternating "
           f"(global iterations: core {core[0]['global']}, command {cmd[0]['global']})\n")
 
-    def secs(rows, key):
-        return ", ".join(f"{r[key]:.2f}" for r in rows)
-
     print("| run | seconds | median | against the core |")
     print("|---|---|---|---|")
     print(f"| core (`untangle_and_smooth` on the command's input, Python) | "
-          f"{secs(core, 'seconds')} | {base:.2f} | |")
-    print(f"| `eegt` command (.blend load, run, checked save) | {secs(cmd, 'total')} | "
+          f"{_secs(r['seconds'] for r in core)} | {base:.2f} | |")
+    print(f"| `eegt` command (.blend load, run, checked save) | {_secs(r['total'] for r in cmd)} | "
           f"{total:.2f} | {100 * (total / base - 1):+.0f} % |")
-    print(f"| the command's own core call | {secs(cmd, 'core')} | {own:.2f} | "
+    print(f"| the command's own core call | {_secs(r['core'] for r in cmd)} | {own:.2f} | "
           f"(the command is {100 * (total / own - 1):+.0f} % of it) |")
 
 
@@ -227,10 +229,9 @@ def in_process(bpy, cli, args, src: Path, out: Path) -> None:
     for name, nf, tot, own_core, qmin, qavg, inv in rows:
         print(f"| {name} | {nf:,} | {tot:.2f} | {own_core:.2f} | "
               f"{100 * (tot / own_core - 1):+.0f} % | {qmin:.3f} | {qavg:.4f} | {inv} |")
-    cmd_s = ", ".join(f"{c[0]:.2f}" for c in cmd)
-    core_s = ", ".join(f"{c['seconds']:.2f}" for c in core)
     print(f"\nthe command against the core on its input, this process, alternating, medians of "
-          f"{args.repeat}: command {cmd_s} s, core {core_s} s: {100 * (total / base - 1):+.0f} % "
+          f"{args.repeat}: command {_secs(c[0] for c in cmd)} s, core "
+          f"{_secs(c['seconds'] for c in core)} s: {100 * (total / base - 1):+.0f} % "
           f"(global iterations {o['global_iterations']} / {core[-1]['global']})")
 
 

@@ -276,8 +276,8 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
 def _edge_info(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.MeshArrays,
                edges: mesh_io.EdgeArrays, lut: np.ndarray, n_nodes: int) -> EdgeInfo | None:
     """The chosen faces' edge analysis (in node numbers) from Blender's edge table
-    (``EdgeInfo.from_table``: one count per edge, no sort of every corner), or None to let
-    the plane fit and the core analyse the faces themselves. ``corners``: the chosen faces'
+    (``EdgeInfo.from_table``: one count per edge, no sort of every corner), or None when
+    the table does not fit them (the caller then sorts). ``corners``: the chosen faces'
     corners face by face (``offsets``); ``lut`` maps mesh vertices to nodes, in order."""
     ev, ce = edges.edge_verts, edges.corner_edges
     if offsets[-1] == 0 or ev.size == 0 or ev.min() < 0 or ev.max() >= lut.size:
