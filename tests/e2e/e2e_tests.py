@@ -841,6 +841,13 @@ def t_gui_uv_click_undo():
     return lines[-1].removeprefix("E2E-GUI-UV-OK").strip()
 
 
+# ---------------------------------------------------------------- more test modules -------
+# Topic modules (tests/e2e/e2e_*.py) import their helpers from this module and register with
+# @test; this file runs as __main__, so it is made importable under its own name first.
+sys.modules.setdefault("e2e_tests", sys.modules[__name__])
+for _path in sorted(glob.glob(f"{HERE}/e2e_*.py")):
+    __import__(os.path.basename(_path)[:-3])
+
 # ---------------------------------------------------------------- main -------------------
 
 
