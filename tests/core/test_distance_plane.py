@@ -46,8 +46,6 @@ def test_nearest_boundary_handles_dense_boundary_far_from_coarse_queries():
 
 
 def test_plane_frame_round_trip_and_orientation():
-    rng = np.random.default_rng(1)
-    p2 = rng.uniform(0, 1, (4, 2))
     p2 = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
     a, b = 0.7, -1.1
     rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]) @ np.array(
