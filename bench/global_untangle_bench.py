@@ -1,7 +1,7 @@
 """Benchmark of core.optimize.untangle_global on the shared meshes (stage alone, no EEGT smoothing).
 
 Usage: python -m bench.global_untangle_bench [mesh ...] [--perturb K] [--repeat R]
-Self-contained: own OBJ loader, boundary detection and mean-ratio quality (SPEC section 3).
+Self-contained: own OBJ loader, boundary detection and mean-ratio quality (docs/method.md 3).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ prints one markdown table with rows: the paper's published values (Tables 1-3), 
 paper-faithful mode (`EEGTParams.paper()`), our defaults (`EEGTParams()`), Blender's Smooth
 Vertices (factor 0.5, repeat 100, boundary vertices not selected, i.e. fixed) measured in the
 same run through the PyPI bpy module, and peer values quoted from issue 6. Quality is the mean
-ratio (SPEC section 3, `core.mesh_stats`) on the 2D coordinates; seconds are medians of
+ratio (docs/method.md 3, `core.mesh_stats`) on the 2D coordinates; seconds are medians of
 repeated runs (3, or 1 with --quick; paper mode on naca_deform and two_holes_twist runs once).
 Then the robustness table (`bench.robustness`), and before/after PNGs in --out.
 `--readme` also rewrites the block between `<!-- results:begin -->` and

@@ -1,4 +1,4 @@
-"""Planar meshes in 3D (SPEC section 5): fit the plane, map to 2D and back.
+"""Planar meshes in 3D (docs/method.md, section 5): fit the plane, map to 2D and back.
 
 The plane normal is the mesh's vector area. Summed face by face, the interior edges cancel
 (each is walked once in each direction), so it equals the Newell sum over the open (boundary
@@ -70,7 +70,8 @@ class PlaneFrame:
         ``tol * size`` from it.
 
         Without ``project`` the plane goes through the centroid of the used nodes and every
-        used node must lie within the tolerance (SPEC 5 and 7: a non-planar mesh is refused).
+        used node must lie within the tolerance (docs/method.md 5 and 7: a non-planar mesh is
+        refused).
 
         With ``project`` (the user asked to flatten the mesh) nothing is refused for being
         off the plane, and the plane is the one the nodes that never move define: the fixed
@@ -83,7 +84,7 @@ class PlaneFrame:
         LAPACK's eigensolver, whose bits depend on the CPU; for the nearly planar outlines
         this option is meant for, the vector area gives the same plane to well within the
         tolerance and is exactly reproducible. Fixed nodes off that plane stay where they
-        are (they never move, SPEC 4); ``fixed_offset`` says how far the farthest one is,
+        are (they never move, docs/method.md 4); ``fixed_offset`` says how far the farthest one is,
         for the caller to report.
 
         ``edges``: the faces' EdgeInfo when the caller has it (from a Blender mesh's edge

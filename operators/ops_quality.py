@@ -66,7 +66,7 @@ def quality_name_clash(obj: bpy.types.Object, measure: str = "mean_ratio") -> st
     otherwise) or ``eegt_quality_color`` of the add-on's own type and domain
     is ours from an earlier run and is overwritten. One of another type or domain is the
     user's data (named so by hand, or by a script or geometry nodes): replacing it would
-    delete it, and "attributes stay identical" (SPEC 7) is the promise, so storing is
+    delete it, and "attributes stay identical" (docs/method.md 7) is the promise, so storing is
     refused, with the attribute and the mesh left exactly as they were. A vertex group of
     either name blocks it too (Blender refuses the attribute); both are checked before
     anything is written, so a refusal never leaves half the pair.

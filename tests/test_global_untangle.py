@@ -40,7 +40,7 @@ def boundary_mask(n_nodes: int, groups: dict[int, np.ndarray]) -> np.ndarray:
 
 
 def quality(points: np.ndarray, groups: dict[int, np.ndarray]) -> tuple[float, float, int]:
-    """SPEC section 3 mean ratio: q_min, q_avg (inverted = 0), number of inverted elements."""
+    """The mean ratio (docs/method.md 3): q_min, q_avg (inverted = 0), number inverted."""
     qs, n_inv = [], 0
     for n, f in groups.items():
         p = points[f]

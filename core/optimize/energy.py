@@ -13,7 +13,8 @@ of code", ACM TOG 2021), written here from the paper's equations, for 2D:
 
 J_t maps a regular reference corner onto the current corner t. Each n-gon (n >= 4) contributes
 its n corner triangles (p_{k-1}, p_k, p_{k+1}) with the regular n-gon corner as reference (so a
-positive det on every corner is exactly SPEC section 3's validity, and f = 2 / q_k for eps -> 0);
+positive det on every corner is exactly the mean ratio's validity (docs/method.md 3), and
+f = 2 / q_k for eps -> 0);
 a triangle contributes one corner (all three give the same J up to a rotation) with the
 equilateral triangle as reference. Reference edge lengths follow the local mean edge length,
 smoothed, and are scaled so the reference areas add up to the domain area.
@@ -361,7 +362,7 @@ class FoldoverEnergy:
         return self._scatter(a, b, layout[1], layout[0])
 
     def n_inverted(self, x: np.ndarray, y: np.ndarray) -> int:
-        """Elements with a corner det <= 0 (SPEC section 3)."""
+        """Elements with a corner det <= 0 (docs/method.md 3)."""
         x0 = x[self.v0]
         y0 = y[self.v0]
         det = (x[self.v1] - x0) * (y[self.v2] - y0) - (y[self.v1] - y0) * (x[self.v2] - x0)
@@ -375,7 +376,7 @@ class LiftEnergy(FoldoverEnergy):
     """F = sum_e [ -q_e + PENALTY ((qc - q_e)_+ / qc)^2 ] + BARRIER sum_corners w / q_k.
 
     q_k = 2 det / |J|_F^2 is the corner's mean ratio (theta = 0, eps -> 0) and q_e the mean
-    over the element's corners (SPEC section 3). The first term maximises q_avg itself, the
+    over the element's corners (docs/method.md 3). The first term maximises q_avg itself, the
     second is a soft floor qc on every element's quality, the third a barrier per corner (the
     mean alone lets one corner of a polygon collapse). Every corner of every element is kept,
     so element means are complete; only valid (guarded) iterates are evaluated.

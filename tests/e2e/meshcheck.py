@@ -1,6 +1,6 @@
 """Independent mesh checks for the e2e tests (NumPy only; runs in Blender's Python 3.13 / NumPy 2.2
 and in any Python 3.11+). Deliberately does NOT import the project's core: it re-implements the
-SPEC section 3 quality so the e2e tests check the extension against a second implementation.
+mean ratio (docs/method.md 3) so the e2e tests check the extension against a second implementation.
 
 Command line:  python3 meshcheck.py stats FILE.obj            -> JSON stats
                python3 meshcheck.py compare IN.obj OUT.obj    -> JSON: topology same? boundary kept?
@@ -30,7 +30,8 @@ def read_obj(path):
 
 
 def plane_2d(verts, faces):
-    """Project to 2D in the mesh plane (normal = vector area, SPEC 5), valid orientation = CCW."""
+    """Project to 2D in the mesh plane (normal = vector area, docs/method.md 5); the valid
+    orientation is counterclockwise."""
     n = np.zeros(3)
     for f in faces:  # Newell: sum of face area vectors
         p = verts[f]
@@ -47,7 +48,7 @@ def plane_2d(verts, faces):
 
 
 def face_quality(xy, f):
-    """Mean ratio of one n-gon (SPEC 3): mean of corner q_k, 0 if any corner det <= 0."""
+    """Mean ratio of one n-gon (docs/method.md 3): mean of corner q_k, 0 if any corner det <= 0."""
     p = xy[f]
     nn = len(f)
     a = (nn - 2) * math.pi / nn
