@@ -16,8 +16,9 @@ from core.faces import as_faceset
 from core.obj_io import read_obj
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize.energy import LiftEnergy
-from core.optimize.solver import TICK_EVERY, State, lbfgs
+from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
+from core.optimize.state import TICK_EVERY, State
 from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 

@@ -18,8 +18,9 @@ from core.faces import as_faceset
 from core.obj_io import read_obj
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize.energy import FoldoverEnergy, LiftEnergy
-from core.optimize.solver import State, lbfgs
+from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
+from core.optimize.state import State
 from core.pipeline import free_nodes
 
 eo = pytest.importorskip("core.engine_opencl")
@@ -424,7 +425,7 @@ def test_small_problems_go_to_the_small_solver_same_result(device):
 def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
     """limit_corner/finish_limit against FoldoverEnergy._step_limit and skipped_trials on a
     jittered mesh: the same limit bits, the same first step and skip count."""
-    from core.optimize.solver import skipped_trials
+    from core.optimize.state import skipped_trials
 
     p, f = read_obj(DATA / "tri_two_holes.obj")
     p = np.ascontiguousarray(p[:, :2])

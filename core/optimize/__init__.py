@@ -15,7 +15,7 @@ Where things live (NumPy and OpenCL twins side by side):
   energies written out).
 - step limit (the first det root along a search direction: guarded line searches skip the
   trial steps past it, same iterates): `energy.FoldoverEnergy._step_limit`,
-  `solver.skipped_trials`; OpenCL: `solver_parallel.cl` `limit_corner`, `finish_limit`.
+  `state.skipped_trials`; OpenCL: `solver_parallel.cl` `limit_corner`, `finish_limit`.
 - active sub-mesh (rings around seed elements): `submesh.Neighbourhood` (node -> element
   incidence built once, each sub-mesh costs its own size), `submesh.active_submesh`.
 - stage drivers (eps continuation and polish, the lift): `stages.untangle_global`,
@@ -30,8 +30,8 @@ in `core/transform.py` and `core/engine_numpy.py`, twinned by `core/engine_openc
 """
 
 from .options import GlobalOptions
-from .solver import stops
 from .stages import lift_min_quality, untangle_global
+from .state import stops
 from .submesh import active_submesh
 
 __all__ = ["GlobalOptions", "active_submesh", "lift_min_quality", "stops", "untangle_global"]

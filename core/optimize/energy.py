@@ -41,7 +41,7 @@ from .reference import (
     per_arity,
     reference_sizes,
 )
-from .solver import LIMIT_MARGIN, TICK_CORNERS, TICK_EVERY, State
+from .state import LIMIT_MARGIN, TICK_CORNERS, TICK_EVERY, State
 
 __all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar"]
 

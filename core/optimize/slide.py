@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..boundary import SlideView
-from .solver import State
+from .state import State
 
 __all__ = ["SlideProblem", "SlideState", "make_state"]
 

@@ -5,86 +5,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .state import LBFGS_MEMORY, TRIALS, State, skipped_trials, stops
 
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
 
-__all__ = ["LBFGS_MEMORY", "LIMIT_MARGIN", "TRIALS", "State", "lbfgs", "skipped_trials", "stops"]
-
-LBFGS_MEMORY = 4  # L-BFGS (s, y) pairs kept (8 was 15-20% slower, same iterations: docs)
-TICK_EVERY = 20  # progress is reported at most this many L-BFGS iterations apart ...
-TICK_CORNERS = 500_000  # ... and every TICK_CORNERS / corners iterations (big meshes: often)
-
-
-LIMIT_MARGIN = 1e-6  # trial steps within this (relative) of a det root are evaluated
-TRIALS = 40  # line-search halvings
-
-
-def skipped_trials(step: float, limit: float) -> tuple[float, int]:
-    """(first step worth evaluating, halvings skipped): a trial step above the step limit
-    (with a margin for round-off) makes some corner det <= 0, which the guarded line search
-    rejects, so the search goes on from the first step below it with the same iterate."""
-    bound = limit * (1.0 + LIMIT_MARGIN)
-    k = 0
-    while k < TRIALS and step > bound:
-        step *= 0.5
-        k += 1
-    return step, k
-
-
-def stops(answer: Any) -> bool:
-    """A progress callback's answer cancels when it is falsy but not None (False, np.False_,
-    0); None (a callback that returns nothing) and truthy values continue."""
-    return answer is not None and not answer
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    """Dot product by NumPy's pairwise sum: unlike `a @ b` (BLAS, whose result depends on its
-    thread count), bit-identical on every run and thread setting (`np.add.reduce` is
-    `np.sum` without its Python wrapper: half the cost on small meshes)."""
-    return float(np.add.reduce(a * b))
-
-
-class State:
-    """Free coordinates packed as v = [x_free, y_free]; fixed nodes never written."""
-
-    def __init__(self, points: np.ndarray, free: np.ndarray):
-        self.x = np.ascontiguousarray(points[:, 0])
-        self.y = np.ascontiguousarray(points[:, 1])
-        self.fidx = np.flatnonzero(free)
-        self.nf = self.fidx.size
-
-    def unpack(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        x = self.x.copy()
-        y = self.y.copy()
-        x[self.fidx] = v[: self.nf]
-        y[self.fidx] = v[self.nf :]
-        return x, y
-
-    def pack(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        return np.concatenate([x[self.fidx], y[self.fidx]])
-
-    @property
-    def size(self) -> int:
-        """Length of v."""
-        return 2 * self.nf
-
-    @property
-    def written(self) -> np.ndarray:
-        """The nodes v moves (`unpack` gives the others as they were)."""
-        return self.fidx
-
-    def preconditioner(self, precond: np.ndarray) -> np.ndarray:
-        """The diagonal preconditioner of v from the energy's per-node one."""
-        return np.tile(precond[self.fidx], 2)
-
-    def view(self, en):
-        """The energy as `lbfgs` sees it for this state (here: itself; core.optimize.slide
-        puts the sliding nodes' parameters in between)."""
-        return en
+__all__ = ["lbfgs"]
 
 
 def lbfgs(
@@ -109,7 +39,8 @@ def lbfgs(
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
     comments: the energy sees z = [v, fixed coordinates] (`FoldoverEnergy._packed`), whose first
     2 nf gradient entries are the packed gradient, and only accepted points get a gradient;
-    dot products are `_dot`'s pairwise sums (one scratch buffer; the four of a new pair as
+    a dot product dot(a, b) is `np.add.reduce(a * b)`, NumPy's pairwise sum, never BLAS's
+    `a @ b`, whose result depends on its thread count (one scratch buffer; the four of a new pair as
     the rows of one reduce, each row summed exactly as alone); a scalar factor is filled into
     an array first (a cheaper NumPy operand than a float or a 0-d array).
     """
@@ -142,16 +73,16 @@ def lbfgs(
         q = -g
         alphas = []
         for s, yv, rho, _, _ in reversed(mem):
-            al = rho * red(mul(s, q, tmp))  # rho _dot(s, q)
+            al = rho * red(mul(s, q, tmp))  # rho dot(s, q)
             alphas.append(al)
             c0.fill(al)
             q -= mul(yv, c0, tmp)  # q -= al yv
         if mem:
             c0.fill(mem[-1][3] / mem[-1][4])
-            q *= mul(dpre, c0, tmp)  # q *= dpre (_dot(s, y) / _dot(y, dpre y)) of the last pair
+            q *= mul(dpre, c0, tmp)  # q *= dpre (dot(s, y) / dot(y, dpre y)) of the last pair
             for (s, yv, rho, _, _), al in zip(mem, reversed(alphas), strict=True):
                 c0.fill(al - rho * red(mul(yv, q, tmp)))
-                q += mul(s, c0, tmp)  # q += (al - rho _dot(yv, q)) s
+                q += mul(s, c0, tmp)  # q += (al - rho dot(yv, q)) s
             step = 1.0
         else:
             q *= dpre
@@ -200,7 +131,7 @@ def lbfgs(
         mul(s, s, ss_)
         mul(yv, yv, yy_)
         mul(yv, mul(dpre, yv, tmp), ydy_)
-        sy, ss, yy, ydy = red(prods, 1).tolist()  # _dot(s, y), _dot(s, s), ...
+        sy, ss, yy, ydy = red(prods, 1).tolist()  # dot(s, y), dot(s, s), ...
         if sy > 1e-12 * math.sqrt(ss * yy):
             mem.append((s, yv, 1.0 / sy, sy, ydy))
             if len(mem) > LBFGS_MEMORY:

@@ -19,7 +19,8 @@ import numpy as np
 from ..csr import bincount_csr
 from ..engine_opencl import LOCK, _runtime
 from .energy import FoldoverEnergy, LiftEnergy
-from .solver import LBFGS_MEMORY, State, lbfgs, stops
+from .solver import lbfgs
+from .state import LBFGS_MEMORY, State, stops
 
 __all__ = ["KERNEL_FILE", "OpenCLLbfgs", "device_solver"]
 

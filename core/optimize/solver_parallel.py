@@ -23,7 +23,8 @@ import numpy as np
 from ..csr import bincount_csr, point_morton
 from ..engine_opencl import LOCK, _runtime
 from .energy import FoldoverEnergy, LiftEnergy
-from .solver import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, lbfgs, stops
+from .solver import lbfgs
+from .state import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, stops
 
 __all__ = ["KERNEL_FILE", "ParallelLbfgs", "device_solver", "reduction_plan"]
 

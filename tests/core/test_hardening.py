@@ -9,7 +9,7 @@ from meshdata import load2d
 
 from core import EEGTParams, mesh_stats, quality, untangle_and_smooth
 from core.optimize import energy
-from core.optimize.solver import TICK_EVERY
+from core.optimize.state import TICK_EVERY
 
 FAN_PTS = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0.5, 0.5]], float)
 FAN = [[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]

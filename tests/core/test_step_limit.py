@@ -12,8 +12,9 @@ from core.faces import as_faceset
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize import energy as energy_mod
 from core.optimize.energy import FoldoverEnergy, LiftEnergy, _corner_limit
-from core.optimize.solver import LIMIT_MARGIN, TRIALS, State, lbfgs, skipped_trials
+from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
+from core.optimize.state import LIMIT_MARGIN, TRIALS, State, skipped_trials
 from core.pipeline import free_nodes
 
 

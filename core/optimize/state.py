@@ -1,0 +1,86 @@
+"""What every L-BFGS path shares: the packed free coordinates (`State`), the line search's
+constants and its step-limit skip, and how a progress answer cancels. The NumPy solver
+(`solver`), its device twins (`solver_opencl`, `solver_parallel`) and the energies use these,
+so none of them imports another for them."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "LBFGS_MEMORY",
+    "LIMIT_MARGIN",
+    "TICK_CORNERS",
+    "TICK_EVERY",
+    "TRIALS",
+    "State",
+    "skipped_trials",
+    "stops",
+]
+
+LBFGS_MEMORY = 4  # L-BFGS (s, y) pairs kept (8 was 15-20% slower, same iterations: docs)
+TICK_EVERY = 20  # progress is reported at most this many L-BFGS iterations apart ...
+TICK_CORNERS = 500_000  # ... and every TICK_CORNERS / corners iterations (big meshes: often)
+
+
+LIMIT_MARGIN = 1e-6  # trial steps within this (relative) of a det root are evaluated
+TRIALS = 40  # line-search halvings
+
+
+def skipped_trials(step: float, limit: float) -> tuple[float, int]:
+    """(first step worth evaluating, halvings skipped): a trial step above the step limit
+    (with a margin for round-off) makes some corner det <= 0, which the guarded line search
+    rejects, so the search goes on from the first step below it with the same iterate."""
+    bound = limit * (1.0 + LIMIT_MARGIN)
+    k = 0
+    while k < TRIALS and step > bound:
+        step *= 0.5
+        k += 1
+    return step, k
+
+
+def stops(answer: Any) -> bool:
+    """A progress callback's answer cancels when it is falsy but not None (False, np.False_,
+    0); None (a callback that returns nothing) and truthy values continue."""
+    return answer is not None and not answer
+
+
+class State:
+    """Free coordinates packed as v = [x_free, y_free]; fixed nodes never written."""
+
+    def __init__(self, points: np.ndarray, free: np.ndarray):
+        self.x = np.ascontiguousarray(points[:, 0])
+        self.y = np.ascontiguousarray(points[:, 1])
+        self.fidx = np.flatnonzero(free)
+        self.nf = self.fidx.size
+
+    def unpack(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        x = self.x.copy()
+        y = self.y.copy()
+        x[self.fidx] = v[: self.nf]
+        y[self.fidx] = v[self.nf :]
+        return x, y
+
+    def pack(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.concatenate([x[self.fidx], y[self.fidx]])
+
+    @property
+    def size(self) -> int:
+        """Length of v."""
+        return 2 * self.nf
+
+    @property
+    def written(self) -> np.ndarray:
+        """The nodes v moves (`unpack` gives the others as they were)."""
+        return self.fidx
+
+    def preconditioner(self, precond: np.ndarray) -> np.ndarray:
+        """The diagonal preconditioner of v from the energy's per-node one."""
+        return np.tile(precond[self.fidx], 2)
+
+    def view(self, en):
+        """The energy as `lbfgs` sees it for this state (here: itself; core.optimize.slide
+        puts the sliding nodes' parameters in between)."""
+        return en
