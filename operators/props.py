@@ -163,26 +163,9 @@ def param_annotations(options: set[str] | None = None) -> dict[str, Any]:
     return {f.name: blender_property(f, options) for f in param_fields()}
 
 
-def params_from(owner: Any, fallback: Any = None) -> EEGTParams:
-    """Build EEGTParams from an operator or property group.
-
-    For an operator, a parameter that was not set explicitly comes from ``fallback`` (the
-    scene settings) when given.
-    """
-    values: dict[str, Any] = {}
-    props = getattr(owner, "properties", None)
-    for f in param_fields():
-        src = owner
-        if fallback is not None and props is not None and not props.is_property_set(f.name):
-            src = fallback
-        values[f.name] = getattr(src, f.name)
-    return EEGTParams(**values)
-
-
-def set_params(owner: Any, params: EEGTParams) -> None:
-    """Copy EEGTParams values onto an operator or property group."""
-    for f in param_fields():
-        setattr(owner, f.name, getattr(params, f.name))
+def params_from(owner: Any) -> EEGTParams:
+    """EEGTParams from an operator's or a property group's parameter properties."""
+    return EEGTParams(**{f.name: getattr(owner, f.name) for f in param_fields()})
 
 
 def _settings_class() -> type:
