@@ -134,7 +134,7 @@ class FoldoverEnergy:
     """F_eps over the corner triangles that touch a free node, with its gradient.
 
     The hot path works on one flat coordinate vector z and a layout (gather index, scatter
-    index, length of z): `value_grad(x, y)` uses z = [x, y]; `lbfgs` uses z = [v, fixed
+    index, length of z): the whole-mesh measures use z = [x, y]; `lbfgs` uses z = [v, fixed
     coordinates], so it never unpacks or packs. `_eval` gives F and min det J (all a line
     search needs), `_grad` the gradient of the point `_eval` saw last. Per-corner quantities
     live in `_Blocks` (one NumPy call per block of M, no temporaries); every value is the same
@@ -316,16 +316,6 @@ class FoldoverEnergy:
         if self.power != 1.0:
             u = fpmath.power(0.5 * u, self.power)
         return float(np.add.reduce(self.weight * u))
-
-    def value_grad(
-        self, x: np.ndarray, y: np.ndarray, eps: float
-    ) -> tuple[float, np.ndarray, np.ndarray, float]:
-        """F_eps, dF/dx, dF/dy over all nodes (non-free rows included), and min det J."""
-        n = self.n_nodes
-        layout = self._full_layout()
-        e, dmin, ok = self._eval(np.concatenate([x, y]), layout, eps)
-        g = self._grad(layout) if ok else np.zeros(layout[1])
-        return e, g[:n], g[n:], dmin
 
     def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
         """(F_eps, min det J, whether `_grad` may follow) at the flat coordinates z."""
