@@ -1,4 +1,4 @@
-"""The paper's Tables 1-3 side by side with our modes, Blender and quoted peers (issue 6).
+"""The paper's Tables 1-3 side by side with our modes, Blender and quoted peers.
 
 Run: `python -m bench.paper_tables [--quick] [--out out/bench] [--readme]`.
 
@@ -6,8 +6,9 @@ For each mesh (the paper's Table 1 mesh read in place from ../shared, and tests/
 prints one markdown table with rows: the paper's published values (Tables 1-3), our
 paper-faithful mode (`EEGTParams.paper()`), our defaults (`EEGTParams()`), Blender's Smooth
 Vertices (factor 0.5, repeat 100, boundary vertices not selected, i.e. fixed) measured in the
-same run through the PyPI bpy module, and peer values quoted from issue 6. Quality is the mean
-ratio (docs/method.md 3, `core.mesh_stats`) on the 2D coordinates; seconds are medians of
+same run through the PyPI bpy module, and quoted peer values (measured earlier on the same
+machine class, not rerun here). Quality is the mean ratio (docs/method.md 3,
+`core.mesh_stats`) on the 2D coordinates; seconds are medians of
 repeated runs (3, or 1 with --quick; paper mode on naca_deform and two_holes_twist runs once).
 Then the robustness table (`bench.robustness`), and before/after PNGs in --out.
 `--readme` also rewrites the block between `<!-- results:begin -->` and
@@ -63,7 +64,7 @@ PAPER = {
     ]),
 }
 
-# Peers measured earlier on this machine class and quoted from issue 6:
+# Peers measured earlier on the same machine class (not rerun here), quoted:
 # (method, inverted, q_min, q_avg, seconds, note); None = not given.
 PEERS = {
     "table1": [
@@ -272,7 +273,7 @@ def run_ours(points: np.ndarray, faces, params, repeats: int, backends=("numpy",
 
 
 def auto_row(res, sec: float, numpy_res, repeats: int) -> Row:
-    """The defaults with backend="auto" (issue 6's speed target): same points as NumPy?"""
+    """The defaults with backend="auto": same points as NumPy?"""
     same = np.array_equal(res.points, numpy_res.points)
     note = f"backend used: {res.backend}; " + (
         "points bit-identical to the NumPy run" if same else "points differ from the NumPy run"
@@ -383,7 +384,7 @@ def mesh_table(
     rows.append(Row(f"Blender Smooth Vertices (factor {BLENDER_FACTOR}, repeat {BLENDER_REPEAT}, "
                     "boundary fixed)", "measured", sb.n_inverted, sb.q_min, sb.q_avg, bsec, note))
     for m, inv, qmin, qavg, sec, note in PEERS.get(key, []):
-        rows.append(Row(m, "quoted (issue 6)", inv, qmin, qavg, sec, note))
+        rows.append(Row(m, "quoted", inv, qmin, qavg, sec, note))
     short = label.split(" (")[0].split(":")[0]
     summary = [short, cell(rows, "EEGT", "paper"), cell(rows, "ours, `EEGTParams.paper()`"),
                cell(rows, "ours, `EEGTParams()`"), cell(rows, "ours, auto"), cell(rows, "Blender"),
@@ -486,9 +487,9 @@ def main() -> int:
         + machine,
         "",
         "Paper rows are the published values (their machine, Mesquite and EEGT timings); "
-        "*measured* rows ran in this run; *quoted* rows are peers measured earlier on this "
-        "machine class (issue 6). Quality is the mean ratio on the 2D coordinates (0 for inverted "
-        f"elements); seconds are medians of {repeats} run{'s' if repeats > 1 else ''} "
+        "*measured* rows ran in this run; *quoted* rows are peers measured earlier on the same "
+        "machine class, not rerun here. Quality is the mean ratio on the 2D coordinates (0 for "
+        f"inverted elements); seconds are medians of {repeats} run{'s' if repeats > 1 else ''} "
         "(wall time of `core.untangle_and_smooth`; the operator call for Blender).",
         "",
     ]
