@@ -30,17 +30,20 @@ import time
 
 import numpy as np
 
-from core import global_untangle as gu
+from core.optimize.energy import FoldoverEnergy, LiftEnergy
+from core.optimize.solver import lbfgs
+from core.optimize.stages import EPS_MIN
+from core.optimize.state import State
 from core.pipeline import free_nodes
 
 from .meshgen import holed_square
 
 
 def solvers(only: set[str]) -> dict:
-    out = {"numpy": gu._lbfgs}
+    out = {"numpy": lbfgs}
     try:
-        from core.lbfgs_opencl import OpenCLLbfgs
-        from core.lbfgs_parallel import ParallelLbfgs
+        from core.optimize.solver_opencl import OpenCLLbfgs
+        from core.optimize.solver_parallel import ParallelLbfgs
 
         out["single"] = OpenCLLbfgs()
         out["parallel"] = ParallelLbfgs()
@@ -57,19 +60,19 @@ def problems(n: int):
     groups = fs.by_arity()
     free = free_nodes(len(p), fs)
     out = []
-    en = gu._Energy(p, groups, free)
-    st = gu._State(p, free)
+    en = FoldoverEnergy(p, groups, free)
+    st = State(p, free)
     dmin = float(np.min(en.dets(st.x, st.y)))
-    eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else gu.EPS_MIN
+    eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else EPS_MIN
     out.append(("untangle", en, st, st.pack(st.x, st.y), eps, False))
-    en = gu._Energy(p_valid, groups, free)
-    st = gu._State(p_valid, free)
+    en = FoldoverEnergy(p_valid, groups, free)
+    st = State(p_valid, free)
     assert en.n_inverted(st.x, st.y) == 0
-    out.append(("polish", en, st, st.pack(st.x, st.y), gu.EPS_MIN, True))
-    en = gu._LiftEnergy(p_valid, groups, free)
-    st = gu._State(p_valid, free)
+    out.append(("polish", en, st, st.pack(st.x, st.y), EPS_MIN, True))
+    en = LiftEnergy(p_valid, groups, free)
+    st = State(p_valid, free)
     en.qc = float(en.element_quality(st.x, st.y).min())
-    out.append(("lift", en, st, st.pack(st.x, st.y), gu.EPS_MIN, True))
+    out.append(("lift", en, st, st.pack(st.x, st.y), EPS_MIN, True))
     return fs.n_faces, out
 
 
