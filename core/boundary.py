@@ -12,6 +12,8 @@ move freely (beyond the paper, which fixes every boundary node).
   position onto the curve, restricted to tau - REACH gap_prev .. tau + REACH gap_next (the
   parameter gaps to its neighbours on the loop, REACH < 1/2): neighbours moving towards each
   other keep at least 1 - 2 REACH of their gap, so order is kept and no node reaches another.
+  Nodes at one point of the input loop (a *stack*: a node dragged onto its neighbour) slide
+  apart; at a corner one of them keeps the corner.
 - ``free``: only pinned and non-manifold nodes stay.
 
 `BoundaryMotion` carries what the engines need: the movable mask, the sliding nodes with
@@ -141,9 +143,22 @@ class Slide:
         return self.ax[seg] + u * self.dx[seg], self.ay[seg] + u * self.dy[seg]
 
     def direction(self, slots: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """d(position)/d(tau): the direction of the segment each parameter lies on."""
-        seg = self.seg_first[self.curve[slots]] + np.floor(tau).astype(np.int64)
-        return self.dx[seg], self.dy[seg]
+        """d(position)/d(tau): the direction of the segment each parameter lies on; on a
+        segment of zero length (nodes stacked at one point of the input) the previous
+        segment's, the way off the stack back along the curve (its derivative from the
+        left at the segment's start), so that a stacked node does not see a zero gradient."""
+        c = self.curve[slots]
+        k = np.floor(tau).astype(np.int64)
+        seg = self.seg_first[c] + k
+        dx, dy = self.dx[seg], self.dy[seg]
+        flat = self.len2[seg] == 0.0
+        if flat.any():
+            prev = np.where(self.periodic[c], (k - 1) % self.n_seg[c], k - 1)
+            ok = flat & (prev >= 0)
+            back = self.seg_first[c[ok]] + prev[ok]
+            dx, dy = dx.copy(), dy.copy()
+            dx[ok], dy[ok] = self.dx[back], self.dy[back]
+        return dx, dy
 
     def wrap(self, slots: np.ndarray, tau: np.ndarray) -> np.ndarray:
         """Parameters of periodic curves brought into [0, n_seg) (others unchanged)."""
@@ -387,6 +402,60 @@ class SlideView:
         return SlideView(self.slide, glob, self.tau_all(points))
 
 
+def _stack_end(x: np.ndarray, y: np.ndarray, step: np.ndarray, start: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """(last node, nodes passed) of the walk from each of `start` along the loop links
+    `step` (bs.prv or bs.nxt) while the next node sits at the same position."""
+    end = start.copy()
+    passed = np.zeros(start.size, dtype=np.int64)
+    go = np.ones(start.size, dtype=bool)
+    for _ in range(x.size):  # as many rounds as the longest stack (1 or 2 in practice)
+        nb = step[end]
+        go &= (nb >= 0) & (nb != start)
+        at = np.maximum(nb, 0)
+        go &= (x[at] == x[end]) & (y[at] == y[end])
+        if not go.any():
+            break
+        end[go] = nb[go]
+        passed[go] += 1
+    return end, passed
+
+
+def _stacked_sliding(points: np.ndarray, fs: FaceSet, bs: BoundaryStructure, nodes: np.ndarray,
+                     cos_limit: float) -> np.ndarray:
+    """The sliding ones among `nodes`: sliding candidates that sit on a loop neighbour (a
+    *stack* of nodes at one point of the loop, e.g. a node dragged onto its neighbour).
+    A stack's turn is measured between the nearest other positions before and after it. A
+    smooth stack slides whole. A corner stack keeps one node at the corner (a pinned or
+    non-manifold node of the stack, else the one in the fewest faces, the first along the
+    loop on ties) and the others slide off it along their curve, which is what untangles
+    their faces. A stack without another position on either side stays."""
+    x, y = points[:, 0], points[:, 1]
+    head, back = _stack_end(x, y, bs.prv, nodes)
+    tail, ahead = _stack_end(x, y, bs.nxt, nodes)
+    a, b = bs.prv[head], bs.nxt[tail]
+    ok = (a >= 0) & (b >= 0)
+    a, b = np.maximum(a, 0), np.maximum(b, 0)
+    ok &= ((x[a] != x[head]) | (y[a] != y[head])) & ((x[b] != x[tail]) | (y[b] != y[tail]))
+    e1x, e1y = x[nodes] - x[a], y[nodes] - y[a]
+    e2x, e2y = x[b] - x[nodes], y[b] - y[nodes]
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        cos_turn = (e1x * e2x + e1y * e2y) / (np.sqrt(e1x * e1x + e1y * e1y)
+                                              * np.sqrt(e2x * e2x + e2y * e2y))
+    smooth = ok & (cos_turn >= cos_limit)
+    corner = ok & ~smooth
+    # a corner stack whose members all are candidates (`nodes`) needs a keeper
+    whole = corner & (np.bincount(head, minlength=x.size)[head] == back + ahead + 1)
+    faces_at = np.bincount(np.concatenate([g.nodes.ravel() for g in fs.groups]),
+                           minlength=x.size)
+    order = np.lexsort((back, faces_at[nodes], head))
+    first = np.ones(order.size, dtype=bool)
+    first[1:] = head[order[1:]] != head[order[:-1]]
+    keeper = np.zeros(nodes.size, dtype=bool)
+    keeper[order[first]] = True
+    return nodes[smooth | (corner & ~(whole & keeper))]
+
+
 @dataclass(frozen=True)
 class BoundaryMotion:
     """What a boundary mode lets move, for the engines and the global stage."""
@@ -414,8 +483,9 @@ def boundary_motion(points: np.ndarray, faces: FaceSet, fixed=None, mode: str = 
 
     `points` (N, 2) are the input positions the curves and anchors are taken from; `fixed`
     pins extra nodes as in `free_nodes`. A boundary node is a corner when its turning angle
-    (between the incoming and the outgoing boundary edge) exceeds `feature_angle` degrees, or
-    when one of these edges has zero length. `edges`: the faces' EdgeInfo, if known."""
+    (between the incoming and the outgoing boundary edge) exceeds `feature_angle` degrees.
+    Nodes at one point of the loop (a zero-length edge: a node dragged onto its neighbour)
+    are judged as one stack (`_stacked_sliding`). `edges`: the faces' EdgeInfo, if known."""
     if mode not in BOUNDARY_MODES:
         raise ValueError(f"unknown boundary mode {mode!r} (choose from "
                          f"{', '.join(BOUNDARY_MODES)})")
@@ -448,6 +518,9 @@ def boundary_motion(points: np.ndarray, faces: FaceSet, fixed=None, mode: str = 
         smooth = (l1 > 0.0) & (l2 > 0.0) & (cos_turn >= cos_limit)
         sliding = np.zeros(n, dtype=bool)
         sliding[i[smooth]] = True
+        stacked = (l1 == 0.0) | (l2 == 0.0)
+        if stacked.any():
+            sliding[_stacked_sliding(points, fs, bs, i[stacked], cos_limit)] = True
         n_corners = int(np.count_nonzero(candidates & ~sliding))
         slide = _build_slide(np.asarray(points, dtype=np.float64), bs, sliding)
         movable = interior | sliding

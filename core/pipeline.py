@@ -43,7 +43,7 @@ class Cancelled(Exception):
 @dataclass
 class EEGTResult:
     points: np.ndarray
-    status: str  # "valid" | "untangled" | "failed" | "cancelled"
+    status: str  # "valid" | "untangled" (no face of the result inverted) | "failed" | "cancelled"
     before: Stats
     after: Stats
     untangle_iterations: int
@@ -151,7 +151,7 @@ def untangle_and_smooth(
         order, run_fs = z_order(work, fs)
         work = work[order.nodes]  # the run's numbering from here on (one copy, not two)
         run = _Run(work, run_fs, free[order.nodes], params, backend, progress,
-                   frozen[order.faces])
+                   frozen[order.faces], frozen_ids=np.flatnonzero(frozen))
     else:
         run = _Run(work, fs, free, params, backend, progress, frozen, tg, motion)
     try:
@@ -171,9 +171,16 @@ def untangle_and_smooth(
         after = _stats_as_given(out, fs, center, scale, tg) if changed.any() else before
         if not (after == before or after.better_than(before)):  # judged in the caller's units
             out, after = p.copy(), before
-            status = "failed" if before.n_inverted > run.n_frozen else "valid"
-            message += "; the result was not better than the input in its own coordinates: "
-            message += "input returned"
+            status = "failed" if before.n_inverted else "valid"
+            note = "the result was not better than the input in its own coordinates: input returned"
+            if status == "failed":
+                message = _failed(f"{note} with {before.n_inverted} inverted faces", run, message)
+            else:
+                message += f"; {note}"
+        if status != "failed" and after.n_inverted:  # never claim more than the result
+            message = _failed(f"{after.n_inverted} faces are inverted in the caller's "
+                              "coordinates", run, message)
+            status = "failed"
     return EEGTResult(
         out,
         status,
@@ -189,6 +196,17 @@ def untangle_and_smooth(
         int(frozen.sum()),
         0 if tg is None else tg.n_fallback,
     )
+
+
+def _failed(why: str, run: _Run, message: str) -> str:
+    """A 'failed' message that leads with why (and the frozen faces, if any), then what the
+    run did (its own message, without its verdict)."""
+    head = f"failed: {why}"
+    if run.n_frozen:
+        frozen = run.stuck_why()
+        head += f"; {frozen}"
+        message = message.removeprefix(f"failed: {frozen}; ")
+    return f"{head}; the run: {message.removeprefix('failed: ')}"
 
 
 def _normalisation(
@@ -247,10 +265,22 @@ def frozen_note(n_frozen: int) -> str:
             "only: they cannot change")
 
 
+def stuck_note(ids: np.ndarray) -> str:
+    """Why a run that ends with frozen faces is 'failed', naming the faces (0-based, in the
+    caller's face order; the first few)."""
+    ids = np.asarray(ids).ravel()
+    shown = ", ".join(str(int(i)) for i in ids[:5]) + (", ..." if ids.size > 5 else "")
+    what = (f"face {shown} stays inverted" if ids.size == 1
+            else f"{ids.size} faces stay inverted (faces {shown})")
+    return (f"{what}: a corner made of fixed vertices only (boundary, pinned or a slide "
+            "corner) is straight or inverted, so no move can fix it")
+
+
 def frozen_faces(p: np.ndarray, faces, free: np.ndarray) -> np.ndarray:
-    """(F,) bool: faces with a corner made of fixed nodes only whose det is <= 0 (straight or
-    inverted). No move can change such a corner, so these faces count as inverted forever
-    and are left out of the untangling goal."""
+    """(F,) bool: faces with a corner that no move can make positive: made of fixed nodes
+    only with a det <= 0 (straight or inverted), or with two fixed nodes at one point (its
+    det is 0 wherever the third goes). These faces count as inverted forever and are left
+    out of the untangling goal."""
     fs = as_faceset(faces, p.shape[0])
     out = np.zeros(fs.n_faces, dtype=bool)
     x, y = p[:, 0], p[:, 1]
@@ -262,7 +292,13 @@ def frozen_faces(p: np.ndarray, faces, free: np.ndarray) -> np.ndarray:
         det = (x[nxt] - x[nodes]) * (y[prv] - y[nodes]) - (y[nxt] - y[nodes]) * (
             x[prv] - x[nodes]
         )
-        stuck = fixed[:, cols] & ~(free[nxt] | free[prv]) & (det <= 0.0)
+        fix, fix_n, fix_p = fixed[:, cols], ~free[nxt], ~free[prv]
+        stuck = fix & fix_n & fix_p & (det <= 0.0)
+        # two fixed nodes of a corner at one point (a node dragged onto its neighbour)
+        same_n = (x[nxt] == x[nodes]) & (y[nxt] == y[nodes])
+        same_p = (x[prv] == x[nodes]) & (y[prv] == y[nodes])
+        same_np = (x[nxt] == x[prv]) & (y[nxt] == y[prv])
+        stuck |= (fix & fix_n & same_n) | (fix & fix_p & same_p) | (fix_n & fix_p & same_np)
         out[g.ids[cols]] = stuck.any(axis=0)
     return out
 
@@ -275,8 +311,11 @@ class _Run:
     """One run of the pipeline: EEGT phases on an engine, the global stage on the host."""
 
     def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress, frozen,
-                 targets: Targets | None = None, motion: BoundaryMotion | None = None):
+                 targets: Targets | None = None, motion: BoundaryMotion | None = None,
+                 frozen_ids: np.ndarray | None = None):
         self.p, self.fs, self.free, self.params = p, fs, free, params
+        # the frozen faces' ids in the caller's face order (the run's may be renumbered)
+        self.frozen_ids = np.flatnonzero(frozen) if frozen_ids is None else frozen_ids
         self.motion = motion
         slide = None if motion is None else motion.slide
         self.slide = None if slide is None else SlideView(slide)  # the global stage's
@@ -340,7 +379,7 @@ class _Run:
                     f"after {self.n_untangle} untangling iterations"
                     + (f" and {self.n_global} global iterations" if self.n_global else "")
                     + f" (best iterate kept; input had {before.n_inverted - self.n_frozen})"
-                    + frozen
+                    + (f"; besides, {self.stuck_why()}" if self.n_frozen else "")
                 )
         if not self.polished:  # the whole-mesh global stage polishes and lifts as it goes
             if mode == "eegt+local" and (prm.polish_iterations > 0 or prm.lift_rounds > 0):
@@ -348,15 +387,19 @@ class _Run:
             elif mode != "eegt+local" and prm.polish_iterations > 0:
                 current = self.global_stage(polish=prm.polish_iterations)
         self.smooth_eegt(current)
-        status = "untangled" if tangled else "valid"
         verb = f"untangled in {self.n_untangle} iterations, " if tangled else ""
         glob = f"{self.n_global} optimization iterations, " if self.n_global else ""
         b = self.best
-        return status, (
-            f"{verb}{glob}smoothed in {self.n_smooth} iterations: "
-            f"q_min {before.q_min:.4f} -> {b.q_min:.4f}, q_avg {before.q_avg:.4f} -> {b.q_avg:.4f}"
-            + frozen
-        )
+        text = (f"{verb}{glob}smoothed in {self.n_smooth} iterations: "
+                f"q_min {before.q_min:.4f} -> {b.q_min:.4f}, "
+                f"q_avg {before.q_avg:.4f} -> {b.q_avg:.4f}")
+        if b.n_inverted:  # only frozen faces are left: the run cannot claim a valid mesh
+            return "failed", f"failed: {self.stuck_why()}; {text}"
+        return ("untangled" if tangled else "valid"), text + frozen
+
+    def stuck_why(self) -> str:
+        """Why the inverted faces left are there: the frozen ones, by their face ids."""
+        return stuck_note(self.frozen_ids)
 
     def untangle_eegt(self) -> Stats:
         """EEGT until no face is inverted or the iteration cap; 'eegt+global' stops at a stall

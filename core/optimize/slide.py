@@ -42,9 +42,9 @@ class SlideState(State):
         sliding[local] = True
         super().__init__(points, free & ~sliding)
         self.ns = int(self.sidx.size)
-        seg = s.seg_first[s.curve[self.var_slots]] + np.floor(self.tau0[self.var_slots]).astype(
-            np.int64)
-        self._len2 = s.len2[seg]  # the tau preconditioner: d(position) = |d| d(tau)
+        dx, dy = s.direction(self.var_slots, self.tau0[self.var_slots])
+        len2 = dx * dx + dy * dy  # the tau preconditioner: d(position) = |d| d(tau)
+        self._len2 = np.where(len2 > 0.0, len2, 1.0)  # 0: a node stacked inside a stack
         self._views: dict[int, SlideProblem] = {}
 
     @property

@@ -50,7 +50,9 @@ def _untangle_state(
     """The state `untangle_global` starts with, and whether the sliding nodes join later.
     While some corner is inverted the sliding nodes stay (the foldover energy would pull
     them to their neighbours: every trial step past one is refused, and the line search
-    stalls); they slide once the mesh is valid, or from the start when nothing else moves."""
+    stalls); they slide once the mesh is valid, or from the start when nothing else moves.
+    The sliding nodes of a corner that the others cannot change (`_held_stuck`) slide from
+    the start: without them the mesh can never become valid."""
     if slide is None or en.i0.size == 0:
         return make_state(P, free, slide), False
     if float(np.min(en.dets(P[:, 0], P[:, 1]))) > 0.0:
@@ -60,7 +62,39 @@ def _untangle_state(
     rest[local] = False
     if not rest.any():
         return make_state(P, free, slide), False
+    need = _held_stuck(P, free, rest, en)
+    if need.any():
+        return make_state(P, rest | need, slide), True
     return State(P, rest), True
+
+
+def _held_stuck(P: np.ndarray, free: np.ndarray, rest: np.ndarray, en: FoldoverEnergy
+                ) -> np.ndarray:
+    """(N,) bool: the sliding nodes (free, not in `rest`) of validity corners that no node of
+    `rest` can make positive: two of the corner's nodes outside `rest` at one point (its det
+    is 0 wherever the third goes), or all three outside `rest` and a det <= 0. A node dragged
+    onto its neighbour on the boundary makes such a corner."""
+    out = np.zeros(P.shape[0], dtype=bool)
+    v0, v1, v2 = en.v0, en.v1, en.v2
+    held = ~rest
+    h0, h1, h2 = held[v0], held[v1], held[v2]
+    maybe = (h0 & (h1 | h2)) | (h1 & h2)
+    if not maybe.any():
+        return out
+    v0, v1, v2 = v0[maybe], v1[maybe], v2[maybe]
+    h0, h1, h2 = h0[maybe], h1[maybe], h2[maybe]
+    x, y = P[:, 0], P[:, 1]
+    same01 = (x[v0] == x[v1]) & (y[v0] == y[v1])
+    same02 = (x[v0] == x[v2]) & (y[v0] == y[v2])
+    same12 = (x[v1] == x[v2]) & (y[v1] == y[v2])
+    det = (x[v1] - x[v0]) * (y[v2] - y[v0]) - (y[v1] - y[v0]) * (x[v2] - x[v0])
+    stuck = (h0 & h1 & same01) | (h0 & h2 & same02) | (h1 & h2 & same12) | \
+        (h0 & h1 & h2 & (det <= 0.0))
+    if not stuck.any():
+        return out
+    for v in (v0, v1, v2):
+        out[v[stuck]] = True
+    return out & free & ~rest
 
 
 def untangle_global(

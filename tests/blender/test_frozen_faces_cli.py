@@ -1,5 +1,6 @@
-"""A face with a straight corner made of fixed (boundary) vertices only is no failure: the
-command line exits 0, writes the untangled mesh and says how many such faces there are."""
+"""A face with a straight corner made of fixed (boundary) vertices only stays inverted, so
+the run is a failure: the command line exits 3, still writes the untangled and smoothed
+mesh (the default --write-on-fail) and names the face and why."""
 
 from __future__ import annotations
 
@@ -26,15 +27,16 @@ def _obj_with_straight_boundary_corner(path, tangle: bool) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def test_cli_frozen_straight_corner_exits_0_and_reports_the_count(ext, bpy, tmp_path):
+def test_cli_frozen_straight_corner_exits_3_and_names_the_face(ext, bpy, tmp_path):
     src, out, rep = tmp_path / "frozen.obj", tmp_path / "out.obj", tmp_path / "r.json"
     _obj_with_straight_boundary_corner(src, tangle=True)
     code = ext.operators.cli.execute([str(src), "-o", str(out), "--report", str(rep),
                                       "--quiet"])
-    assert code == 0
+    assert code == 3
     (o,) = json.loads(rep.read_text())["objects"]
-    assert o["status"] == "untangled" and o["written"] is True
+    assert o["status"] == "failed" and o["written"] is True
     assert o["before"]["n_inverted"] > 1 and o["after"]["n_inverted"] == 1
+    assert "stays inverted: a corner made of fixed vertices only" in o["message"]
     assert any("1 faces have a straight or inverted corner made of fixed vertices only" in n
                for n in o["notes"])
     xy = np.array([[float(t) for t in ln.split()[1:3]] for ln in out.read_text().splitlines()

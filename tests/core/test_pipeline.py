@@ -232,3 +232,48 @@ def test_faceset_by_arity_rows_are_the_faces_in_order():
     assert sorted(by) == [3, 4, 5]
     assert by[3].tolist() == [[1, 2, 4], [2, 5, 4]] and by[4].tolist() == [[0, 1, 4, 3]]
     assert by[5].tolist() == [[3, 4, 5, 7, 6]] and all(a.flags.c_contiguous for a in by.values())
+
+
+# ---- a status never claims more than the result ------------------------------------------
+
+
+def _grid(n: int = 4) -> tuple[np.ndarray, list]:
+    """n x n unit quads, nodes row by row."""
+    m = n + 1
+    xs, ys = np.meshgrid(np.arange(m, dtype=float), np.arange(m, dtype=float))
+    return np.column_stack([xs.ravel(), ys.ravel()]), [
+        [m * j + i, m * j + i + 1, m * j + i + m + 1, m * j + i + m]
+        for j in range(n) for i in range(n)]
+
+
+def test_two_pinned_nodes_at_one_point_fail_at_once_naming_both_faces():
+    """Pinned interior nodes 6 and 7 of a 4 x 4 grid at one point: their edge has length 0
+    in faces 1 and 5 whatever the free nodes do. Both faces are frozen (two fixed nodes of
+    a corner at one point), the run is 'failed' and says which faces and why, and EEGT does
+    not spend its iteration cap on them."""
+    p, f = _grid()
+    pinned = np.zeros(len(p), dtype=bool)
+    pinned[[6, 7]] = True
+    p[7] = p[6]
+    res = untangle_and_smooth(p, f, fixed=pinned, params=PAPER)
+    assert res.status == "failed" and res.n_frozen == 2
+    assert (res.before.n_inverted, res.after.n_inverted) == (2, 2)
+    assert res.message.startswith("failed: 2 faces stay inverted (faces 1, 5): a corner made "
+                                  "of fixed vertices only"), res.message
+    assert res.untangle_iterations == 0
+
+
+@pytest.mark.parametrize("untangle", ["global", "eegt"])
+def test_status_is_failed_while_a_face_stays_inverted_even_if_the_rest_untangles(untangle):
+    """A boundary node dragged onto the corner (fixed boundary): its face can never open;
+    a folded interior node elsewhere is untangled, the mesh smoothed, and still the status
+    is 'failed', never 'untangled'."""
+    p, f = _grid()
+    p[1] = p[0]
+    p[18] = [2.6, 2.4]  # interior (3, 3) pushed across its neighbours
+    before = mesh_stats(p, f)
+    assert before.n_inverted > 1
+    res = untangle_and_smooth(p, f, params=PAPER.with_(untangle=untangle))
+    assert res.status == "failed" and res.n_frozen == 1
+    assert res.after.n_inverted == 1 == mesh_stats(res.points, f).n_inverted
+    assert "face 0 stays inverted" in res.message and "untangled in" in res.message
