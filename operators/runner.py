@@ -86,6 +86,16 @@ class ObjectResult:
         """True when the mesh ended with no inverted face."""
         return self.status in ("valid", "untangled")
 
+    def claim_no_more_than_result(self) -> None:
+        """Make a 'valid' / 'untangled' status 'failed' when the kept or written positions
+        still have an inverted face (float32 round-off can fold a face the core left valid;
+        a result not better than the input keeps the input's folds)."""
+        left = int((self.after or {}).get("n_inverted", 0))
+        if self.ok and left > 0:
+            where = "written" if self.written else "kept"
+            self.status = "failed"
+            self.message = f"{left} faces stay inverted in the {where} positions"
+
     def line(self) -> str:
         """The one report line of this object."""
         if self.status == "error":
@@ -415,7 +425,7 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
     out.n_free = int(np.count_nonzero(np.asarray(res.moved)))
     out.status = res.status
     out.message = str(res.message)
-    if res.n_frozen:
+    if res.n_frozen and res.status != "failed":  # a failed run's message names them already
         out.notes.append(frozen_note(res.n_frozen))
     out.before = stats_dict(res.before)
     out.after = job.after if job.after is not None else stats_dict(res.after)
@@ -443,6 +453,7 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
         out.written = True
     if not out.written:
         out.after = out.before if job.new_co is not None else out.after
+    out.claim_no_more_than_result()
     return out
 
 

@@ -450,3 +450,23 @@ def test_preferences_and_backend_choice(bpy, ext):
     obj = import_obj(bpy, "quad_hole")
     bpy.ops.mesh.eegt_untangle_smooth(backend="NUMPY")
     assert last(obj).backend == "numpy"
+
+
+@pytest.mark.parametrize("written", [True, False])
+def test_result_with_an_inverted_face_left_is_failed_whatever_the_core_said(ext, written):
+    """The status of an object never claims more than its written (or kept) positions: a
+    face still inverted there makes 'untangled' and 'valid' 'failed', with the count."""
+    from importlib import import_module
+
+    runner = import_module(f"{MODULE}.operators.runner")
+    for status in ("untangled", "valid"):
+        out = runner.ObjectResult(object="Plate", status=status, written=written,
+                                  after={"n_inverted": 2, "q_min": 0.0, "q_avg": 0.7})
+        out.claim_no_more_than_result()
+        where = "written" if written else "kept"
+        assert (out.status, out.ok) == ("failed", False)
+        assert out.message == f"2 faces stay inverted in the {where} positions"
+    clean = runner.ObjectResult(object="Plate", status="untangled", written=written,
+                                after={"n_inverted": 0, "q_min": 0.4, "q_avg": 0.9})
+    clean.claim_no_more_than_result()
+    assert (clean.status, clean.message) == ("untangled", "")
