@@ -217,7 +217,16 @@ class NumpyEngine:
         return dx, dy
 
     def step(self, phase: str) -> Stats:
-        """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back."""
+        """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back.
+
+        A diverging run (a free boundary drifting away) can pass 1e154, where squared edges
+        overflow to inf and the faces there read too low a quality (0 for a triangle), the
+        same as on the OpenCL device; the run keeps its best iterate. That overflow is part
+        of the result (the twins agree bit for bit), so it is not warned about."""
+        with np.errstate(over="ignore"):
+            return self._step(phase)
+
+    def _step(self, phase: str) -> Stats:
         self.iteration += 1
         if self.inv_d_pow is None or (
             self.iteration > 1 and (self.iteration - 1) % self.params.distance_refresh == 0

@@ -15,7 +15,16 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["atan2", "exp", "log", "power", "regular_corner", "sin_cos", "tan_pi_over"]
+__all__ = [
+    "atan2",
+    "exp",
+    "float64_copy",
+    "log",
+    "power",
+    "regular_corner",
+    "sin_cos",
+    "tan_pi_over",
+]
 
 _SQRT_HALF = 0.7071067811865476  # the double nearest sqrt(1/2)
 _LN2_HI = 6.93147180369123816490e-01  # ln 2 split so that k * _LN2_HI is exact for |k| < 2^20
@@ -26,6 +35,16 @@ LOG_COEFFS = tuple(1.0 / (2 * k + 1) for k in range(12))
 # exp(r) = sum_j r^j / j!, |r| <= ln(2) / 2
 EXP_COEFFS = tuple(1.0 / math.factorial(j) for j in range(14))
 _EXP_MAX, _EXP_MIN = 709.782712893384, -745.1332191019412
+
+
+def float64_copy(values) -> np.ndarray:
+    """A float64 copy of array-like input; TypeError for complex numbers, whose imaginary
+    parts NumPy's cast would drop with only a ComplexWarning (ValueError or TypeError, as
+    NumPy raises them, for other non-numbers)."""
+    raw = np.asarray(values)
+    if np.iscomplexobj(raw):
+        raise TypeError(f"got complex numbers ({raw.dtype}), the imaginary parts would be lost")
+    return np.array(raw, dtype=np.float64)
 
 
 def log(x: np.ndarray) -> np.ndarray:

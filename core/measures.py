@@ -22,7 +22,8 @@ theta_e = 180 (n - 2) / n is the regular polygon's interior angle.
 
 Degenerate input never gives NaN: a corner next to a zero-length edge has no angle and
 counts as collapsed (0 deg for the minimum, 180 deg for the maximum, sine 0); an element of
-zero width has the aspect ratio ``ASPECT_MAX`` (1 / machine epsilon).
+zero width has the aspect ratio ``ASPECT_MAX`` (1 / machine epsilon). Every measure reads
+the same at any finite scale: faces are brought to unit size by a power of two (exact).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ import numpy as np
 
 from .faces import FaceSet, as_faceset
 from .fpmath import atan2, regular_corner, tan_pi_over
-from .quality import _check_points, group_quality
+from .quality import _check_points, scaled_group_quality, unit_scaled
 
 __all__ = [
     "ASPECT_MAX",
@@ -70,16 +71,8 @@ def regular_width(n: int) -> float:
 # -- per-group geometry ------------------------------------------------------------------
 
 
-def _unit_scaled(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each face's coordinates times the power of two that brings its largest |coordinate|
-    into [0.5, 1): exact, and the measures are scale-invariant, so squares of edges neither
-    overflow nor lose small edges (and no CPU-dispatched hypot is needed)."""
-    _, e = np.frexp(np.maximum(np.abs(X).max(axis=0), np.abs(Y).max(axis=0)))
-    return np.ldexp(X, -e), np.ldexp(Y, -e)
-
-
 def _edges(X: np.ndarray, Y: np.ndarray):
-    """Edge k = p_{k+1} - p_k of each face (coordinates from ``_unit_scaled``): unit vectors
+    """Edge k = p_{k+1} - p_k of each face (coordinates from ``unit_scaled``): unit vectors
     (0 for a zero-length edge) and lengths, all (n, F)."""
     EX = np.roll(X, -1, axis=0) - X
     EY = np.roll(Y, -1, axis=0) - Y
@@ -93,7 +86,7 @@ def _edges(X: np.ndarray, Y: np.ndarray):
 def _corners(X: np.ndarray, Y: np.ndarray):
     """(sin, cos, defined) of every corner's angle from e1 = p_{k+1} - p_k to
     e2 = p_{k-1} - p_k, (n, F); ``defined`` is False next to a zero-length edge."""
-    UX, UY, _, pos = _edges(*_unit_scaled(X, Y))
+    UX, UY, _, pos = _edges(*unit_scaled(X, Y))
     PX = np.roll(UX, 1, axis=0)  # edge k-1, e2 = -edge k-1
     PY = np.roll(UY, 1, axis=0)
     sin = PX * UY - PY * UX  # det[e1, e2], the same sign as core.quality's corner det
@@ -141,7 +134,7 @@ def aspect_ratio(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     """Longest edge over the smallest width perpendicular to an edge, over the regular
     polygon's ratio; ``ASPECT_MAX`` for a zero-width (collapsed) face."""
     n = X.shape[0]
-    X, Y = _unit_scaled(X, Y)
+    X, Y = unit_scaled(X, Y)
     UX, UY, L, pos = _edges(X, Y)
     width = np.full(X.shape[1], np.inf)
     for k in range(n):  # over the n edges of the arity: each step is vectorized over faces
@@ -198,7 +191,7 @@ class Measure:
 MEASURES: dict[str, Measure] = {m.name: m for m in (
     Measure("mean_ratio", "Mean Ratio", "", True,
             "Mean ratio shape quality (1 = regular polygon, 0 = inverted or degenerate)",
-            group_quality, lambda n: 1.0, lambda n: 0.5, lambda n: 0.0),
+            scaled_group_quality, lambda n: 1.0, lambda n: 0.5, lambda n: 0.0),
     Measure("min_angle", "Minimum Angle", "deg", True,
             "Smallest corner angle in degrees (negative = reflex or inverted corner)",
             min_angle, regular_angle, _per_arity(20.0, lambda n: regular_angle(n) / 2),

@@ -4,6 +4,11 @@ For corner k of an n-gon, J_k = [p_{k+1} - p_k, p_{k-1} - p_k] and M_k = J_k W_n
 W_n the same corner of the regular n-gon; q_k = 2 det(M_k) / |M_k|_F^2 and q(E) = mean_k q_k,
 or 0 when any det(J_k) <= 0 (inverted, reflex corner, degenerate). With per-face targets
 (core.targets) W_k is the target's corner instead: quality 1 = similar to the target.
+
+The public functions (`quality`, `mesh_stats`, core.measures) are scale-safe
+(`scaled_group_quality`): a face whose squared edges would overflow or underflow is
+computed again at unit size (a power of two: exact), so every finite scale reads the same.
+The engines call `group_quality` on the run's normalised coordinates (no extra pass).
 """
 
 from __future__ import annotations
@@ -13,10 +18,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from .faces import as_faceset
-from .fpmath import regular_corner
+from .fpmath import float64_copy, regular_corner
 from .targets import prepare_targets
 
-__all__ = ["Stats", "group_quality", "mesh_stats", "quality", "stats_of"]
+__all__ = [
+    "Stats",
+    "group_quality",
+    "mesh_stats",
+    "quality",
+    "scaled_group_quality",
+    "stats_of",
+    "unit_scaled",
+]
 
 _SQRT3 = np.sqrt(3.0)
 
@@ -54,19 +67,28 @@ def group_quality(
 
     `corners`: None (the regular n-gon) or per-corner target factors (cos_a, inv_sin), (n, F)
     arrays (`GroupTargets.corners`): W_k = Q_k U_k with U_k proportional to
-    [[1, cos_a], [0, 1 / inv_sin]]; every arity then takes the general corner formula."""
+    [[1, cos_a], [0, 1 / inv_sin]]; every arity then takes the general corner formula.
+    The engines' path: squared edges overflow beyond about 1e154 (`scaled_group_quality`
+    is the scale-safe one)."""
+    return _mean_ratio(X, Y, corners, False)[0]
+
+
+def _mean_ratio(
+    X: np.ndarray, Y: np.ndarray, corners: tuple[np.ndarray, np.ndarray] | None, sized: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """(mean ratio, each face's sum of squared edges when `sized`, else None)."""
     n = X.shape[0]
     EX = np.roll(X, -1, axis=0) - X  # edge k: p_{k+1} - p_k
     EY = np.roll(Y, -1, axis=0) - Y
     if corners is not None:
-        return _target_quality(EX, EY, *corners)
+        return _target_quality(EX, EY, *corners, sized)
     if n == 3:
         two_area = EX[0] * EY[1] - EY[0] * EX[1]
         ssq = (EX * EX + EY * EY).sum(axis=0)
         ok = (two_area > 0) & (ssq > 0)
         q = np.zeros(X.shape[1])
         np.divide(2.0 * _SQRT3 * two_area, ssq, out=q, where=ok)
-        return q
+        return q, ssq
     # corner k: e1 = E_k, e2 = -E_{k-1}
     PX = np.roll(EX, 1, axis=0)  # E_{k-1}
     PY = np.roll(EY, 1, axis=0)
@@ -84,12 +106,12 @@ def group_quality(
     ok = (det > 0).all(axis=0) & (fro > 0).all(axis=0)
     qk = np.zeros_like(det)
     np.divide(scale * det, fro, out=qk, where=det > 0)
-    return np.where(ok, qk.mean(axis=0), 0.0)
+    return np.where(ok, qk.mean(axis=0), 0.0), e1sq.sum(axis=0) if sized else None
 
 
 def _target_quality(
-    EX: np.ndarray, EY: np.ndarray, cos_a: np.ndarray, inv_sin: np.ndarray
-) -> np.ndarray:
+    EX: np.ndarray, EY: np.ndarray, cos_a: np.ndarray, inv_sin: np.ndarray, sized: bool
+) -> tuple[np.ndarray, np.ndarray | None]:
     """group_quality's n >= 5 corner formula with per-corner constants, for every arity."""
     PX = np.roll(EX, 1, axis=0)  # E_{k-1}
     PY = np.roll(EY, 1, axis=0)
@@ -101,7 +123,44 @@ def _target_quality(
     ok = (det > 0).all(axis=0) & (fro > 0).all(axis=0)
     qk = np.zeros_like(det)
     np.divide((2.0 * inv_sin) * det, fro, out=qk, where=det > 0)
-    return np.where(ok, qk.mean(axis=0), 0.0)
+    return np.where(ok, qk.mean(axis=0), 0.0), e1sq.sum(axis=0) if sized else None
+
+
+def unit_scaled(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, F) corner coordinates, each face times the power of two that brings its largest
+    |coordinate| into [0.5, 1). Exact, and every measure here is scale-invariant, so the
+    values stay; but squared edges can neither overflow (faces beyond about 1e154) nor
+    underflow (below about 1e-154)."""
+    big = np.abs(X[0])
+    for row in (*X[1:], *Y):
+        np.maximum(big, np.abs(row), out=big)
+    _, e = np.frexp(big)
+    if e.size and (int(e.min()) < -1021 or int(e.max()) > 1021):  # 2^-e is no normal float
+        return np.ldexp(X, -e), np.ldexp(Y, -e)
+    s = np.ldexp(1.0, -e)  # X * 2^-e: the same bits as ldexp, several times faster
+    return X * s, Y * s
+
+
+# Sums of squared edges in [SAFE_LO, SAFE_HI]: no square, product or corner term is near
+# overflow or the subnormal range (a margin of 2^400 left for target corner factors)
+SAFE_LO, SAFE_HI = 2.0**-600, 2.0**600
+
+
+def scaled_group_quality(
+    X: np.ndarray, Y: np.ndarray, corners: tuple[np.ndarray, np.ndarray] | None = None
+) -> np.ndarray:
+    """`group_quality`, right at any finite scale: faces whose squared edges leave
+    [SAFE_LO, SAFE_HI] (or overflow) are computed again scaled by `unit_scaled` (exact).
+    Faces in range keep `group_quality`'s bits; any face scaled by 2^k reads the same."""
+    with np.errstate(over="ignore", invalid="ignore"):  # the faces it hits are redone
+        q, size = _mean_ratio(X, Y, corners, True)
+    redo = np.flatnonzero(~((size >= SAFE_LO) & (size <= SAFE_HI)))
+    if redo.size == q.size:  # the whole group (a mesh far from unit size): no gathering
+        return group_quality(*unit_scaled(X, Y), corners)
+    if redo.size:
+        part = None if corners is None else (corners[0][:, redo], corners[1][:, redo])
+        q[redo] = group_quality(*unit_scaled(X[:, redo], Y[:, redo]), part)
+    return q
 
 
 def stats_of(qs: list[np.ndarray]) -> Stats:
@@ -115,9 +174,9 @@ def stats_of(qs: list[np.ndarray]) -> Stats:
 
 def _check_points(points, dim: int = 2) -> np.ndarray:
     """A float64 (N, dim) copy of the points; ValueError naming the problem (non-numbers,
-    wrong shape, the first non-finite node)."""
+    complex numbers, wrong shape, the first non-finite node)."""
     try:  # always a copy: callers' arrays stay untouched
-        p = np.array(points, dtype=np.float64)
+        p = float64_copy(points)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"points must be an (N, {dim}) array of numbers ({exc})") from None
     if p.ndim != 2 or p.shape[1] != dim:
@@ -134,7 +193,8 @@ def quality(points, faces, targets=None, measure: str = "mean_ratio") -> np.ndar
 
     `targets`: None (against the regular polygon), or an (n_corners, 2) array of per-corner
     target points in the faces' corner order (or a prepared core.targets.Targets): the mean
-    ratio against each face's target shape (1 = similar to it); the mean ratio only."""
+    ratio against each face's target shape (1 = similar to it); the mean ratio only.
+    Every measure is scale-safe: a mesh times 2^k reads the same bits at any finite scale."""
     if measure != "mean_ratio":
         if targets is not None:
             raise ValueError(f"targets apply to the mean ratio only, not to {measure!r}")
@@ -147,7 +207,7 @@ def quality(points, faces, targets=None, measure: str = "mean_ratio") -> np.ndar
     out = np.empty(fs.n_faces)
     for i, g in enumerate(fs.groups):
         corners = None if tg is None else tg.groups[i].corners
-        out[g.ids] = group_quality(p[g.nodes, 0], p[g.nodes, 1], corners)
+        out[g.ids] = scaled_group_quality(p[g.nodes, 0], p[g.nodes, 1], corners)
     return out
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .faces import FaceSet, as_faceset
+from .fpmath import float64_copy
 from .plane import PlaneFrame
 
 __all__ = ["reference_targets", "reference_to_2d"]
@@ -28,14 +29,32 @@ def _signed_area(p: np.ndarray, fs: FaceSet) -> float:
     return 0.5 * total
 
 
+def _unit_scaled(r: np.ndarray) -> np.ndarray:
+    """r times the power of two that brings its largest |coordinate| into [0.5, 1) (exact;
+    unchanged when all are 0)."""
+    _, e = np.frexp(np.max(np.abs(r)))
+    return np.ldexp(r, -e)
+
+
+def _unit_centred(r: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """The used nodes (the others at 0) centred on their mean and scaled by a power of two
+    to a largest |coordinate| in [0.5, 1): scaled first, so that the mean cannot overflow (a
+    reference near 1e308), and again once centred, so that a small mesh far from the origin
+    keeps its area clear of underflow. The sign of the total area is then right at any
+    finite scale."""
+    s = _unit_scaled(np.where(used[:, None], r, 0.0))
+    s = s - s[used].mean(axis=0)
+    return _unit_scaled(np.where(used[:, None], s, 0.0))
+
+
 def _checked(reference_points, n_nodes: int, width: int) -> np.ndarray:
     if reference_points is None:
         raise ValueError("target 'reference' needs a reference mesh (reference_points: the "
                          "same mesh's vertices in their reference positions)")
     try:
-        r = np.array(reference_points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError("reference_points must be an array of numbers") from None
+        r = float64_copy(reference_points)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"reference_points must be an array of numbers ({exc})") from None
     if r.ndim != 2 or r.shape[1] != width:
         raise ValueError(f"reference_points must be an (N, {width}) array, got shape {r.shape}")
     if r.shape[0] != n_nodes:
@@ -53,9 +72,7 @@ def reference_targets(reference_points, faces, n_nodes: int) -> np.ndarray:
     if not np.isfinite(r[used]).all():
         bad = int(np.count_nonzero(~np.isfinite(r[used]).all(axis=1)))
         raise ValueError(f"reference mesh has {bad} vertices with NaN or infinite coordinates")
-    span = float(np.max(np.ptp(r[used], axis=0)))
-    scale = 1.0 / span if span > 0.0 else 1.0  # the sign test free of overflow and underflow
-    area = _signed_area((r - r[used].mean(axis=0)) * scale, fs)
+    area = _signed_area(_unit_centred(r, used), fs)
     if area < 0.0:
         raise ValueError("reference mesh is clockwise (its total signed area is negative): "
                          "it must have the faces' orientation")
@@ -74,8 +91,12 @@ def reference_to_2d(reference3d, faces, n_nodes: int, tol: float = 1e-5) -> np.n
     if not np.isfinite(r[used]).all():
         bad = int(np.count_nonzero(~np.isfinite(r[used]).all(axis=1)))
         raise ValueError(f"reference mesh has {bad} vertices with NaN or infinite coordinates")
+    # fitted at a largest |coordinate| in [0.5, 1) (a power of two: the same plane and bits,
+    # but its sums and squares can neither overflow nor underflow), then scaled back
+    _, e = np.frexp(np.max(np.abs(r[used])))
+    unit = np.ldexp(np.where(used[:, None], r, 0.0), -e)
     try:
-        frame = PlaneFrame.fit(np.where(used[:, None], r, 0.0), fs, tol=tol)
+        frame = PlaneFrame.fit(unit, fs, tol=tol)
     except ValueError as exc:
         raise ValueError(f"reference {str(exc).splitlines()[0]}") from None
-    return frame.to_2d(r)
+    return np.ldexp(frame.to_2d(unit), e)

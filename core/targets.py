@@ -119,7 +119,7 @@ def target_fallback_note(n_fallback: int) -> str:
 
 def _check_array(targets, n_corners: int) -> np.ndarray:
     try:
-        t = np.array(targets, dtype=np.float64)
+        t = fpmath.float64_copy(targets)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"targets must be an ({n_corners}, 2) array of numbers ({exc})") from None
     if t.shape != (n_corners, 2):

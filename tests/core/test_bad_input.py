@@ -44,6 +44,47 @@ def test_nan_or_inf_coordinates_raise_clear_error(bad):
     assert np.array_equal(p, keep, equal_nan=True)
 
 
+
+def _complex_calls():
+    """(name, call with one complex array at the core's input) for every entry point."""
+    from core import EEGTParams, PlaneFrame, mesh_stats, quality, summaries
+    from core.reference_shapes import reference_targets, reference_to_2d
+
+    p = square_pts()
+    z = p + 0.5j  # every imaginary part nonzero: a cast would silently drop them
+    z3 = np.column_stack([z, np.zeros(5)])
+    ref = EEGTParams(target="reference")
+    n_corners = 12
+    return {
+        "untangle_and_smooth points": lambda: untangle_and_smooth(z, FAN),
+        "untangle_and_smooth_3d points": lambda: untangle_and_smooth_3d(z3, FAN),
+        "quality points": lambda: quality(z, FAN),
+        "quality points (a list)": lambda: quality(z.tolist(), FAN),
+        "mesh_stats points": lambda: mesh_stats(z.astype(np.complex64), FAN),
+        "summaries points": lambda: summaries(z, FAN),
+        "PlaneFrame.fit points": lambda: PlaneFrame.fit(z3, FAN),
+        "targets": lambda: quality(p, FAN, targets=np.ones((n_corners, 2)) * 1j),
+        "reference_points": lambda: untangle_and_smooth(p, FAN, params=ref,
+                                                        reference_points=z),
+        "reference_targets": lambda: reference_targets(z, FAN, 5),
+        "reference_to_2d": lambda: reference_to_2d(z3, FAN, 5),
+    }
+
+
+@pytest.mark.parametrize("name", list(_complex_calls()))
+def test_complex_coordinates_raise_clear_error(name):
+    """Regression: complex arrays lost their imaginary parts with only a ComplexWarning
+    (a reference mesh's shapes, then, silently wrong). Now a one-line ValueError."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=r"complex numbers .*the imaginary parts would "
+                                             r"be lost") as err:
+            _complex_calls()[name]()
+    assert "\n" not in str(err.value)
+
+
 def test_all_nodes_fixed_raises_clear_error():
     p = square_pts()
     with pytest.raises(ValueError, match="every node is fixed"):

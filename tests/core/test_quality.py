@@ -1,11 +1,14 @@
 """Mean ratio (SPEC section 3): closed forms, inverted/degenerate faces, invariances."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
 
-from core import mesh_stats, quality
+from core import mesh_stats, quality, summaries
+from core.faces import as_faceset
+from core.quality import group_quality
 
 
 def tri_closed_form(p: np.ndarray) -> float:
@@ -97,3 +100,86 @@ def test_mixed_mesh_stats_count_inverted_as_zero():
     q = quality(pts, faces)
     assert s.q_avg == pytest.approx(q.sum() / 3)
     assert q[0] == 1.0 and q[1] == 0.0 and q[2] > 0.5
+
+
+EQUILATERAL = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, math.sqrt(3.0) / 2.0]])
+SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+HEXAGON = np.column_stack([np.cos(np.arange(6) * np.pi / 3), np.sin(np.arange(6) * np.pi / 3)])
+REGULAR = {"equilateral triangle": EQUILATERAL, "square": SQUARE, "hexagon": HEXAGON}
+
+
+@pytest.mark.parametrize("shape", REGULAR)
+def test_mean_ratio_is_the_same_at_every_power_of_two_scale_without_warnings(shape):
+    """Regression: the squared edges overflowed from about 1e154 (NaN and a RuntimeWarning)
+    and underflowed below about 1e-162 (0.0, read as inverted). Scaled by 2^k the corner
+    coordinates are exact, so every k gives the unit-scale value bit for bit."""
+    p = REGULAR[shape]
+    face = [list(range(len(p)))]
+    unit = quality(p, face)[0]
+    assert unit == pytest.approx(1.0, abs=2e-16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = {k: quality(p * 2.0**k, face)[0] for k in range(-1000, 1001)}
+        stats = mesh_stats(p * 2.0**1000, face), mesh_stats(p * 2.0**-1000, face)
+        summary = [summaries(p * 2.0**k, face, ["mean_ratio"])["mean_ratio"].min
+                   for k in (-1000, 1000)]
+    assert {k for k, q in got.items() if q != unit} == set()
+    assert stats[0] == stats[1] == mesh_stats(p, face)
+    assert summary == [unit, unit]
+
+
+
+@pytest.mark.parametrize("k", [1023, -1022, -1060, -1074])
+def test_unit_square_at_the_ends_of_the_float_range_reads_one(k):
+    """Corners 0 and 2^k are exact from the largest double's exponent down to the smallest
+    subnormal (2^-1074): the square reads 1, no warning."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert quality(SQUARE * 2.0**k, [[0, 1, 2, 3]])[0] == 1.0
+
+@pytest.mark.parametrize("scale", [1e300, 1e154, 1e-162, 1e-300])
+@pytest.mark.parametrize("shape", REGULAR)
+def test_mean_ratio_at_decimal_extreme_scales_is_the_unit_value(shape, scale):
+    """At a decimal scale the coordinates round, so the value may move by an ulp; it is
+    exactly the value of the same rounded face brought back to unit size by a power of two,
+    and no longer NaN (1e154, 1e300) or 0 (1e-162, 1e-300)."""
+    p = REGULAR[shape] * scale
+    face = [list(range(len(p)))]
+    back = np.ldexp(p, -np.frexp(np.abs(p).max())[1])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        q = quality(p, face)[0]
+    assert q == quality(back, face)[0]
+    assert q == pytest.approx(1.0, abs=1e-15)
+
+
+def test_scale_safe_mean_ratio_keeps_the_bits_of_ordinary_meshes_and_inverted_faces():
+    """Faces of ordinary size are computed as before (group_quality's bits); tiny, huge,
+    inverted and collapsed faces in the same call each read their own value."""
+    rng = np.random.default_rng(7)
+    pts = rng.normal(size=(600, 2))
+    faces = np.array([rng.choice(600, 4, replace=False) for _ in range(300)])
+    fs = as_faceset(faces, len(pts))
+    g = fs.groups[0]
+    plain = group_quality(pts[g.nodes, 0], pts[g.nodes, 1])
+    assert np.array_equal(quality(pts, faces), plain) and (plain == 0).sum() > 50
+    # two valid faces copied at 2^-700 and 2^700 (where their squares under- and overflow)
+    # and a collapsed face
+    a, b = np.flatnonzero(plain > 0.0)[:2]
+    p = np.vstack([pts, pts[faces[a]] * 2.0**-700, pts[faces[b]] * 2.0**700, np.zeros((4, 2))])
+    extra = np.arange(600, 612).reshape(3, 4)
+    q = quality(p, np.vstack([faces, extra]))
+    assert np.array_equal(q[:300], plain)
+    assert q[300] == plain[a] > 0.1 and q[301] == plain[b] > 0.1 and q[302] == 0.0
+
+
+def test_mean_ratio_against_targets_is_scale_safe():
+    """The target path (per-corner constants) is redone at unit scale the same way."""
+    t = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [0.0, 1.0]])  # a 4 x 1 target
+    face = [[0, 1, 2, 3]]
+    unit = quality(t, face, targets=t)[0]
+    assert unit == pytest.approx(1.0, abs=1e-15)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert [quality(t * 2.0**k, face, targets=t)[0] for k in (-1000, -520, 520, 1000)] \
+            == [unit] * 4

@@ -126,3 +126,32 @@ def test_non_planar_3d_reference_is_refused():
     bent[:, 2] = 0.3 * bent[:, 0] ** 2
     with pytest.raises(ValueError, match="reference mesh is not planar"):
         untangle_and_smooth_3d(v, f, params=REFERENCE, reference_points=bent)
+
+
+def test_reference_near_the_float_limit_is_accepted_with_the_same_targets():
+    """Regression: a reference of about 5e307 was refused as 'zero total area' after an
+    overflow warning (its mean overflowed). The orientation test now works at unit scale
+    (powers of two), so 2^k multiples give the same run bit for bit and 5e307 (rounded
+    coordinates) the same outcome up to round-off; in 3D as well."""
+    import warnings
+
+    v, f = load("quad_hole")
+    p = v[:, :2].copy()
+    r = p + 0.05 * np.sin(3 * p[:, ::-1])
+    base = untangle_and_smooth(p, f, params=REFERENCE, reference_points=r)
+    s = 5e307 / np.abs(r).max()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for k in (-1000, 1019):
+            assert np.array_equal(reference_targets(r * 2.0**k, f, len(r)),
+                                  reference_targets(r, f, len(r)) * 2.0**k)
+        exact = untangle_and_smooth(p, f, params=REFERENCE, reference_points=r * 2.0**1019)
+        near = untangle_and_smooth(p, f, params=REFERENCE, reference_points=r * s)
+        r3 = np.column_stack([r, np.zeros(len(r))]) @ np.array(
+            [[0.6, 0.0, 0.8], [0.0, 1.0, 0.0], [-0.8, 0.0, 0.6]]).T
+        flat = reference_to_2d(r3 * s, f, len(r))
+    assert np.abs(r * s).max() == pytest.approx(5e307)
+    assert np.array_equal(exact.points, base.points) and exact.after == base.after
+    assert near.status == base.status == "untangled" and near.after.n_inverted == 0
+    assert near.after.q_avg == pytest.approx(base.after.q_avg, abs=1e-4)  # round-off only
+    assert np.allclose(quality(flat, f), quality(r, f), rtol=0, atol=1e-12)
