@@ -1,7 +1,7 @@
 """Element quality measures engineers check, for polygons of any arity (docs/measures.md).
 
 Every measure is computed per arity group on (n, F) corner coordinates, like the mean ratio
-of `core.quality` (reused here, SPEC section 3). Notation for corner k of an n-gon with
+of `core.quality` (reused here, docs/method.md 3). Notation for corner k of an n-gon with
 nodes p_0..p_{n-1} counterclockwise: e1 = p_{k+1} - p_k, e2 = p_{k-1} - p_k; its interior
 angle is the counterclockwise turn from e1 to e2, so a corner of a valid convex polygon has
 0 < angle < 180 deg, a reflex corner more than 180 and a corner of an inverted element too.

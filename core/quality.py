@@ -1,4 +1,4 @@
-"""Mean-ratio quality (SPEC section 3), one definition for every arity.
+"""Mean-ratio quality (docs/method.md 3), one definition for every arity.
 
 For corner k of an n-gon, J_k = [p_{k+1} - p_k, p_{k-1} - p_k] and M_k = J_k W_n^{-1}, with
 W_n the same corner of the regular n-gon; q_k = 2 det(M_k) / |M_k|_F^2 and q(E) = mean_k q_k,
@@ -43,7 +43,7 @@ class Stats:
     q_avg: float
 
     def better_than(self, other: Stats) -> bool:
-        """Fewer inverted, then higher q_min, then higher q_avg (SPEC 2.7)."""
+        """Fewer inverted, then higher q_min, then higher q_avg (docs/method.md 2)."""
         return (-self.n_inverted, self.q_min, self.q_avg) > (
             -other.n_inverted,
             other.q_min,

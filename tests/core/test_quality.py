@@ -1,4 +1,4 @@
-"""Mean ratio (SPEC section 3): closed forms, inverted/degenerate faces, invariances."""
+"""Mean ratio (docs/method.md 3): closed forms, inverted/degenerate faces, invariances."""
 
 import math
 import warnings
