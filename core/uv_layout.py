@@ -1,7 +1,8 @@
 """UV maps as planar meshes: weld face corners into UV vertices, find islands and their sides.
 
 A UV map stores one 2D point per face corner (Blender's loop). Corners of one mesh vertex
-whose UVs are equal are one UV vertex; the faces over those UV vertices form the UV mesh,
+whose UVs are within ``UV_CONNECT_LIMIT`` of each other (per axis, as Blender's own island
+tools join them) are one UV vertex; the faces over those UV vertices form the UV mesh,
 whose connected components are the islands. Seams and mesh borders are that mesh's
 boundary. An island is either counterclockwise (its faces keep the 3D faces' orientation)
 or mirrored (clockwise, as mirrored UVs of symmetric models are): its total signed area
@@ -16,7 +17,12 @@ import numpy as np
 
 from .faces import FaceSet, faces_from_csr
 
+# Blender's STD_UV_CONNECT_LIMIT: two corners of one vertex whose UVs differ by less than
+# this in u and in v are one UV vertex for its island tools (Select Linked, UV islands).
+UV_CONNECT_LIMIT = 1e-4
+
 __all__ = [
+    "UV_CONNECT_LIMIT",
     "UVLayout",
     "components",
     "corner_loops",
@@ -117,9 +123,39 @@ def next_corner(fs: FaceSet) -> np.ndarray:
     return nxt
 
 
-def weld_uv(loop_start, loop_total, corner_verts, uv) -> UVLayout:
-    """Weld a UV map: loops of one mesh vertex with equal UVs (float32, -0 = +0) become one
-    UV vertex. ValueError (one line) for NaN/infinite UVs or mismatched arrays."""
+def _near_pairs(vert: np.ndarray, uv: np.ndarray, limit: np.float32) -> tuple[np.ndarray,
+                                                                              np.ndarray]:
+    """Pairs (a, b) of rows of one vertex whose float32 UVs differ by less than ``limit`` in
+    u and in v (Blender's test, in float32). Rows sorted by (vertex, u): each row is compared
+    with the next, the one after, ... while u stays within the limit (a few passes: one per
+    row of the longest run of one vertex's UVs within the limit in u)."""
+    n = vert.size
+    order = np.lexsort((uv[:, 0], vert))
+    vs, us, ws = vert[order], uv[order, 0], uv[order, 1]
+    row = np.arange(n - 1)
+    a, b = [], []
+    d = 1
+    while row.size:
+        row = row[row + d < n]
+        nxt = row + d
+        close = (vs[nxt] == vs[row]) & (us[nxt] - us[row] < limit)
+        row, nxt = row[close], nxt[close]  # u sorted: a row that fails stays failed
+        hit = np.abs(ws[nxt] - ws[row]) < limit
+        a.append(order[row[hit]])
+        b.append(order[nxt[hit]])
+        d += 1
+    empty = np.zeros(0, dtype=np.int64)
+    return (np.concatenate(a) if a else empty), (np.concatenate(b) if b else empty)
+
+
+def weld_uv(loop_start, loop_total, corner_verts, uv,
+            limit: float = UV_CONNECT_LIMIT) -> UVLayout:
+    """Weld a UV map: loops of one mesh vertex whose float32 UVs differ by less than
+    ``limit`` in u and in v (chained: a ~ b and b ~ c weld all three) become one UV vertex,
+    as Blender's island tools see them; ``limit`` 0 welds equal values only (-0 = +0). A UV
+    vertex sits at the value most of its loops hold (ties: the first by vertex, then float32
+    bits); the result does not depend on the order of faces or loops. ValueError (one line)
+    for NaN/infinite UVs or mismatched arrays."""
     loop_start = np.asarray(loop_start, dtype=np.int64)
     loop_total = np.asarray(loop_total, dtype=np.int64)
     corner_verts = np.asarray(corner_verts, dtype=np.int64)
@@ -142,9 +178,21 @@ def weld_uv(loop_start, loop_total, corner_verts, uv) -> UVLayout:
     keys = np.stack([corner_verts[order], bits[order, 0], bits[order, 1]], axis=1)
     new = np.ones(order.size, dtype=bool)
     new[1:] = np.any(keys[1:] != keys[:-1], axis=1)
-    loop_node = np.empty(order.size, dtype=np.int64)
-    loop_node[order] = np.cumsum(new) - 1
-    first = order[new]
+    loop_exact = np.empty(order.size, dtype=np.int64)
+    loop_exact[order] = np.cumsum(new) - 1
+    first = order[new]  # one loop per distinct (vertex, value), in (vertex, bits) order
+    a, b = _near_pairs(corner_verts[first], clean[first], np.float32(limit)) \
+        if limit > 0 else (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if a.size:  # near values of one vertex: one UV vertex at its most used value
+        group = components(first.size, a, b)
+        count = np.bincount(loop_exact, minlength=first.size)
+        pick = np.lexsort((np.arange(first.size), -count, group))
+        lead = np.ones(pick.size, dtype=bool)
+        lead[1:] = group[pick[1:]] != group[pick[:-1]]
+        first = first[pick[lead]]
+        loop_node = group[loop_exact]
+    else:
+        loop_node = loop_exact
     points = clean[first].astype(np.float64)
     faces = faces_from_csr(loop_start, loop_total, loop_node)
     n = points.shape[0]

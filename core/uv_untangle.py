@@ -7,7 +7,10 @@ where they are. A mirrored island is reflected (u -> -u, exact) before the runs 
 them, so the core always sees counterclockwise faces. With scope "tangles" only the tangled
 faces and a few rings around them run first, grown until they untangle (see
 ``untangle_uv``). Results are rounded to the UV map's storage type and an island is only
-changed when its rounded result is better than its input (``accept``).
+changed when its rounded result is better than its input (``accept``). A run never claims
+more than its result: an island whose selected faces are still inverted at the end is
+``failed``, with the reason (``UVResult.message``: how many faces stay inverted, and whether
+every corner of them is fixed, so that no move could change them).
 
 Measures of a selection (``measure``): flipped faces (zero area or against their island's
 orientation), inverted faces (flipped, or a reflex or crossed corner: what the core removes),
@@ -29,7 +32,7 @@ from .faces import FaceSet
 from .params import EEGTParams
 from .pipeline import untangle_and_smooth
 from .quality import Stats, quality, stats_of
-from .topology import free_nodes
+from .topology import boundary_nodes, free_nodes
 from .uv_layout import UVLayout, island_faces, signed_face_areas
 from .uv_overlap import overlapping_faces
 
@@ -132,6 +135,8 @@ class IslandRun:
     n_frozen: int = 0
     n_target_fallback: int = 0
     seconds: float = 0.0
+    inverted_left: int = 0  # selected faces still inverted at the end
+    stuck: int = 0  # ... of them with every corner fixed (pinned, border): no move helps
 
 
 @dataclass
@@ -145,6 +150,7 @@ class UVResult:
     seconds: float = 0.0
     backend: str = ""
     notes: list[str] = field(default_factory=list)
+    message: str = ""  # why it failed: the faces that stay inverted and why
 
     @property
     def n_free(self) -> int:
@@ -312,9 +318,61 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         reasons = {r.message for r in runs if r.message}
         raise ValueError("nothing to move: " + "; ".join(sorted(reasons))
                          if reasons else "nothing to move")
+    result.message = _settle(layout, out, selected, side, keep, fixed, targets, runs)
     result.status = _overall(runs)
     result.notes = _notes(runs)
     return result
+
+
+def _settle(layout: UVLayout, points: np.ndarray, selected: np.ndarray, side: np.ndarray,
+            keep: np.ndarray, pins: np.ndarray | None, targets: np.ndarray | None,
+            runs: list[IslandRun]) -> str:
+    """Mark ``failed`` every island whose selected faces (with area) are still inverted at
+    the final ``points``, measured as ``measure`` does; the reason, "" when none is left.
+    Why a face stays: every corner of it is fixed (``keep``: pins and the selection's
+    border, or an island border), so no move changes it; or a corner of it inside the island
+    is used by two faces only, which cannot both be convex there (their angles at it add up
+    to a full turn); else the engine could not untangle it."""
+    ids = np.flatnonzero(selected & (side[layout.island] != 0))
+    sub, nodes, rows = island_faces(layout.faces, ids)
+    q = quality(layout.oriented_points(side, points)[nodes], sub,
+                targets=None if targets is None else targets[rows])
+    bad = q == 0.0  # what stats_of counts as inverted
+    if not bad.any():
+        return ""
+    border = boundary_nodes(layout.n_nodes, layout.faces)
+    corner = nodes[sub.indices]  # global UV vertex of every corner of ``sub``
+    face_of = np.repeat(np.arange(sub.n_faces), sub.counts)
+    loose = np.zeros(sub.n_faces, dtype=bool)  # a corner that could move
+    np.logical_or.at(loose, face_of, ~(keep | border)[corner])
+    pair = np.zeros(sub.n_faces, dtype=bool)  # an inner corner of two faces only
+    np.logical_or.at(pair, face_of, (np.bincount(layout.faces.indices,
+                                                 minlength=layout.n_nodes) == 2)[corner]
+                     & ~border[corner])
+    stuck = bad & ~loose
+    pair &= bad & ~stuck
+    isl = layout.island[ids]
+    left = np.bincount(isl[bad], minlength=layout.n_islands)
+    held = np.bincount(isl[stuck], minlength=layout.n_islands)
+    for r in runs:
+        r.inverted_left, r.stuck = int(left[r.island]), int(held[r.island])
+        if r.inverted_left and r.status != "error":
+            r.status = "failed"
+    pinned = np.zeros(layout.n_nodes, dtype=bool) if pins is None else np.asarray(pins, bool)
+    at = corner[np.repeat(stuck, sub.counts)]
+    kinds = [name for name, on in (
+        ("pinned", pinned[at].any()), ("on an island border", border[at].any()),
+        ("on the border of the selection", (keep & ~pinned & ~border)[at].any())) if on]
+    fixed = ", ".join(kinds[:-1]) + " or " + kinds[-1] if len(kinds) > 1 else "".join(kinds)
+    n_stuck, n_pair = int(stuck.sum()), int(pair.sum())
+    parts = [(n_stuck, f"every corner of them is {fixed}", f"with every corner {fixed}"),
+             (n_pair, "a corner of them is used by two faces only (both cannot be convex)",
+              "with a corner used by two faces only (both cannot be convex)"),
+             (int(bad.sum()) - n_stuck - n_pair, "the engine could not untangle them",
+              "the engine could not untangle")]
+    parts = [p for p in parts if p[0]]
+    why = parts[0][1] if len(parts) == 1 else ", ".join(f"{k} {short}" for k, _, short in parts)
+    return f"{int(bad.sum())} faces stay inverted: {why}"
 
 
 class _Cancel(Exception):
@@ -455,12 +513,11 @@ def _line(exc: Exception) -> str:
 
 
 def _overall(runs: list[IslandRun]) -> str:
-    """failed when an island that could move ends with a movable flipped face or errs;
-    untangled when some island had flipped faces; else valid."""
-    active = [r for r in runs if r.n_free or r.status == "error"]
-    if any(r.status in ("failed", "error") for r in active):
+    """failed when an island ends with an inverted selected face (``_settle``) or errs;
+    untangled when some island had inverted faces; else valid."""
+    if any(r.status in ("failed", "error") for r in runs):
         return "failed"
-    if any(r.before is not None and r.before.n_inverted > r.n_frozen for r in active):
+    if any(r.before is not None and r.before.n_inverted > 0 for r in runs):
         return "untangled"
     return "valid"
 
@@ -474,13 +531,10 @@ def _notes(runs: list[IslandRun]) -> list[str]:
     for r in runs:
         if r.status == "error":
             notes.append(f"island {r.island}: {r.message}")
-        elif r.status == "failed":
-            n = (r.after or r.before).n_inverted if (r.after or r.before) else 0
-            notes.append(f"island {r.island}: {n} flipped faces remain")
-    frozen = sum(r.n_frozen for r in runs)
-    if frozen:
-        notes.append(f"{frozen} faces are flipped with every corner fixed (border or pins): "
-                     "they cannot change")
+    failed = [r for r in runs if r.status == "failed"]
+    if len(failed) > 1:
+        notes.append("inverted faces left in islands " + ", ".join(
+            f"{r.island} ({r.inverted_left})" for r in failed))
     mirrored = sum(1 for r in runs if r.mirrored)
     if mirrored:
         notes.append(f"{mirrored} mirrored island(s)")

@@ -82,7 +82,8 @@ class UVObjectResult:
                 f"{'as in 3D' if self.targets == '3D' else 'regular'}), "
                 f"{self.islands_run}/{self.islands} islands, {self.seconds:.2f} s, {self.backend}")
         if self.status == "failed":
-            text += "; FAILED to untangle every island"
+            text += f"; FAILED: {self.message}" if self.message else \
+                "; FAILED to untangle every island"
         if not self.written:
             text += "; nothing written"
         if self.notes:
@@ -230,6 +231,8 @@ def apply(obj: bpy.types.Object, job: UVJob, *, write: bool = True) -> UVObjectR
     out.n_uv_vertices = lay.n_nodes
     out.n_faces = int(np.count_nonzero(job.selected))
     out.status = res.status
+    if res.status == "failed":
+        out.message = res.message
     out.seconds, out.backend = res.seconds, res.backend
     out.islands_run = sum(1 for r in res.islands if r.n_free)
     out.mirrored_islands = sum(1 for r in res.islands if r.mirrored)
@@ -252,6 +255,11 @@ def apply(obj: bpy.types.Object, job: UVJob, *, write: bool = True) -> UVObjectR
         out.written = True
     if not out.written:
         out.after = out.before
+    left = int(out.after.get("inverted", 0))
+    if left and out.status in ("valid", "untangled"):  # never claim more than the map holds
+        out.status = "failed"
+        out.message = f"{left} faces stay inverted" + ("" if out.written else
+                                                       " (nothing written)")
     if (job.after or job.before).overlapping and res.status in ("valid", "untangled"):
         out.notes.append("overlaps left inside islands come from their fixed borders (a "
                          "border that crosses itself)")

@@ -9,7 +9,17 @@ import numpy as np
 import pytest
 
 from .conftest import positions
-from .uvtools import tangled, uv_values
+from .uvtools import (
+    inverted_uv_faces,
+    jitter_uv_vertices,
+    loop_faces,
+    one_ulp_apart,
+    primitive,
+    tangled,
+    uv_border_loops,
+    uv_values,
+    uv_vertex_groups,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -126,3 +136,76 @@ def test_uv_progress_lines_name_the_island(bpy, ext, blend, capfd):
     assert re.search(r"EEGT Sphere: island 1/1 untangle iteration 0: inverted \d+", out)
     assert "EEGT Sphere UV 'UVMap': flipped " in out
     assert "EEGT Plain" not in out
+
+
+def _save_uv(bpy, obj, uv, path):
+    obj.data.attributes[obj.data.uv_layers.active.name].data.foreach_set(
+        "vector", np.ascontiguousarray(uv, np.float32).ravel())
+    obj.data.update()
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+
+
+def test_uv_grid_with_loops_a_float32_step_apart_exit_0_none_inverted(bpy, ext, tmp_path):
+    """Blender's Grid with the UVs of one loop of every UV vertex one float32 step off (as
+    4.2-4.5 store part of them), interior jittered: exit 0 means no inverted face left."""
+    obj = primitive(bpy, "grid")
+    uv0 = uv_values(obj)
+    groups = uv_vertex_groups(obj, uv0)
+    border = uv_border_loops(obj, groups)
+    free = np.ones(groups.max() + 1, bool)
+    free[groups[border]] = False
+    uv1 = one_ulp_apart(jitter_uv_vertices(obj, uv0, groups, free, 0.6, seed=3), groups, 4)
+    path, out, rep = tmp_path / "grid.blend", tmp_path / "out.blend", tmp_path / "r.json"
+    _save_uv(bpy, obj, uv1, path)
+    assert cli(ext).execute([str(path), "--uv", "-o", str(out), "--report", str(rep),
+                             "--quiet"]) == 0
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert (o["status"], o["n_uv_vertices"], o["n_free"]) == ("untangled", 121, 81)
+    assert (o["before"]["inverted"], o["after"]["inverted"]) == (11, 0)
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    uv2 = uv_values(bpy.data.objects["Grid"])
+    assert not inverted_uv_faces(bpy.data.objects["Grid"], uv2, groups).any()
+    assert np.array_equal(uv2[border], uv1[border])
+
+
+def test_uv_pins_holding_an_inverted_face_exit_3_failed(bpy, ext, tmp_path, capfd):
+    """Every corner of one inverted face pinned: exit 3, "failed" and why, the rest
+    untangled and written."""
+    obj = tangled(bpy, "sphere", "jitter")
+    me = obj.data
+    uv0 = uv_values(obj)
+    groups = uv_vertex_groups(obj, uv0)
+    lf = loop_faces(obj)
+    inside = np.ones(len(me.polygons), bool)
+    np.logical_and.at(inside, lf, ~uv_border_loops(obj, groups))
+    bad = inverted_uv_faces(obj, uv0, groups)
+    face = int(np.flatnonzero(bad & inside)[0])
+    pins = np.isin(groups, groups[lf == face])
+    layer = me.uv_layers.active
+    if hasattr(layer, "pin_ensure"):
+        layer.pin_ensure()
+    layer.pin.foreach_set("value", pins)
+    path, out, rep = tmp_path / "pinned.blend", tmp_path / "out.blend", tmp_path / "r.json"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    assert cli(ext).execute([str(path), "--uv", "-o", str(out), "--report", str(rep),
+                             "--quiet"]) == 3
+    report = json.loads(rep.read_text())
+    (o,) = report["objects"]
+    assert report["exit_code"] == 3
+    assert o["status"] == "failed" and o["written"]
+    assert o["message"] == "1 faces stay inverted: every corner of them is pinned"
+    assert (o["before"]["inverted"], o["after"]["inverted"]) == (int(bad.sum()), 1)
+    assert "FAILED: 1 faces stay inverted: every corner of them is pinned" in \
+        capfd.readouterr().out
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    obj = bpy.data.objects["Sphere"]
+    uv1 = uv_values(obj)
+    assert np.flatnonzero(inverted_uv_faces(obj, uv1, groups)).tolist() == [face]
+    assert np.array_equal(uv1[pins], uv0[pins])
+    assert code_without_pins(ext, path, tmp_path) == 0
+
+
+def code_without_pins(ext, path, tmp_path) -> int:
+    """The same file with --no-pinned: the face is free again and untangles."""
+    return cli(ext).execute([str(path), "--uv", "--no-pinned", "-o",
+                             str(tmp_path / "free.blend"), "--quiet"])

@@ -7,9 +7,15 @@ import pytest
 
 from .conftest import MODULE, positions, snapshot
 from .uvtools import (
+    PRIMITIVES,
+    inverted_uv_faces,
+    jitter_uv_vertices,
     loop_faces,
+    one_ulp_apart,
+    primitive,
     set_mesh_selection,
     tangled,
+    uv_border_loops,
     uv_select_by_blender,
     uv_values,
     uv_vertex_groups,
@@ -478,3 +484,123 @@ def test_scope_around_tangles_repairs_a_local_fold_and_keeps_a_good_unwrap(bpy, 
     assert mean["TANGLES"][1] >= mean["TANGLES"][0]
     assert mean["TANGLES"][1] >= mean["SELECTION"][1] - 1e-3
     assert bpy.context.scene.eegt_uv_settings.scope == "TANGLES"  # the default
+
+
+def _set_uv(obj, uv: np.ndarray) -> None:
+    obj.data.attributes[obj.data.uv_layers.active.name].data.foreach_set(
+        "vector", np.ascontiguousarray(uv, np.float32).ravel())
+    obj.data.update()
+
+
+# (UV vertices as Blender's island tools see them, those off the UV border, faces no UV
+# layout can make valid) of each primitive: the same in bpy 4.2.23, 4.5.15 and 5.0.1. The
+# monkey's UV map has an inner UV vertex used by two quads only (on its middle line): their
+# angles there add up to a full turn, so one of them always has a straight or reflex corner.
+PRIMITIVE_COUNTS = {"grid": (121, 81, 0), "plane": (4, 0, 0), "cube": (14, 0, 0),
+                    "cylinder": (130, 0, 0), "sphere": (559, 403, 0),
+                    "ico_sphere": (63, 19, 0), "torus": (637, 517, 0),
+                    "monkey": (555, 415, 1)}
+
+
+@pytest.mark.parametrize("kind", sorted(PRIMITIVES))
+def test_blender_primitives_with_uvs_a_float32_step_apart_untangle(bpy, ext, kind):
+    """Every primitive of the Add menu with a UV map, its interior UVs jittered, one loop of
+    each UV vertex one float32 step off (as Blender 4.2-4.5 store part of the Grid's UVs):
+    the run leaves no inverted face that a layout can fix and says "untangled" (the monkey:
+    "failed", naming its one impossible face); UV vertices on the UV border keep every
+    loop's bits, each moved UV vertex holds one value."""
+    obj = primitive(bpy, kind)
+    uv0 = uv_values(obj)
+    groups = uv_vertex_groups(obj, uv0)  # Blender's rule, computed here
+    border = uv_border_loops(obj, groups)
+    free = np.ones(groups.max() + 1, bool)
+    free[groups[border]] = False
+    n_uv, n_free, n_impossible = PRIMITIVE_COUNTS[kind]
+    assert (groups.max() + 1, int(free.sum())) == (n_uv, n_free)
+    uv1 = one_ulp_apart(jitter_uv_vertices(obj, uv0, groups, free, 0.6, seed=3), groups, 4)
+    assert np.array_equal(uv_vertex_groups(obj, uv1), groups)
+    _set_uv(obj, uv1)
+    n_bad = int(inverted_uv_faces(obj, uv1, groups).sum())  # 2 (ico sphere) to 44 (monkey)
+    assert (n_bad > 0) == (n_free > 0)
+    edit_all(bpy)
+    done = bpy.ops.uv.eegt_untangle_smooth()
+    bpy.ops.object.mode_set(mode="OBJECT")
+    (res,) = ops_uv(ext).LAST_RESULTS
+    uv2 = uv_values(obj)
+    if not n_free:  # nothing off the UV border: refused, nothing written
+        assert done == {"CANCELLED"} and res.status == "error"
+        assert res.message.startswith("nothing to move: every UV vertex is fixed")
+        assert np.array_equal(uv2, uv1)
+        return
+    assert done == {"FINISHED"} and res.n_uv_vertices == n_uv and res.n_free == n_free
+    assert res.before["inverted"] == n_bad and res.after["inverted"] == n_impossible
+    assert int(inverted_uv_faces(obj, uv2, groups).sum()) == n_impossible
+    if n_impossible:
+        assert res.status == "failed" and not res.ok
+        assert res.message == ("1 faces stay inverted: a corner of them is used by two faces "
+                               "only (both cannot be convex)")
+    else:
+        assert res.status == "untangled" and res.ok and res.message == ""
+    assert np.array_equal(uv2[border], uv1[border])  # every loop's bits, ulps and all
+    moved = np.any(uv2 != uv1, axis=1)
+    assert np.array_equal(np.unique(groups[moved]), np.unique(groups[moved & ~border]))
+    one = np.zeros((groups.max() + 1, 2), np.float32)
+    one[groups[moved]] = uv2[moved]
+    assert np.array_equal(one[groups[moved]], uv2[moved])  # one value per moved UV vertex
+
+
+def test_blender_grid_as_stored_welds_into_one_island(bpy, ext):
+    """Blender's own Grid (10 x 10 subdivisions, size 2) with its UVs as stored (bpy 4.2 and
+    4.5 keep 0.2 and 0.20000002 along a row and a column), interior UVs jittered: 121 UV
+    vertices in one island, 81 free, every inverted face untangled."""
+    obj = primitive(bpy, "grid")
+    uv0 = uv_values(obj)
+    groups = uv_vertex_groups(obj, uv0)
+    border = uv_border_loops(obj, groups)
+    free = np.ones(groups.max() + 1, bool)
+    free[groups[border]] = False
+    uv1 = jitter_uv_vertices(obj, uv0, groups, free, 0.6, seed=3)
+    _set_uv(obj, uv1)
+    lay = ext.core.uv_layout.weld_uv(*_csr(obj), uv1)
+    assert (lay.n_nodes, lay.n_islands) == (121, 1)
+    assert np.array_equal(lay.loop_node, groups)  # numbered as here: by vertex
+    edit_all(bpy)
+    assert bpy.ops.uv.eegt_untangle_smooth() == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    (res,) = ops_uv(ext).LAST_RESULTS
+    assert (res.n_free, res.before["inverted"], res.after["inverted"]) == (81, 11, 0)
+    assert res.status == "untangled" and "FAILED" not in res.line()
+    assert not inverted_uv_faces(obj, uv_values(obj), groups).any()
+    assert np.array_equal(uv_values(obj)[border], uv1[border])
+
+
+def test_pins_that_hold_an_inverted_face_fail_and_say_why(bpy, ext):
+    """Every corner of one inverted face pinned: the rest untangles, that face cannot; the
+    run says "failed" and why, as a warning, and writes the rest."""
+    obj = tangled(bpy, "sphere", "jitter")
+    me = obj.data
+    uv0 = uv_values(obj)
+    groups = uv_vertex_groups(obj, uv0)
+    border = uv_border_loops(obj, groups)
+    bad = inverted_uv_faces(obj, uv0, groups)
+    lf = loop_faces(obj)
+    inside = np.ones(len(me.polygons), bool)
+    np.logical_and.at(inside, lf, ~border)
+    face = int(np.flatnonzero(bad & inside)[0])  # an inverted face off the border
+    pins = np.isin(groups, groups[lf == face])
+    layer = me.uv_layers.active
+    if hasattr(layer, "pin_ensure"):
+        layer.pin_ensure()
+    layer.pin.foreach_set("value", pins)
+    edit_all(bpy)
+    assert bpy.ops.uv.eegt_untangle_smooth(**REGULAR) == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    (res,) = ops_uv(ext).LAST_RESULTS
+    uv1 = uv_values(obj)
+    assert np.flatnonzero(inverted_uv_faces(obj, uv1, groups)).tolist() == [face]
+    assert res.before["inverted"] == int(bad.sum()) and res.after["inverted"] == 1
+    assert res.status == "failed" and not res.ok and res.written
+    assert res.message == "1 faces stay inverted: every corner of them is pinned"
+    assert "; FAILED: 1 faces stay inverted: every corner of them is pinned" in res.line()
+    assert np.array_equal(uv1[pins], uv0[pins])
+    assert obj.eegt_last_uv_run.status == "failed"

@@ -28,19 +28,99 @@ def test_weld_seam_splits_vertices_into_two_uv_vertices():
     assert np.array_equal(np.sort(g.co[seam, 0]), np.full(5, 2.0))
 
 
-def test_weld_equal_values_only_minus_zero_is_zero():
+def ulp_grid(n: int = 11, step: float = 0.1, line: int = 2):
+    """A grid whose UVs are the vertex xy times ``step`` (float32), stored as Blender 4.2-4.5's
+    Grid primitive stores them: along the column and the row ``line`` (0.2 for 10 x 10
+    subdivisions) the loops of the faces on their far side hold one float32 step more
+    (0.20000002), except where they meet the grid's first row or column. The bumped loops
+    (bool (L, 2)) come with it."""
+    g = grid_uv(n)
+    g.uv = (g.uv * np.float32(step)).astype(np.float32)
+    quads = g.corner_verts.reshape(-1, 4)
+    face_x, face_y = (np.repeat(g.co[quads[:, 0], k], 4) for k in (0, 1))
+    x, y = g.co[g.corner_verts, 0], g.co[g.corner_verts, 1]
+    bump = np.stack([(x == line) & (face_x >= line) & (y >= 1),
+                     (y == line) & (face_y >= line) & (x >= 1)], axis=1)
+    g.uv[bump] = np.nextafter(g.uv[bump], np.float32(np.inf))
+    return g, bump
+
+
+def test_weld_joins_loops_one_float32_step_apart_as_blender_does():
+    g, bump = ulp_grid()
+    assert set(g.uv[bump].tolist()) == {float(np.nextafter(np.float32(0.2), np.float32(1)))}
+    exact = weld_uv(g.loop_start, g.loop_total, g.corner_verts, g.uv, limit=0.0)
+    # what Blender 4.5.15's grid gives when welded by bit equality: two islands
+    assert (exact.n_nodes, exact.n_islands) == (121 + 21, 2)
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, g.uv)
+    assert (lay.n_nodes, lay.n_islands) == (121, 1)
+    assert np.array_equal(lay.vertex[lay.loop_node], g.corner_verts)
+    # a UV vertex sits at the value most of its loops hold (a tie: the lower one)
+    clean = g.co[lay.vertex, :2].astype(np.float32) * np.float32(0.1)
+    assert np.array_equal(lay.points, clean.astype(np.float64))
+    assert lay.area[0] == pytest.approx(1.0)
+
+
+def test_weld_tie_takes_the_lower_value_and_minus_zero_is_zero():
     g = grid_uv(3)
     uv = g.uv.copy()
-    v0 = np.flatnonzero(g.corner_verts == 0)  # vertex 0 is used by one loop: use vertex 4
     loops4 = np.flatnonzero(g.corner_verts == 4)
-    assert v0.size == 1 and loops4.size == 4
+    assert loops4.size == 4
     uv[loops4] = (0.0, 1.0)
     uv[loops4[0]] = (-0.0, 1.0)
+    for limit in (0.0, 1e-4):
+        lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv, limit=limit)
+        assert len(set(lay.loop_node[loops4].tolist())) == 1
+    up = np.nextafter(np.float32(0.5), np.float32(1))
+    uv[loops4] = (0.5, 1.0)
+    uv[loops4[1:3], 0] = up  # two loops each: a tie
     lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)
+    (node,) = set(lay.loop_node[loops4].tolist())
+    assert lay.points[node].tolist() == [0.5, 1.0]
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv, limit=0.0)
+    assert len(set(lay.loop_node[loops4].tolist())) == 2
+
+
+def test_weld_limit_per_axis_chained_and_one_vertex_only():
+    g = grid_uv(3)
+    uv = g.uv.copy()
+    loops4 = np.flatnonzero(g.corner_verts == 4)
+    base = np.float32(0.5)
+    uv[loops4] = (base, base)
+    uv[loops4[1]] = (base + np.float32(9e-5), base + np.float32(9e-5))  # 1.27e-4 apart,
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)  # under 1e-4 per axis
     assert len(set(lay.loop_node[loops4].tolist())) == 1
-    uv[loops4[1], 0] = np.nextafter(np.float32(0), np.float32(1))  # one float32 step off
+    uv[loops4[2]] = (base + np.float32(1.7e-4), base)  # 1.7e-4 from the first, 8e-5 from
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)  # the second: chained
+    assert len(set(lay.loop_node[loops4].tolist())) == 1
+    uv[loops4[3]] = (base, base + np.float32(2.8e-4))  # 1.9e-4 in v from the nearest
     lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)
     assert len(set(lay.loop_node[loops4].tolist())) == 2
+    assert lay.points[lay.loop_node[loops4[0]]].tolist() == [0.5, 0.5]  # 2 of 3 loops: ties
+    uv[:] = (0.25, 0.75)  # every loop at one point: still one UV vertex per mesh vertex
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)
+    assert lay.n_nodes == 9 and np.array_equal(lay.vertex[lay.loop_node], g.corner_verts)
+
+
+def test_weld_does_not_depend_on_face_or_loop_order():
+    g, _ = ulp_grid(7)
+    g.uv *= np.float32(3)  # UV vertices 3e-1 apart
+    rng = np.random.default_rng(11)
+    uv = g.uv + rng.integers(-1, 2, g.uv.shape).astype(np.float32) * np.float32(3e-5)
+    ref = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)
+    assert ref.n_nodes == 49  # every near value of a vertex joined (6e-5 apart at most)
+    perm = rng.permutation(g.n_faces)  # faces stored in shuffled order, loops rotated
+    ls = np.empty_like(g.loop_start)
+    ls[perm] = g.loop_start
+    turn = rng.integers(0, 4, g.n_faces)
+    src = (np.arange(4)[None, :] + turn[:, None]) % 4 + 4 * np.arange(g.n_faces)[:, None]
+    dst = np.repeat(ls, 4).reshape(-1, 4) + np.arange(4)
+    cv, uv2 = np.empty_like(g.corner_verts), np.empty_like(uv)
+    cv[dst] = g.corner_verts[src]
+    uv2[dst] = uv[src]
+    lay = weld_uv(ls, g.loop_total, cv, uv2)
+    assert lay.n_nodes == ref.n_nodes
+    assert np.array_equal(lay.points[lay.loop_node[dst]], ref.points[ref.loop_node[src]])
+    assert np.array_equal(lay.points, ref.points) and np.array_equal(lay.vertex, ref.vertex)
 
 
 def test_weld_refuses_nan_and_wrong_sizes():

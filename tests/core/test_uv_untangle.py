@@ -184,3 +184,64 @@ def test_scope_tangles_grows_until_it_untangles():
     assert tries == ["island 1/1 (108 of 361 faces"]  # the next ring count covers > 3/4:
     assert "faces)" not in phases[-1]  # the whole island ran after it
     assert res.status == "untangled" and measure(lay, res.points, sel).inverted == 0
+
+
+def test_one_ulp_seams_do_not_fix_vertices():
+    # Blender 4.2-4.5's Grid primitive stores UVs one float32 step apart along a row and a
+    # column; welded by bit equality they are cuts whose vertices cannot move
+    from test_uv_layout import ulp_grid
+    g, _ = ulp_grid()
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, g.uv)
+    free = ~boundary_nodes(lay.n_nodes, lay.faces)
+    assert lay.n_nodes == 121 and free.sum() == 81
+    uv = jitter_interior(g.uv, lay.loop_node, free, 0.09, seed=0)
+    sel = np.ones(g.n_faces, bool)
+    cut = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv, limit=0.0)
+    assert cut.n_nodes == 137  # 16 cut vertices left after the jitter
+    res = untangle_uv(cut, sel)  # welded bit for bit: the cuts stay, so do inverted faces
+    assert (measure(cut, cut.points, sel).inverted, measure(cut, res.points, sel).inverted) \
+        == (43, 2)
+    assert res.status == "failed"
+    assert res.message == "2 faces stay inverted: the engine could not untangle them"
+    lay = weld_uv(g.loop_start, g.loop_total, g.corner_verts, uv)
+    assert lay.n_nodes == 121
+    res = untangle_uv(lay, sel)
+    after = measure(lay, res.points, sel)
+    assert measure(lay, lay.points, sel).inverted == 43
+    assert res.status == "untangled" and (after.inverted, after.overlapping) == (0, 0)
+    assert res.moved.sum() == 81 and not res.moved[~free].any()
+    assert res.message == ""
+
+
+def test_pinned_inverted_faces_fail_and_say_why():
+    g, lay = tangled()
+    sel = np.ones(g.n_faces, bool)
+    bad = flipped_faces(lay, lay.points, corners=True)
+    assert np.flatnonzero(bad)[:2].tolist() == [10, 11]  # island 0, next to each other
+    pins = np.zeros(lay.n_nodes, bool)
+    pins[[12, 13, 22, 23]] = True  # face 10's corners; face 11's others are on the border
+    assert np.array_equal(lay.faces.indices[40:48], [12, 13, 23, 22, 13, 14, 24, 23])
+    res = untangle_uv(lay, sel, fixed=pins)
+    after = measure(lay, res.points, sel)
+    assert after.inverted == 2
+    assert np.flatnonzero(flipped_faces(lay, res.points, corners=True)).tolist() == [10, 11]
+    assert res.status == "failed"
+    assert res.message == ("2 faces stay inverted: every corner of them is pinned or on an "
+                           "island border")
+    assert [(r.status, r.inverted_left, r.stuck) for r in res.islands] == [
+        ("failed", 2, 2), ("untangled", 0, 0)]
+    # an island with nothing free at all is not left out of the verdict either
+    pins = lay.node_island == 0
+    res = untangle_uv(lay, sel, fixed=pins)
+    assert [r.status for r in res.islands] == ["failed", "untangled"]
+    assert res.status == "failed" and res.islands[0].n_free == 0
+    assert res.message == ("5 faces stay inverted: every corner of them is pinned or on an "
+                           "island border")
+    assert measure(lay, res.points, sel).inverted == 5
+
+
+def test_a_face_that_could_move_but_stays_inverted_fails():
+    _, lay = tangled()
+    res = untangle_uv(lay, np.ones(lay.faces.n_faces, bool), accept=lambda a, b: False)
+    assert res.status == "failed" and not res.moved.any()
+    assert res.message == "12 faces stay inverted: the engine could not untangle them"
