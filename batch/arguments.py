@@ -33,7 +33,8 @@ def add_batch_arguments(p: argparse.ArgumentParser) -> None:
         elif action.dest == "output":
             action.help = ("output file for one input, or output folder (OUTDIR) for many: "
                            "each output keeps its input's path relative to the folder or "
-                           "pattern it came from")
+                           "pattern it came from; an output that is its input only with "
+                           "--in-place")
         elif action.dest == "report":
             action.help = ("write a JSON report here (a batch also writes a CSV beside it; "
                            "default OUTDIR/eegt_report.json)")

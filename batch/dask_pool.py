@@ -17,10 +17,12 @@ import importlib.util
 import logging
 import os
 import shutil
+import socket
 import sys
 import tempfile
 import time
 import types
+import urllib.parse
 import uuid
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
@@ -31,6 +33,12 @@ from .pool import by_size, cancelled
 Result = dict[str, Any]
 POLL = 0.1
 TASK_MODULE = "eegt_batch_worker"
+# Seconds to open a connection to a scheduler's port (nothing listening: refused at once; a
+# host that does not answer: this long), then to complete Dask's handshake with it.
+CONNECT_TIMEOUT = 3.0
+HANDSHAKE_TIMEOUT = 10.0
+# Address schemes whose scheduler listens on a TCP port that can be tried first.
+TCP_SCHEMES = ("tcp", "tls", "ws", "wss")
 
 
 class DaskError(Exception):
@@ -73,6 +81,30 @@ def parse_address(address: str) -> tuple[str, int | None]:
     return "remote", None
 
 
+def probe(address: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Open and close a TCP connection to a remote scheduler's port, so that a wrong
+    address is one line within `timeout` seconds (DaskError) rather than after Dask's own
+    retries; addresses of other transports are left to Dask."""
+    scheme, sep, _ = address.partition("://")
+    if sep and scheme not in TCP_SCHEMES:
+        return
+    parts = urllib.parse.urlsplit(address if sep else "tcp://" + address)
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host, port = None, None
+    if not host or port is None:
+        raise DaskError(f"eegt: --dask {address}: a scheduler address is tcp://HOST:PORT "
+                        "(its port is 8786 unless it was started with another)")
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as exc:
+        why = f"no answer in {timeout:g} s" if isinstance(exc, TimeoutError) else \
+            (exc.strerror or str(exc)).lower()
+        raise DaskError(f"eegt: cannot connect to the Dask scheduler at {address}: {why} "
+                        "(is `dask scheduler` running there?)") from None
+
+
 @contextlib.contextmanager
 def plain_main() -> Iterator[None]:
     """An empty ``__main__`` module while a local cluster lives: its worker processes are
@@ -100,7 +132,8 @@ def connect(address: str, default_workers: int) -> tuple[Any, Any]:
                 n_workers=n or default_workers, threads_per_worker=1, processes=True,
                 dashboard_address=None, silence_logs=logging.ERROR, memory_limit=0)
             return distributed.Client(cluster), cluster
-        return distributed.Client(address, timeout="20s"), None
+        probe(address)
+        return distributed.Client(address, timeout=f"{HANDSHAKE_TIMEOUT:g}s"), None
     except Exception as exc:
         if cluster is not None:
             cluster.close()

@@ -55,8 +55,10 @@ def expand(patterns: Sequence[str], recursive: bool = False,
     within a folder or pattern, each file once), and a note for every pattern or folder that
     gave none. ``**`` in a pattern matches any depth; folders are searched below their top
     level only with `recursive`. Nothing inside an `exclude` folder (the output folder) is an
-    input, except a file named explicitly."""
-    excluded = [_real(p) for p in exclude]
+    input, except a file named explicitly, unless that folder is itself one of the folders
+    named (its files are then their own outputs)."""
+    named = {_real(p) for p in patterns if os.path.isdir(p)}
+    excluded = [r for r in (_real(p) for p in exclude) if r not in named]
     found: list[Source] = []
     notes: list[str] = []
     for pattern in patterns:
@@ -157,17 +159,44 @@ def output_path(src: Source, outdir: str, suffix: str = "", fmt: str | None = No
     return os.path.normpath(os.path.join(outdir, stem + suffix + ("." + fmt if fmt else ext)))
 
 
-def check_outputs(sources: Sequence[Source], outputs: Sequence[str | None]) -> None:
+def same_file(a: str, b: str) -> bool:
+    """Whether paths `a` and `b` name one file: the same file when both exist (through
+    symbolic or hard links, any spelling of the path), else the same resolved path (a link
+    to a file not there yet)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return _real(a) == _real(b)
+
+
+def replaces_input(input_path: str, output: str | None, in_place: bool = False,
+                   instead: str | None = None) -> str | None:
+    """The one rule for an output that is its own input, in the single-file command and
+    in every file of a batch: refused (this one-line reason, exit 2) unless --in-place asks
+    for it; None when `output` may be written. `instead`: the batch's wording of what
+    else to give."""
+    if in_place or output is None or not same_file(input_path, output):
+        return None
+    if instead is None:
+        return (f"eegt: -o '{output}' is the input file itself: give --in-place to replace "
+                "it, or another output")
+    return (f"eegt: the output of '{input_path}' would replace it: give --in-place to "
+            f"replace it, or {instead}")
+
+
+def check_outputs(sources: Sequence[Source], outputs: Sequence[str | None],
+                  in_place: bool = False) -> None:
     """Raise PlanError when two inputs would write the same output or an output would
-    replace its own input."""
+    replace its own input without `in_place`."""
     first: dict[str, str] = {}
     for src, out in zip(sources, outputs, strict=True):
         if out is None or src.problem:
             continue
+        why = replaces_input(src.path, out, in_place,
+                             "another -o folder, a --suffix or a --format")
+        if why:
+            raise PlanError(why)
         key = _real(out)
-        if key == _real(src.path):
-            raise PlanError(f"eegt: the output of '{src.path}' would replace it: give another "
-                            "-o folder, a --suffix or a --format")
         if key in first:
             raise PlanError(f"eegt: '{first[key]}' and '{src.path}' would both write "
                             f"'{out}' (use --suffix, or inputs from one folder)")
@@ -176,8 +205,8 @@ def check_outputs(sources: Sequence[Source], outputs: Sequence[str | None]) -> N
 
 def up_to_date(input_path: str, output: str | None) -> bool:
     """Whether `output` exists and is not older than `input_path` (what --skip-existing
-    skips)."""
-    if output is None:
+    skips); never when the output is the input itself (--in-place)."""
+    if output is None or same_file(input_path, output):
         return False
     try:
         return os.stat(output).st_mtime_ns >= os.stat(input_path).st_mtime_ns

@@ -7,11 +7,13 @@ folder, or a batch flag (``--jobs``, ``--timeout``, ``--skip-existing``, ``--rec
 command runs as it always did. Every file of a batch is run by that single-file command in
 its own ``blender -b`` (this Blender's binary; with ``--files-per-worker K`` one Blender runs
 K files in turn, see ``serve``), at most ``--jobs`` at once or as tasks on a Dask cluster, so
-that a crash, a hang or a memory blow-up in one file cannot take the others down. Everything that
-can be checked before starting is (bad flags, no inputs, an output folder that is a file,
-``-o FILE`` for many inputs, two inputs writing one output, Dask missing): one line on
-stderr, exit 2, nothing started. Ctrl+C (or SIGTERM) kills the running workers, removes
-their temporary files and still writes the report; exit 130.
+that a crash, a hang or a memory blow-up in one file cannot take the others down. Everything
+that can be checked before starting is (bad flags, no inputs, an output folder that is a
+file, ``-o FILE`` for many inputs, two inputs writing one output, an output replacing its
+input without ``--in-place``, a bad ``--dask`` value, Dask missing, no scheduler answering at
+the ``--dask`` address): one line on stderr, exit 2, nothing started. Ctrl+C (or SIGTERM)
+kills the running workers, removes their temporary files and still writes the report; exit
+130.
 """
 
 from __future__ import annotations
@@ -91,9 +93,11 @@ def _check_flags(ns: argparse.Namespace) -> None:
                             ("--format", ns.format)):
             if given:
                 raise _usage(f"eegt: {flag} needs -o OUTDIR (outputs to compare or name)")
-    if ns.dask is not None:
+    if ns.dask is not None:  # the value first: a bad one is exit 2 whatever is installed
+        kind, _ = dask_pool.parse_address(ns.dask)
         dask_pool.require()
-        dask_pool.parse_address(ns.dask)
+        if kind == "remote":
+            dask_pool.probe(ns.dask)
 
 
 def _output_kind(ns: argparse.Namespace) -> tuple[str | None, str | None]:
@@ -128,10 +132,12 @@ def plan(ns: argparse.Namespace, parser: argparse.ArgumentParser, argv: list[str
     if outdir:
         outputs: list[str | None] = [inputs.output_path(s, outdir, ns.suffix, ns.format)
                                      for s in sources]
+    elif ns.in_place and not outfile:  # each input written over itself
+        outputs = [s.path for s in sources]
     else:
         outputs = [outfile] * len(sources)
     try:
-        inputs.check_outputs(sources, outputs)
+        inputs.check_outputs(sources, outputs, ns.in_place)
     except inputs.PlanError as exc:
         raise _usage(str(exc)) from None
     p = _Plan()

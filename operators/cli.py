@@ -11,8 +11,11 @@ input with no faces to work on, or output that could not be saved, 1 internal er
 ``--report`` writes a JSON report either way.
 
 Everything that can be checked before computing is: the input path (a directory says so),
-the output type, and that the output and the report can be created (``-o x.fbx`` fails at
-once, and a long run never ends in a result it cannot save).
+the output type, that the output is not the input itself (unless ``--in-place``), that the
+output and the report can be created (``-o x.fbx`` fails at once, and a long run never ends
+in a result it cannot save), and the reference of target "reference" (readable, finite, of
+each chosen object's topology; not with ``--uv``). Each is exit 2 with one line, nothing
+written.
 
 Faceless input, per object: a mesh object without faces (edges or points only) is skipped
 with a line and listed in the report's ``"skipped"``, and the others are processed as usual
@@ -45,9 +48,10 @@ from typing import Any
 
 import bpy
 
+from ..batch.inputs import replaces_input
 from ..core import EEGTParams
 from ..core.backends import warm_up
-from . import metrics, props, report, runner, uv_props, uv_runner
+from . import metrics, props, reference_input, report, runner, uv_props, uv_runner
 from .ops_untangle import _printer
 from .reference_input import ReferenceSource, from_file
 
@@ -60,11 +64,14 @@ ZSTD_MAGIC, ZSTD_SEEKABLE_END = b"\x28\xb5\x2f\xfd", b"\xb1\xea\x92\x8f"
 
 
 class UsageError(Exception):
-    """A command-line or input problem: one line, exit code 2 (0 for --help)."""
+    """A command-line or input problem: one line, exit code 2 (0 for --help). `unwritable`:
+    the path this error says cannot be written (the report is then not tried again)."""
 
-    def __init__(self, message: str, code: int = EXIT_USAGE) -> None:
+    def __init__(self, message: str, code: int = EXIT_USAGE,
+                 unwritable: str | None = None) -> None:
         super().__init__(message)
         self.code = code
+        self.unwritable = unwritable
 
 
 class _Parser(argparse.ArgumentParser):
@@ -89,7 +96,11 @@ def build_parser() -> argparse.ArgumentParser:
                             "2 bad arguments or input, 1 internal error.")
     p.add_argument("input", help="input .blend (all mesh objects) or .obj/.ply/.stl file")
     p.add_argument("-o", "--output", help="output .blend/.obj/.ply/.stl (nothing is written "
-                                          "without it)")
+                                          "without it); the input file itself only with "
+                                          "--in-place")
+    p.add_argument("--in-place", action="store_true",
+                   help="write the result over the input file (without -o, or with -o naming "
+                        "it): it is replaced whole once the result is saved and checked")
     p.add_argument("--object", action="append", default=[], metavar="NAME",
                    help="only this mesh object (repeatable)")
     p.add_argument("--backend", choices=("numpy", "opencl", "auto"), default=None,
@@ -161,6 +172,11 @@ def _reference(ns: argparse.Namespace, params: EEGTParams) -> ReferenceSource | 
 
 
 def _params(ns: argparse.Namespace) -> EEGTParams:
+    """The run's parameters from the flags; UsageError for a contradiction or a bad value."""
+    if ns.uv is not None and (ns.reference or ns.reference_key or ns.target == "reference"):
+        raise UsageError("eegt: --uv takes each UV face's target shape from its 3D face: "
+                         "--reference, --reference-key and --target reference are for vertex "
+                         "positions")
     if (ns.reference or ns.reference_key) and ns.target is None:
         ns.target = "reference"
     elif (ns.reference or ns.reference_key) and ns.target != "reference":
@@ -176,7 +192,8 @@ def _params(ns: argparse.Namespace) -> EEGTParams:
 
 
 def _check_paths(ns: argparse.Namespace) -> None:
-    """Fail fast, before loading or computing: input readable, output type supported, output
+    """Fail fast, before loading or computing: input readable, output type supported, the
+    output not the input unless --in-place (which alone makes the input the output), output
     and report creatable (so a long run never ends in an unsavable result)."""
     path = ns.input
     if os.path.isdir(path):
@@ -185,14 +202,28 @@ def _check_paths(ns: argparse.Namespace) -> None:
         raise UsageError(f"eegt: cannot read input '{path}': no such file")
     if not os.access(path, os.R_OK):
         raise UsageError(f"eegt: cannot read input '{path}': permission denied")
+    _check_input_type(path)
+    if ns.in_place and not ns.output:
+        ns.output = path
     if ns.output:
         ext = os.path.splitext(ns.output)[1].lower()
         if ext not in OUTPUT_EXTENSIONS:
             raise UsageError(f"eegt: unsupported output type '{ext or ns.output}' (use .blend, "
                              ".obj, .ply or .stl)")
+        why = replaces_input(path, ns.output, ns.in_place)
+        if why:
+            raise UsageError(why)
         _check_writable(ns.output, "output")
     if ns.report:
         _check_writable(ns.report, "report")
+
+
+def _check_input_type(path: str) -> None:
+    """The input is of a type the command reads (UsageError otherwise)."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext != ".blend" and ext not in MESH_EXTENSIONS:
+        raise UsageError(f"eegt: unsupported input type '{ext}' (use .blend, .obj, .ply or "
+                         ".stl)")
 
 
 def _check_writable(path: str, what: str) -> None:
@@ -200,16 +231,19 @@ def _check_writable(path: str, what: str) -> None:
     in an existing file) and remove it again if it is new."""
     folder = os.path.dirname(os.path.abspath(path))
     if os.path.isdir(path):
-        raise UsageError(f"eegt: cannot write {what} '{path}': is a directory")
+        raise UsageError(f"eegt: cannot write {what} '{path}': is a directory",
+                         unwritable=path)
     if not os.path.isdir(folder):
-        raise UsageError(f"eegt: cannot write {what} '{path}': no folder {folder}")
+        raise UsageError(f"eegt: cannot write {what} '{path}': no folder {folder}",
+                         unwritable=path)
     existed = os.path.exists(path)
     try:  # non-blocking: a FIFO without a reader fails here instead of hanging
         os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NONBLOCK, 0o666))
         if not existed:
             os.remove(path)
     except OSError as exc:
-        raise UsageError(f"eegt: cannot write {what} '{path}': {_why(exc)}") from None
+        raise UsageError(f"eegt: cannot write {what} '{path}': {_why(exc)}",
+                         unwritable=path) from None
 
 
 def _why(exc: OSError) -> str:
@@ -244,9 +278,7 @@ def _load(path: str) -> None:
         if ext == ".blend":
             bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
             return
-        if ext not in MESH_EXTENSIONS:
-            raise UsageError(f"eegt: unsupported input type '{ext}' (use .blend, .obj, .ply "
-                             "or .stl)")
+        _check_input_type(path)
         bpy.ops.wm.read_homefile(use_empty=True)
         if ext == ".obj":
             bpy.ops.wm.obj_import(filepath=path, forward_axis="Y", up_axis="Z")
@@ -443,6 +475,42 @@ def _uv_objects(objs: list[bpy.types.Object], name: str,
     return kept
 
 
+def _check_reference(objs: list[bpy.types.Object], ref: ReferenceSource) -> None:
+    """Target "reference": every chosen object has the reference the command line names,
+    of its topology and with finite coordinates, before any work (UsageError: exit 2, one
+    line, nothing written). The runner checks each object again."""
+    for obj in objs:
+        me = obj.data
+        edited = reference_input.edited_key(obj)
+        if ref.file:
+            n, f = ref.file_points.shape[0], ref.file_faces.n_faces
+            if not reference_input.same_topology(me, n, ref.file_faces):
+                raise UsageError(
+                    f"eegt: --reference '{ref.file}' ({n} vertices, {f} faces) does not fit "
+                    f"object '{obj.name}' ({len(me.vertices)} vertices, {len(me.polygons)} "
+                    "faces): a reference has the same vertices and faces, in the same order")
+        elif not ref.key and reference_input.default_key(me, edited) is None:
+            raise UsageError(
+                "eegt: --target reference needs --reference FILE or --reference-key NAME: "
+                f"object '{obj.name}' has no Basis shape key under an active one to take by "
+                "default")
+        elif ref.key:
+            keys = me.shape_keys
+            names = [kb.name for kb in keys.key_blocks] if keys is not None else []
+            if ref.key not in names:
+                have = ", ".join(names[:10]) or "none"
+                raise UsageError(f"eegt: --reference-key {ref.key}: object '{obj.name}' has no "
+                                 f"shape key '{ref.key}' (its shape keys: {have})")
+            if ref.key == edited:
+                raise UsageError(f"eegt: --reference-key {ref.key}: it is the active shape key "
+                                 f"of object '{obj.name}', the one the run changes: choose "
+                                 "another")
+        try:
+            reference_input.reference_positions(obj, ref, edited)
+        except ValueError as exc:
+            raise UsageError(f"eegt: object '{obj.name}': {exc}") from None
+
+
 def _backend(choice: str | None, device: str | None) -> tuple[str, str | None]:
     from .prefs import resolve_backend
     name, pref_device = resolve_backend(choice.upper() if choice else "PREFS")
@@ -472,6 +540,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         ns = build_parser().parse_args(argv)
         rep["input"], rep["output"] = ns.input, ns.output
         _check_paths(ns)
+        rep["output"] = ns.output  # --in-place alone: the input
         params = _params(ns)
         reference = _reference(ns, params)
         rep["params"] = params.as_dict() if hasattr(params, "as_dict") else \
@@ -488,6 +557,8 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             bpy.ops.object.mode_set(mode="OBJECT")
         if ns.uv is not None:
             objs = _uv_objects(objs, ns.uv, rep)
+        if reference is not None:
+            _check_reference(objs, reference)
         results, measured = [], []
         for obj in objs:
             progress = None if ns.quiet else _printer(obj.name)
@@ -525,6 +596,8 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         if str(exc):
             print(str(exc), file=sys.stdout if code == EXIT_OK else sys.stderr, flush=True)
         rep["error"] = None if code == EXIT_OK else str(exc)
+        if ns is not None and exc.unwritable is not None and exc.unwritable == ns.report:
+            ns.report = None  # said once: the report is not tried again
     except Exception as exc:
         traceback.print_exc()
         print(f"eegt: internal error: {exc!r}", file=sys.stderr, flush=True)

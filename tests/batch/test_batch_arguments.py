@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import socket
+import time
 
 import pytest
 
@@ -147,6 +149,35 @@ def test_dask_addresses(address, parsed):
 def test_bad_dask_addresses_are_one_line_errors(address):
     with pytest.raises(dask_pool.DaskError, match=r"^eegt: --dask"):
         dask_pool.parse_address(address)
+
+
+def test_unreachable_scheduler_is_refused_within_the_connect_timeout():
+    """Nothing listens on port 1: refused at once; no Dask needed to tell."""
+    t0 = time.monotonic()
+    with pytest.raises(dask_pool.DaskError) as err:
+        dask_pool.probe("tcp://127.0.0.1:1")
+    assert time.monotonic() - t0 < dask_pool.CONNECT_TIMEOUT
+    assert str(err.value) == ("eegt: cannot connect to the Dask scheduler at tcp://127.0.0.1:1: "
+                              "connection refused (is `dask scheduler` running there?)")
+    assert dask_pool.CONNECT_TIMEOUT <= 5
+
+
+def test_probe_connects_to_a_listening_scheduler_port():
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        port = server.getsockname()[1]
+        for address in (f"tcp://127.0.0.1:{port}", f"127.0.0.1:{port}"):
+            dask_pool.probe(address)  # no error
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1", "tcp://127.0.0.1:port"])
+def test_scheduler_address_without_a_port_number_is_a_bad_value(address):
+    with pytest.raises(dask_pool.DaskError) as err:
+        dask_pool.probe(address)
+    assert str(err.value) == (f"eegt: --dask {address}: a scheduler address is "
+                              "tcp://HOST:PORT (its port is 8786 unless it was started with "
+                              "another)")
 
 
 def test_missing_dask_says_how_to_install_it(monkeypatch):

@@ -96,6 +96,13 @@ def test_output_folder_inside_an_input_folder_is_not_searched(tree):
     assert len(sources) == 4
 
 
+def test_output_folder_that_is_the_input_folder_is_searched_whole(tree):
+    """-o naming the input folder itself (--in-place): its subfolders stay inputs."""
+    sources, _ = inputs.expand([str(tree)], recursive=True, exclude=[str(tree)])
+    assert rels(sources) == ["a.obj", "b.PLY", os.path.join("sub", "c.stl"),
+                             os.path.join("sub", "deep", "d.blend")]
+
+
 def test_output_path_keeps_relative_path_with_suffix_and_format(tmp_path):
     src = inputs.Source("in/sub/c.stl", os.path.join("sub", "c.stl"))
     assert inputs.output_path(src, "out", "", None) == os.path.join("out", "sub", "c.stl")
@@ -111,11 +118,38 @@ def test_two_inputs_writing_one_output_is_refused(tmp_path):
         inputs.check_outputs([a, b], outs)
 
 
-def test_output_replacing_its_input_is_refused(tmp_path):
+def test_output_replacing_its_input_is_refused_unless_in_place(tmp_path):
     a = inputs.Source(str(touch(tmp_path / "m.obj")), "m.obj")
-    with pytest.raises(inputs.PlanError, match="would replace it"):
-        inputs.check_outputs([a], [inputs.output_path(a, str(tmp_path))])
+    same = inputs.output_path(a, str(tmp_path))
+    with pytest.raises(inputs.PlanError) as err:
+        inputs.check_outputs([a], [same])
+    assert str(err.value) == (f"eegt: the output of '{a.path}' would replace it: give "
+                              "--in-place to replace it, or another -o folder, a --suffix or "
+                              "a --format")
+    inputs.check_outputs([a], [same], in_place=True)  # asked for
     inputs.check_outputs([a], [inputs.output_path(a, str(tmp_path), "_fixed")])  # fine
+
+
+def test_same_file_through_links_and_spellings(tmp_path):
+    real = touch(tmp_path / "d" / "m.obj")
+    (tmp_path / "link.obj").symlink_to(real)
+    (tmp_path / "dirlink").symlink_to(tmp_path / "d")
+    os.link(real, tmp_path / "hard.obj")
+    touch(tmp_path / "d" / "other.obj")
+    for other in (real, tmp_path / "link.obj", tmp_path / "dirlink" / "m.obj",
+                  tmp_path / "d" / ".." / "d" / "m.obj", tmp_path / "hard.obj"):
+        assert inputs.same_file(str(real), str(other)), other
+        assert inputs.replaces_input(str(real), str(other)) is not None, other
+        assert inputs.replaces_input(str(real), str(other), in_place=True) is None, other
+    for other in (tmp_path / "d" / "other.obj", tmp_path / "d" / "new.obj"):
+        assert not inputs.same_file(str(real), str(other)), other
+        assert inputs.replaces_input(str(real), str(other)) is None, other
+    # a symbolic link to a file not there yet: the same path once resolved
+    (tmp_path / "dangling.obj").symlink_to(tmp_path / "d" / "later.obj")
+    assert inputs.same_file(str(tmp_path / "d" / "later.obj"), str(tmp_path / "dangling.obj"))
+    assert inputs.replaces_input(str(real), str(real)) == (
+        f"eegt: -o '{real}' is the input file itself: give --in-place to replace it, or "
+        "another output")
 
 
 def test_up_to_date_needs_an_output_not_older_than_its_input(tmp_path):
@@ -129,6 +163,7 @@ def test_up_to_date_needs_an_output_not_older_than_its_input(tmp_path):
     os.utime(out, ns=(2_000_000_001_000_000_000,) * 2)
     assert inputs.up_to_date(str(inp), str(out))  # newer
     assert not inputs.up_to_date(str(inp), None)
+    assert not inputs.up_to_date(str(inp), str(inp))  # the input itself (--in-place)
 
 
 def test_stale_temporaries_are_those_of_dead_processes_only(tmp_path):

@@ -12,6 +12,7 @@ import json
 import os
 import shutil
 import sys
+import time
 
 import pytest
 
@@ -67,7 +68,8 @@ def one_error_line(capfd) -> str:
      "eegt: '{m}/quad_hole.obj' and '{t}/x/quad_hole.obj' would both write "
      "'{t}/out/quad_hole.obj' (use --suffix, or inputs from one folder)"),
     (["{m}", "-o", "{m}"], "eegt: the output of '{m}/quad_hole.obj' would replace it: give "
-                           "another -o folder, a --suffix or a --format"),
+                           "--in-place to replace it, or another -o folder, a --suffix or a "
+                           "--format"),
     (["{m}", "-o", "{t}/out", "--dask", "local:2", "--jobs", "2"],
      "eegt: --jobs is for local workers; with --dask the cluster's workers run the files "
      "(local:N sets their number)"),
@@ -97,6 +99,55 @@ def test_dask_missing_exits_2_saying_how_to_install(bpy, ext, tmp_path, meshes, 
     line = one_error_line(capfd)
     assert line.startswith("eegt: --dask needs the dask and distributed packages")
     assert "blender -b --python-expr" in line and "--target" in line
+
+
+@pytest.mark.parametrize("value", ["local:zero", "local:0", " "])
+def test_bad_dask_value_is_said_before_a_missing_dask(bpy, ext, tmp_path, meshes, capfd,
+                                                      monkeypatch, value):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    assert cli(ext).execute([str(meshes), "-o", str(tmp_path / "out"), "--dask", value]) == 2
+    line = one_error_line(capfd)
+    assert line.startswith(f"eegt: --dask {value.strip()}".rstrip()) and "packages" not in line
+
+
+def test_dask_scheduler_not_listening_is_exit_2_in_seconds(bpy, ext, tmp_path, meshes, capfd):
+    pytest.importorskip("distributed", reason="--dask needs the distributed package, which "
+                                              "this Python lacks")
+    t0 = time.monotonic()
+    code = cli(ext).execute([str(meshes), "-o", str(tmp_path / "out"), "--dask",
+                             "tcp://127.0.0.1:1"])
+    seconds = time.monotonic() - t0
+    assert code == 2 and seconds < 8
+    assert one_error_line(capfd) == ("eegt: cannot connect to the Dask scheduler at "
+                                     "tcp://127.0.0.1:1: connection refused (is `dask "
+                                     "scheduler` running there?)")
+    assert not (tmp_path / "out").exists()  # checked before the output folder is made
+
+
+@pytest.mark.parametrize("argv", [["{m}", "--in-place"], ["{m}", "-o", "{m}", "--in-place"]])
+def test_in_place_batch_writes_each_input_over_itself(bpy, ext, tmp_path, meshes, monkeypatch,
+                                                     argv):
+    monkeypatch.setenv("EEGT_BLENDER", sys.executable)  # planned, never started
+    b = batch(ext)
+    argv = [a.format(m=meshes) for a in argv] + ["--recursive", "--quiet"]
+    parser = b.build_parser()
+    ns = parser.parse_intermixed_args(argv)
+    p = b.plan(ns, parser, argv)
+    files = [str(meshes / "quad_hole.obj"), str(meshes / "sub" / "tilted_plane.obj")]
+    assert [(t["input"], t["output"]) for t in p.tasks] == list(zip(files, files))
+    assert all("--in-place" in t["args"] for t in p.tasks)
+    argv = ext.batch.worker.file_args(p.tasks[0], "r.json")
+    back = cli(ext).build_parser().parse_args(argv)
+    assert back.output == back.input == files[0] and back.in_place is True
+
+
+def test_in_place_batch_skip_existing_still_runs_every_file(bpy, ext, meshes, monkeypatch):
+    monkeypatch.setenv("EEGT_BLENDER", sys.executable)  # planned, never started
+    b = batch(ext)
+    argv = [str(meshes), "-o", str(meshes), "--in-place", "--skip-existing", "--recursive"]
+    parser = b.build_parser()
+    p = b.plan(parser.parse_intermixed_args(argv), parser, argv)
+    assert len(p.tasks) == 2 and p.entries == [None, None]
 
 
 def test_no_blender_binary_for_workers_is_exit_2(bpy, ext, tmp_path, meshes, capfd, monkeypatch):
@@ -198,7 +249,8 @@ def test_dask_local_cluster_tasks_report_a_machine_without_blender(bpy, ext, tmp
                                                                    capfd, monkeypatch):
     """A real LocalCluster of 2 worker processes: the worker module is uploaded, every task
     runs on a worker and reports, as a per-file error, that this machine has no Blender."""
-    pytest.importorskip("distributed")
+    pytest.importorskip("distributed", reason="--dask needs the distributed package, which "
+                                              "this Python lacks")
     monkeypatch.setenv("EEGT_BLENDER", str(tmp_path / "no-blender"))  # workers inherit it
     out = tmp_path / "out"
     code = cli(ext).execute([str(meshes), "--recursive", "-o", str(out), "--dask", "local:2",

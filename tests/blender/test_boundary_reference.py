@@ -5,6 +5,7 @@ the command line, and bad input (one line, mesh unchanged)."""
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -302,16 +303,72 @@ def test_cli_slide_and_reference_file(bpy, ext, tmp_path):
     assert med < 1.05 and p95 < 1.2
 
 
+def nan_reference(tmp_path):
+    """quad_hole.obj with its first vertex's x a NaN."""
+    lines = (DATA / "quad_hole.obj").read_text().splitlines()
+    first = next(i for i, ln in enumerate(lines) if ln.startswith("v "))
+    lines[first] = "v nan " + " ".join(lines[first].split()[2:])
+    path = tmp_path / "nan.obj"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def uv_blend(bpy, tmp_path):
+    """A .blend with a grid that has a UV map."""
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=4, y_subdivisions=4)
+    path = tmp_path / "uv.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.read_homefile(use_empty=True)
+    return path
+
+
+@pytest.mark.parametrize("case", ["other topology", "NaN coordinate", "missing key",
+                                  "no reference", "uv with a file", "uv with a key",
+                                  "uv with target reference"])
+def test_cli_bad_reference_is_exit_2_before_any_work_and_writes_nothing(bpy, ext, tmp_path,
+                                                                         capfd, case):
+    inp, other = DATA / "quad_hole.obj", DATA / "mixed_quad_tri.obj"
+    uv_message = ("eegt: --uv takes each UV face's target shape from its 3D face: "
+                  "--reference, --reference-key and --target reference are for vertex "
+                  "positions")
+    args, expected = {
+        "other topology": (["--reference", other],
+                           f"eegt: --reference '{other}' (2790 vertices, 2941 faces) does not "
+                           "fit object 'quad_hole' (168 vertices, 140 faces): a reference has "
+                           "the same vertices and faces, in the same order"),
+        "NaN coordinate": (["--reference", nan_reference(tmp_path)],
+                           f"eegt: reference '{tmp_path / 'nan.obj'}' has 1 vertex with a NaN "
+                           "or infinite coordinate"),
+        "missing key": (["--reference-key", "Nope"],
+                        "eegt: --reference-key Nope: object 'quad_hole' has no shape key "
+                        "'Nope' (its shape keys: none)"),
+        "no reference": (["--target", "reference"],
+                         "eegt: --target reference needs --reference FILE or --reference-key "
+                         "NAME: object 'quad_hole' has no Basis shape key under an active "
+                         "one to take by default"),
+        "uv with a file": (["--uv", "--reference", inp], uv_message),
+        "uv with a key": (["--uv", "--reference-key", "Basis"], uv_message),
+        "uv with target reference": (["--uv", "--target", "reference"], uv_message),
+    }[case]
+    if case.startswith("uv"):
+        inp = uv_blend(bpy, tmp_path)
+    out, rep = tmp_path / f"out{inp.suffix}", tmp_path / "r.json"
+    capfd.readouterr()
+    code = ext.operators.cli.execute([str(inp), "-o", str(out), "--report", str(rep),
+                                      *map(str, args)])
+    captured = capfd.readouterr()
+    assert code == 2
+    assert [ln for ln in captured.err.splitlines() if ln.strip()] == [expected]
+    assert "EEGT" not in captured.out  # no object was worked on
+    assert not out.exists() and not [n for n in os.listdir(tmp_path) if n.startswith(".")]
+    report = json.loads(rep.read_text())
+    assert report["exit_code"] == 2 and report["error"] == expected
+    assert report["objects"] == [] and report["written"] is False
+
+
 def test_cli_bad_reference(bpy, ext, tmp_path, capsys):
     cli = ext.operators.cli
     inp = str(DATA / "quad_hole.obj")
-    other = str(DATA / "mixed_quad_tri.obj")
-    rep = tmp_path / "r.json"
-    # another topology: that object is refused (exit 3), nothing is written for it
-    assert cli.execute([inp, "--reference", other, "--report", str(rep), "--quiet"]) == 3
-    (o,) = json.loads(rep.read_text())["objects"]
-    assert o["status"] == "error" and "different topology" in o["message"]
-    assert not o["written"]
     # contradictions and unreadable files: usage errors (exit 2), one line on stderr
     for args, needle in (
         (["--target", "regular", "--reference", inp], "need --target reference"),
@@ -324,7 +381,52 @@ def test_cli_bad_reference(bpy, ext, tmp_path, capsys):
         assert cli.execute([inp, *args, "--quiet"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert needle in err[-1], (args, err)
-    # target reference on an OBJ (no shape keys) without a reference: the object's error
-    assert cli.execute([inp, "--target", "reference", "--report", str(rep), "--quiet"]) == 3
+
+
+def test_cli_reference_key_of_a_blend_checks_every_chosen_object(bpy, ext, tmp_path, capfd):
+    """A .blend whose first object has Basis + an active key and whose second has no keys:
+    --target reference is refused for the second (exit 2, nothing written) unless --object
+    leaves it out; the first then runs against its Basis key."""
+    keyed = import_obj(bpy, "quad_hole")
+    keyed.shape_key_add(name="Basis")
+    keyed.shape_key_add(name="Edit")
+    keyed.active_shape_key_index = 1
+    keyed_name, plain_name = keyed.name, import_obj(bpy, "tilted_plane").name
+    src = tmp_path / "in.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    out, rep = tmp_path / "out.blend", tmp_path / "r.json"
+    cli = ext.operators.cli
+    capfd.readouterr()
+    assert cli.execute([str(src), "-o", str(out), "--target", "reference", "--quiet"]) == 2
+    assert capfd.readouterr().err.strip() == (
+        "eegt: --target reference needs --reference FILE or --reference-key NAME: object "
+        f"'{plain_name}' has no Basis shape key under an active one to take by default")
+    assert not out.exists()
+    assert cli.execute([str(src), "-o", str(out), "--target", "reference", "--object",
+                        keyed_name, "--report", str(rep), "--quiet"]) == 0
     (o,) = json.loads(rep.read_text())["objects"]
-    assert "needs a reference" in o["message"]
+    assert o["object"] == keyed_name and o["after"]["n_inverted"] == 0
+    assert "shape key 'Basis'" in " ".join(o["notes"])
+    assert cli.execute([str(src), "-o", str(out), "--reference-key", "Edit", "--object",
+                        keyed_name, "--quiet"]) == 2
+    assert capfd.readouterr().err.strip() == (
+        f"eegt: --reference-key Edit: it is the active shape key of object '{keyed_name}', "
+        "the one the run changes: choose another")
+
+
+def test_cli_reference_key_with_a_nan_is_exit_2_and_writes_nothing(bpy, ext, tmp_path, capfd):
+    obj = import_obj(bpy, "quad_hole")
+    obj.shape_key_add(name="Basis")
+    obj.shape_key_add(name="Edit")
+    obj.active_shape_key_index = 1
+    obj.data.shape_keys.key_blocks["Basis"].data[0].co.x = float("nan")
+    src = tmp_path / "in.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    out = tmp_path / "out.blend"
+    capfd.readouterr()
+    assert ext.operators.cli.execute([str(src), "-o", str(out), "--reference-key", "Basis",
+                                      "--quiet"]) == 2
+    assert capfd.readouterr().err.strip() == (
+        "eegt: object 'quad_hole': reference shape key 'Basis' has 1 vertex with a NaN or "
+        "infinite coordinate")
+    assert not out.exists()

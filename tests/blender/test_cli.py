@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
 
 import numpy as np
 import pytest
@@ -165,3 +167,67 @@ def test_unknown_opencl_device_falls_back_to_numpy(bpy, ext, tmp_path):
     (o,) = json.loads(rep.read_text())["objects"]
     assert o["backend"].startswith("numpy (") and "using NumPy" in o["backend"]
     assert o["after"]["n_inverted"] == 0
+
+
+# ---- -o naming the input: refused unless --in-place ---------------------------------------
+
+
+def hidden(folder) -> list[str]:
+    return sorted(n for n in os.listdir(folder) if n.startswith("."))
+
+
+@pytest.mark.parametrize("spelling", ["same path", "symbolic link", "dotted path",
+                                      "linked folder"])
+def test_output_naming_the_input_is_refused_and_leaves_it(bpy, ext, tmp_path, capfd, spelling):
+    real = tmp_path / "d" / "m.obj"
+    real.parent.mkdir()
+    shutil.copy(DATA / "quad_hole.obj", real)
+    (tmp_path / "link.obj").symlink_to(real)
+    (tmp_path / "dl").symlink_to(real.parent)
+    out = {"same path": real, "symbolic link": tmp_path / "link.obj",
+           "dotted path": tmp_path / "d" / ".." / "d" / "m.obj",
+           "linked folder": tmp_path / "dl" / "m.obj"}[spelling]
+    before = real.read_bytes()
+    rep = tmp_path / "r.json"
+    assert cli(ext).execute([str(real), "-o", str(out), "--report", str(rep), "--quiet"]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert err == [f"eegt: -o '{out}' is the input file itself: give --in-place to replace "
+                   "it, or another output"]
+    assert real.read_bytes() == before and hidden(real.parent) == []
+    report = json.loads(rep.read_text())
+    assert report["exit_code"] == 2 and report["written"] is False and report["objects"] == []
+    assert len(bpy.data.objects) == 0  # refused before the input was read
+
+
+@pytest.mark.parametrize("argv", [["--in-place"], ["-o", "{inp}", "--in-place"],
+                                  ["-o", "{link}", "--in-place"]])
+def test_in_place_replaces_the_input_whole(bpy, ext, tmp_path, argv):
+    inp = tmp_path / "m.obj"
+    shutil.copy(DATA / "quad_hole.obj", inp)
+    (tmp_path / "link.obj").symlink_to(inp)
+    rep = tmp_path / "r.json"
+    args = [a.format(inp=inp, link=tmp_path / "link.obj") for a in argv]
+    assert cli(ext).execute([str(inp), *args, "--report", str(rep), "--quiet"]) == 0
+    report = json.loads(rep.read_text())
+    assert report["written"] is True and report["output"] in (str(inp), str(tmp_path / "link.obj"))
+    (o,) = report["objects"]
+    assert o["before"]["n_inverted"] == 23 and o["after"]["n_inverted"] == 0
+    assert not inp.is_symlink() and (tmp_path / "link.obj").is_symlink()
+    src, dst = read_obj_vertices(DATA / "quad_hole.obj"), read_obj_vertices(inp)
+    assert src.shape == dst.shape == (168, 3) and not np.allclose(src, dst)
+    assert hidden(tmp_path) == []
+    bpy.ops.wm.read_homefile(use_empty=True)
+    from .conftest import mesh_quality
+    assert (mesh_quality(ext, import_obj(bpy, "m", inp)) > 0).all()
+
+
+def test_in_place_blend_keeps_every_object(bpy, ext, tmp_path):
+    import_obj(bpy, "quad_hole")
+    import_obj(bpy, "tilted_plane")
+    src = tmp_path / "in.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(src))
+    assert cli(ext).execute([str(src), "--in-place", "--quiet"]) == 0
+    bpy.ops.wm.open_mainfile(filepath=str(src))
+    assert sorted(o.name for o in bpy.data.objects) == ["quad_hole", "tilted_plane"]
+    assert bpy.data.objects["quad_hole"].eegt_last_run.inverted_after == 0
+    assert not (tmp_path / "in.blend1").exists() and hidden(tmp_path) == []

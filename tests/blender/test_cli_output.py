@@ -40,6 +40,16 @@ def test_unwritable_report_fails_before_computing_and_writes_no_output(bpy, ext,
     assert len(bpy.data.objects) == 0 and rep["objects"] == []
 
 
+@pytest.mark.parametrize("report", ["/proc/nope/r.json", "{tmp}/missing/r.json"])
+def test_unwritable_report_is_said_once(bpy, ext, tmp_path, capfd, report):
+    report = report.format(tmp=tmp_path)
+    code, rep = run(ext, DATA / "quad_hole.obj", "--report", report, "--quiet")
+    err = capfd.readouterr().err.strip().splitlines()
+    assert code == 2 and err == [f"eegt: cannot write report '{report}': no folder "
+                                 f"{os.path.dirname(report)}"]
+    assert rep["error"] == err[0] and rep["exit_code"] == 2
+
+
 def test_output_folder_missing_fails_before_computing(bpy, ext, tmp_path, capfd):
     code, _ = run(ext, DATA / "quad_hole.obj", "-o", tmp_path / "nope" / "out.obj")
     assert code == 2 and len(bpy.data.objects) == 0
