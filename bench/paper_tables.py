@@ -319,7 +319,7 @@ def machine_line(blender_version: str) -> str:
 
 def simd_level() -> str:
     """The best SIMD extension NumPy dispatches to on this CPU (results do not depend on it:
-    tests/test_reproducibility.py), so that readers can tell the machine class."""
+    tests/core/test_reproducibility.py), so that readers can tell the machine class."""
     try:
         from numpy._core import _multiarray_umath as mu
     except ImportError:

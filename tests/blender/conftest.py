@@ -14,9 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from meshdata import DATA as DATA  # tests/data, re-exported: the CLI tests import it from here
+from meshdata import path as mesh_path
 
 ROOT = Path(__file__).resolve().parents[2]
-DATA = ROOT / "tests" / "data"
 EXT_ID = "eegt_blender"
 MODULE = f"bl_ext.user_default.{EXT_ID}"
 
@@ -74,9 +75,10 @@ def bpy(ext, bpy_mod):
 
 
 def import_obj(bpy, name: str, path: Path | None = None):
-    """Import tests/data/NAME.obj with identity axes; the new object, selected and active."""
+    """Import tests/data/NAME.obj (or ``path``) with Blender's OBJ importer, identity axes;
+    the new object, selected and active."""
     bpy.ops.object.select_all(action="DESELECT") if bpy.context.view_layer.objects else None
-    bpy.ops.wm.obj_import(filepath=str(path or DATA / f"{name}.obj"), forward_axis="Y",
+    bpy.ops.wm.obj_import(filepath=str(path or mesh_path(name)), forward_axis="Y",
                           up_axis="Z")
     obj = bpy.context.selected_objects[0]
     bpy.context.view_layer.objects.active = obj

@@ -17,9 +17,10 @@ from core import (
 PAPER = EEGTParams.paper()
 
 
-@pytest.mark.parametrize(
-    "name", ["quad_hole", "tri_two_holes", "naca_deform", "mixed_quad_tri", "polygon_voronoi"]
-)
+@pytest.mark.parametrize("name", [
+    "quad_hole", "tri_two_holes", pytest.param("naca_deform", marks=pytest.mark.slow),
+    "mixed_quad_tri", "polygon_voronoi",
+])
 def test_paper_mode_untangles_shared_mesh_and_keeps_boundary_bit_identical(name):
     p, f = load2d(name)
     before = mesh_stats(p, f)

@@ -1,4 +1,5 @@
-"""Tests of core.optimize (foldover-free energy + L-BFGS, the lift), self-contained helpers."""
+"""Tests of core.optimize (foldover-free energy + L-BFGS, the lift); the boundary and the
+quality are computed here independently of the core, the meshes read by tests/meshdata.py."""
 
 from __future__ import annotations
 
@@ -6,24 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from meshdata import load_groups
 
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
-
-DATA = Path(__file__).parent / "data"
-
-
-def load_obj(path: Path) -> tuple[np.ndarray, dict[int, np.ndarray]]:
-    """Minimal OBJ reader: `v x y z`, `f i j k ...` (1-based)."""
-    verts: list[tuple[float, float]] = []
-    faces: dict[int, list[list[int]]] = {}
-    for line in path.read_text().splitlines():
-        parts = line.split()
-        if parts and parts[0] == "v":
-            verts.append((float(parts[1]), float(parts[2])))
-        elif parts and parts[0] == "f":
-            idx = [int(p.split("/")[0]) - 1 for p in parts[1:]]
-            faces.setdefault(len(idx), []).append(idx)
-    return np.array(verts), {n: np.array(f, dtype=np.int64) for n, f in faces.items()}
 
 
 def boundary_mask(n_nodes: int, groups: dict[int, np.ndarray]) -> np.ndarray:
@@ -59,7 +45,7 @@ def quality(points: np.ndarray, groups: dict[int, np.ndarray]) -> tuple[float, f
 
 
 def load_case(name: str) -> tuple[np.ndarray, dict[int, np.ndarray], np.ndarray]:
-    pts, groups = load_obj(DATA / f"{name}.obj")
+    pts, groups = load_groups(name)
     return pts, groups, ~boundary_mask(len(pts), groups)
 
 
@@ -206,14 +192,15 @@ def test_bit_identical_across_blas_threads() -> None:
     here = hashlib.sha256(out.tobytes()).hexdigest()
     code = (
         "import hashlib\n"
-        "from tests.test_global_untangle import GlobalOptions, load_case, untangle_global\n"
+        "from tests.core.test_global_untangle import GlobalOptions, load_case, untangle_global\n"
         "p, g, f = load_case('naca_deform')\n"
         "o, _ = untangle_global(p, g, f, GlobalOptions(polish_iter=0))\n"
         "print(hashlib.sha256(o.tobytes()).hexdigest())\n"
     )
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    root = Path(__file__).resolve().parent.parent
-    env["PYTHONPATH"] = str(root) + os.pathsep + env.get("PYTHONPATH", "")
+    root = Path(__file__).resolve().parents[2]
+    paths = [str(root), str(root / "tests"), env.get("PYTHONPATH", "")]  # tests: meshdata
+    env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
     res = subprocess.run(
         [sys.executable, "-c", code], cwd=root, env=env, capture_output=True, text=True, check=True
     )

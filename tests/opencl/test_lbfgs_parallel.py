@@ -6,16 +6,15 @@ Needs a float64 OpenCL device (pocl's CPU device is enough); skips, saying why, 
 
 from __future__ import annotations
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
+from meshdata import load2d
 
 from bench.meshgen import holed_square
 from core.faces import as_faceset
-from core.obj_io import read_obj
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize.energy import FoldoverEnergy, LiftEnergy
 from core.optimize.solver import lbfgs
@@ -26,8 +25,6 @@ from core.pipeline import free_nodes
 eo = pytest.importorskip("core.engine_opencl")
 lp = pytest.importorskip("core.optimize.solver_parallel")
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
-
-DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +40,7 @@ def solver(device):
 
 
 def mesh(name: str):
-    v, f = read_obj(DATA / f"{name}.obj")
-    p = np.ascontiguousarray(v[:, :2])
+    p, f = load2d(name)
     fs = as_faceset(f, len(p))
     return p, fs.by_arity(), free_nodes(len(p), fs)
 
@@ -319,6 +315,7 @@ def test_lift_from_an_invalid_point_restarts_and_stops_like_the_host(solver):
     assert a[1] == b[1] == 1 and np.array_equal(a[0], b[0]) and np.array_equal(b[0], v0)
 
 
+@pytest.mark.slow
 @settings(
     max_examples=6,
     deadline=None,
@@ -427,8 +424,7 @@ def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
     jittered mesh: the same limit bits, the same first step and skip count."""
     from core.optimize.state import skipped_trials
 
-    p, f = read_obj(DATA / "tri_two_holes.obj")
-    p = np.ascontiguousarray(p[:, :2])
+    p, f = load2d("tri_two_holes")
     fs = as_faceset(f, len(p))
     groups, free = fs.by_arity(), free_nodes(len(p), fs)
     en = LiftEnergy(p, groups, free)

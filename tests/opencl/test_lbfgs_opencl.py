@@ -6,14 +6,13 @@ Needs a float64 OpenCL device (pocl's CPU device is enough); skips, saying why, 
 from __future__ import annotations
 
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
+from meshdata import load2d
 
 from core.faces import as_faceset
-from core.obj_io import read_obj
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize.energy import LiftEnergy
 from core.optimize.solver import lbfgs
@@ -26,8 +25,6 @@ eo = pytest.importorskip("core.engine_opencl")
 lo = pytest.importorskip("core.optimize.solver_opencl")
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
-DATA = Path(__file__).resolve().parent / "data"
-
 
 @pytest.fixture(scope="module")
 def solver():
@@ -38,8 +35,7 @@ def solver():
 
 
 def mesh(name: str):
-    v, f = read_obj(DATA / f"{name}.obj")
-    p = np.ascontiguousarray(v[:, :2])
+    p, f = load2d(name)
     fs = as_faceset(f, len(p))
     groups = fs.by_arity()
     return p, fs, groups, free_nodes(len(p), fs)

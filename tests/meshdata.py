@@ -1,4 +1,11 @@
-"""Test meshes: our OBJ copies in tests/data and the paper's Table 1 mesh read from ../shared."""
+"""The tests' one mesh loader: the OBJ meshes of tests/data and the paper's Table 1 mesh,
+read in place from ../shared/meshes (third-party, never copied here).
+
+Every test folder imports it as ``meshdata`` (tests/conftest.py puts tests/ on ``sys.path``);
+a child Python process started by a test gets it with ``tests`` on its PYTHONPATH. The meshes
+are read with the core's own reader (core.obj_io); nothing is cached, so every call returns
+fresh arrays a test may change.
+"""
 
 from __future__ import annotations
 
@@ -7,27 +14,45 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core.faces import FaceSet
+from core.faces import FaceSet, as_faceset
 from core.obj_io import read_legacy_vtk, read_obj
 
-DATA = Path(__file__).resolve().parents[1] / "data"
-SHARED_MESQUITE = (
-    Path(__file__).resolve().parents[3]
-    / "shared"
-    / "meshes"
-    / "mesquite"
-    / "hole_in_square_tanglap.vtk"
-)
+ROOT = Path(__file__).resolve().parents[1]  # the repository (= the extension package)
+DATA = ROOT / "tests" / "data"
+SHARED_MESHES = ROOT.parent / "shared" / "meshes"
+SHARED_MESQUITE = SHARED_MESHES / "mesquite" / "hole_in_square_tanglap.vtk"
+
+# the bundled meshes: planar in z = 0 but tilted_plane (a plane in 3D), all tangled but the
+# naca_undeformed reference of naca_deform
+NAMES = tuple(sorted(f.stem for f in DATA.glob("*.obj")))
+PLANAR = ("quad_hole", "tri_two_holes", "naca_deform", "mixed_quad_tri", "polygon_voronoi",
+          "two_holes_twist")
+
+
+def path(name: str) -> Path:
+    """tests/data/NAME.obj (FileNotFoundError naming the bundled meshes when absent)."""
+    p = DATA / f"{name}.obj"
+    if not p.is_file():
+        raise FileNotFoundError(f"no test mesh {p} (bundled: {', '.join(NAMES)})")
+    return p
 
 
 def load(name: str) -> tuple[np.ndarray, FaceSet]:
-    """(N, 3) points and faces of tests/data/NAME.obj."""
-    return read_obj(DATA / f"{name}.obj")
+    """(N, 3) float64 points and the faces of tests/data/NAME.obj."""
+    return read_obj(path(name))
 
 
 def load2d(name: str) -> tuple[np.ndarray, FaceSet]:
+    """(N, 2) float64 points (x, y; C-contiguous copy) and the faces of tests/data/NAME.obj."""
     v, f = load(name)
-    return v[:, :2].copy(), f
+    return np.ascontiguousarray(v[:, :2]), f
+
+
+def load_groups(name: str) -> tuple[np.ndarray, dict[int, np.ndarray]]:
+    """(N, 2) points and the faces by arity, {n: (F_n, n) nodes}: the global stage's format
+    (``FaceSet.by_arity``, each group's faces in file order)."""
+    p, f = load2d(name)
+    return p, as_faceset(f, len(p)).by_arity()
 
 
 def mesquite_table1() -> tuple[np.ndarray, np.ndarray]:

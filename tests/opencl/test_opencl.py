@@ -9,18 +9,17 @@ from __future__ import annotations
 import sys
 import types
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
+from meshdata import load, load2d
 
 from bench.fuzz import merge_faces
 from core import backends
 from core.engine_numpy import NumpyEngine
 from core.faces import FaceSet, as_faceset
-from core.obj_io import read_obj
 from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 from core.planar import untangle_and_smooth_3d
@@ -28,7 +27,6 @@ from core.targets import prepare_targets
 
 eo = pytest.importorskip("core.engine_opencl")
 
-DATA = Path(__file__).resolve().parent / "data"
 PLANAR = ["quad_hole", "tri_two_holes", "naca_deform", "mixed_quad_tri", "polygon_voronoi"]
 PLANAR += ["two_holes_twist"]
 REL = 1e-12
@@ -55,11 +53,6 @@ def cpu_device(device) -> str:
 def _fresh_warnings(monkeypatch):
     """Each test sees the 'said once' fallback messages afresh."""
     monkeypatch.setattr(backends, "_warned", set())
-
-
-def load2d(name: str) -> tuple[np.ndarray, FaceSet]:
-    v, f = read_obj(DATA / f"{name}.obj")
-    return v[:, :2].copy(), f
 
 
 def assert_close(a: np.ndarray, b: np.ndarray, scale: float, what: str) -> None:
@@ -179,7 +172,7 @@ def test_naca_deform_outcome(device):
 
 
 def test_tilted_plane_3d(device):
-    v, f = read_obj(DATA / "tilted_plane.obj")
+    v, f = load("tilted_plane")
     ra = untangle_and_smooth_3d(v, f, backend="numpy")
     rb = untangle_and_smooth_3d(v, f, backend="opencl")
     assert rb.backend == "opencl"
@@ -313,6 +306,7 @@ def assert_same_run(ra, rb) -> None:
     )
 
 
+@pytest.mark.slow
 @settings(
     max_examples=100,
     deadline=None,
@@ -812,6 +806,7 @@ def test_targets_one_face_ngon_bit_identical(cpu_device, n):
     step_exact(pts, fs, free_nodes(len(pts), fs), EEGTParams(distance_refresh=2), 6, 4, T)
 
 
+@pytest.mark.slow
 @settings(
     max_examples=40,
     deadline=None,

@@ -4,23 +4,19 @@ for whole runs (the global stage runs on the host with sliding nodes)."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from meshdata import load2d
 
 from bench.fuzz import make_case
 from core import backends
 from core.boundary import boundary_motion
 from core.engine_numpy import NumpyEngine
 from core.faces import as_faceset
-from core.obj_io import read_obj
 from core.params import EEGTParams
 from core.pipeline import untangle_and_smooth
 
 eo = pytest.importorskip("core.engine_opencl")
-
-DATA = Path(__file__).resolve().parent / "data"
 
 
 @pytest.fixture(scope="module")
@@ -31,11 +27,6 @@ def cpu_device() -> str:
     if not eo._runtime().is_cpu:
         pytest.skip("bit-identity is promised on CPU devices")
     return eo._runtime().name
-
-
-def load2d(name: str):
-    v, f = read_obj(DATA / f"{name}.obj")
-    return v[:, :2].copy(), f
 
 
 def step_exact(p, f, fixed, params, n_untangle: int, n_smooth: int) -> int:

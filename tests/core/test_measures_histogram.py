@@ -1,24 +1,21 @@
 """bench.measures_histogram: its table and picture on a small bundled mesh."""
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 import pytest
+from meshdata import load2d
 
 from bench.measures_histogram import _names, draw, run_mesh, table
 from core import MEASURE_NAMES, quality
-from core.obj_io import read_obj
-
-DATA = Path(__file__).resolve().parent / "data"
 
 
 def test_quad_hole_table_and_png(tmp_path):
     r = run_mesh("quad_hole")
-    v, f = read_obj(DATA / "quad_hole.obj")
+    p, f = load2d("quad_hole")
     assert r["status"] == "untangled"
     for m in MEASURE_NAMES:
-        assert np.array_equal(r["values"]["before"][m], quality(v[:, :2], f, measure=m))
+        assert np.array_equal(r["values"]["before"][m], quality(p, f, measure=m))
     assert (r["values"]["after"]["scaled_jacobian"] > 0).all()
     text = table([r]).splitlines()
     assert len(text) == 2 + len(MEASURE_NAMES)
