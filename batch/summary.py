@@ -18,13 +18,17 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
+from .run_stats import KINDS, MESH, kind_of_objects
+
 EXIT_INTERRUPTED = 130
 # Worst first: an unfinished run, then nothing written, then a mesh left tangled.
 _SEVERITY = {1: 3, 2: 2, 3: 1, 0: 0}
 STATUSES = ("ok", "failed", "error", "timeout", "crashed", "skipped", "cancelled")
+# Each kind's stats columns (batch/run_stats.py), the mesh ones first as they always were,
+# then the kind of the file's run; a file fills the columns of its kind only.
 CSV_COLUMNS = ("input", "output", "status", "exit_code", "seconds", "objects",
-               "inverted_before", "inverted_after", "q_min_before", "q_min_after",
-               "q_avg_before", "q_avg_after", "backend", "host", "message")
+               *(c for k in KINDS.values() for c in k.columns()), "kind",
+               "backend", "host", "message")
 
 
 def file_code(status: str, exit_code: int | None) -> int:
@@ -47,17 +51,13 @@ def worst_exit(codes: Iterable[int]) -> int:
     return worst
 
 
-def combine(stats: list[dict[str, Any]], faces: list[int]) -> dict[str, Any] | None:
-    """One file's stats from its objects': inverted faces added up, the lowest q_min, q_avg
-    weighted by face count."""
-    pairs = [(s, n) for s, n in zip(stats, faces) if s]
-    if not pairs:
-        return None
-    total = sum(n for _, n in pairs)
-    avg = (sum(s["q_avg"] * n for s, n in pairs) / total if total
-           else sum(s["q_avg"] for s, _ in pairs) / len(pairs))
-    return {"n_inverted": sum(int(s["n_inverted"]) for s, _ in pairs),
-            "q_min": min(float(s["q_min"]) for s, _ in pairs), "q_avg": float(avg)}
+def combine(stats: list[dict[str, Any] | None], faces: list[int],
+            kind: str = "mesh") -> dict[str, Any] | None:
+    """One file's stats from its objects' stats blocks of a ``kind`` of run (see
+    ``run_stats``: mesh: inverted faces added up, the lowest q_min, q_avg weighted by face
+    count; uv: flipped / inverted / overlapping faces added up, distortion mean weighted by
+    face count, the worst distortion kept)."""
+    return KINDS[kind].combine(stats, faces)
 
 
 def file_entry(result: dict[str, Any]) -> dict[str, Any]:
@@ -67,13 +67,16 @@ def file_entry(result: dict[str, Any]) -> dict[str, Any]:
     faces = [int(o.get("n_faces") or 0) for o in objects]
     backends = sorted({o.get("backend") for o in objects if o.get("backend")})
     status = result["status"]
+    kind = kind_of_objects(objects)
+    stats = kind in KINDS
     return {
         "input": result["input"], "output": result.get("output"), "status": status,
         "exit_code": result.get("exit_code"),
         "written": bool(rep.get("written")) if rep else False,
         "started": result.get("started"), "seconds": result.get("seconds", 0.0),
-        "before": combine([o.get("before") for o in objects], faces),
-        "after": combine([o.get("after") for o in objects], faces),
+        "kind": kind,  # of the run: the keys of before / after (run_stats.KINDS)
+        "before": combine([o.get("before") for o in objects], faces, kind) if stats else None,
+        "after": combine([o.get("after") for o in objects], faces, kind) if stats else None,
         "backend": ",".join(backends), "host": result.get("host", ""),
         "pid": result.get("pid"),
         "message": result.get("message", ""), "objects": objects,
@@ -86,6 +89,16 @@ def counts(entries: Iterable[dict[str, Any]]) -> dict[str, int]:
     c = dict.fromkeys(STATUSES, 0)
     for e in entries:
         c[e["status"]] = c.get(e["status"], 0) + 1
+    return c
+
+
+def kinds(entries: Iterable[dict[str, Any]]) -> dict[str, int]:
+    """How many files ran each kind of run ("mesh", "uv": which stats their totals hold;
+    files with no object result are left out)."""
+    c: dict[str, int] = {}
+    for e in entries:
+        if e.get("kind"):
+            c[e["kind"]] = c.get(e["kind"], 0) + 1
     return c
 
 
@@ -136,23 +149,28 @@ class Progress:
 
 
 def csv_rows(entries: Iterable[dict[str, Any]]) -> list[list[Any]]:
-    """One CSV row per file (CSV_COLUMNS)."""
+    """One CSV row per file (CSV_COLUMNS): the stats columns of the file's kind filled."""
     rows = []
     for e in entries:
+        kind = e.get("kind", MESH.name if e.get("before") or e.get("after") else None)
         b, a = e.get("before") or {}, e.get("after") or {}
+        cells: list[Any] = []
+        for k in KINDS.values():
+            for s in k.stats:
+                for block in (b, a):
+                    cells.append(_cell(block.get(s.key), s.integer) if k.name == kind else "")
         rows.append([e["input"], e.get("output") or "", e["status"],
                      "" if e.get("exit_code") is None else e["exit_code"],
                      f"{e.get('seconds', 0.0):.3f}", len(e.get("objects") or []),
-                     b.get("n_inverted", ""), a.get("n_inverted", ""),
-                     _num(b.get("q_min")), _num(a.get("q_min")),
-                     _num(b.get("q_avg")), _num(a.get("q_avg")),
-                     e.get("backend", ""), e.get("host", ""),
+                     *cells, kind or "", e.get("backend", ""), e.get("host", ""),
                      " ".join(str(e.get("message") or "").split())])
     return rows
 
 
-def _num(x: Any) -> str:
-    return "" if x is None else f"{float(x):.6f}"
+def _cell(x: Any, integer: bool) -> Any:
+    if x is None:
+        return ""
+    return int(x) if integer else f"{float(x):.6f}"
 
 
 def csv_path_for(json_path: str) -> str:

@@ -331,7 +331,8 @@ def run(argv: list[str]) -> int:
             "mode": "dask" if ns.dask else "local", "jobs": None if ns.dask else p.jobs,
             "files_per_worker": ns.files_per_worker or 1,
             "dask": ns.dask, "timeout": ns.timeout, "outdir": p.outdir,
-            "interrupted": interrupted, "counts": summary.counts(files), "exit_code": code,
+            "interrupted": interrupted, "counts": summary.counts(files),
+            "kinds": summary.kinds(files), "exit_code": code,
             "files": files}
     written = ""
     if p.report:

@@ -51,9 +51,10 @@ import bpy
 from ..batch.inputs import replaces_input
 from ..core import EEGTParams
 from ..core.backends import warm_up
-from . import metrics, props, reference_input, report, runner, uv_props, uv_runner
+from . import metrics, props, reference_input, report, runner, uv_runner
 from .ops_untangle import _printer
 from .reference_input import ReferenceSource, from_file
+from .result import store_last_run
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_FAILED = 0, 1, 2, 3
 MESH_EXTENSIONS = (".obj", ".ply", ".stl")
@@ -567,7 +568,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
                                            device=device, use_pins=not ns.no_pinned,
                                            scope=ns.uv_scope, progress=progress,
                                            write_on_fail=not ns.no_write_on_fail)
-                uv_props.store_last_run(obj, res)
+                store_last_run(obj, res)
                 results.append(res)
                 measured.append(None)  # --metrics measure positions, which --uv leaves alone
                 print("EEGT " + res.line(), flush=True)
@@ -578,7 +579,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             ok = job.error is None and job.result is not None and \
                 job.result.status in ("valid", "untangled")
             res = runner.apply(obj, job, write=ok or not ns.no_write_on_fail)
-            runner.store_last_run(obj, res)
+            store_last_run(obj, res)
             results.append(res)
             measured.append(metrics.run_metrics(job, res, ns.metrics) if ns.metrics else None)
             print("EEGT " + res.line(), flush=True)

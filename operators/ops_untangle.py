@@ -19,6 +19,7 @@ from bpy.props import BoolProperty, EnumProperty, StringProperty
 from . import modes, props, runner
 from .prefs import resolve_backend
 from .reference_input import ReferenceSource
+from .result import store_last_run
 
 PRINT_EVERY = 1.0  # seconds: the longest a background run stays silent between progress lines
 
@@ -258,7 +259,7 @@ class MESH_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
         results = [runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
         LAST_RESULTS[:] = results
         for obj, res in zip(objs, results, strict=True):
-            runner.store_last_run(obj, res)
+            store_last_run(obj, res)
             self.report({"INFO"} if res.ok else {"WARNING"}, res.line())
         if not any(r.written for r in results):
             return {"CANCELLED"}

@@ -21,6 +21,7 @@ from ..core.uv_overlap import overlapping_faces
 from ..core.uv_untangle import flipped_faces
 from . import mesh_io, modes, props, uv_mesh, uv_props, uv_runner
 from .ops_untangle import EEGTRunMixin
+from .result import store_last_run
 
 # The results of the last UV run, newest last (read by the tests).
 LAST_RESULTS: list[uv_runner.UVObjectResult] = []
@@ -90,7 +91,7 @@ class UV_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
         results = [uv_runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
         LAST_RESULTS[:] = results
         for obj, res in zip(objs, results, strict=True):
-            uv_props.store_last_run(obj, res)
+            store_last_run(obj, res)
             self.report({"INFO"} if res.ok else {"WARNING"}, res.line())
         return {"FINISHED"} if any(r.written for r in results) else {"CANCELLED"}
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import bpy
 
 from . import props
+from .result import draw_last_run
 
 
 class _EEGTTab:
@@ -94,25 +95,8 @@ class VIEW3D_PT_eegt_last_run(_EEGTTab, bpy.types.Panel):
     bl_parent_id = "VIEW3D_PT_eegt"
 
     def draw(self, context: bpy.types.Context) -> None:
-        layout = self.layout
         obj = context.active_object
-        lr = getattr(obj, "eegt_last_run", None) if obj is not None else None
-        if lr is None or not lr.has_run:
-            layout.label(text="No run on the active object yet")
-            return
-        col = layout.column(align=True)
-        col.label(text=f"{obj.name}: {lr.status}")
-        if lr.status not in ("error", "cancelled"):
-            col.label(text=f"Inverted: {lr.inverted_before} -> {lr.inverted_after}")
-            col.label(text=f"q min: {lr.q_min_before:.3f} -> {lr.q_min_after:.3f}")
-            col.label(text=f"q avg: {lr.q_avg_before:.3f} -> {lr.q_avg_after:.3f}")
-            its = f"{lr.untangle_iterations} + {lr.smooth_iterations}"
-            if lr.global_iterations:
-                its = f"{lr.untangle_iterations} + {lr.global_iterations} + {lr.smooth_iterations}"
-            col.label(text=f"Iterations: {its}")
-            col.label(text=f"{lr.seconds:.2f} s, {lr.backend}")
-        else:
-            col.label(text=lr.message)
+        draw_last_run(self.layout, obj, "mesh", obj.name if obj is not None else "")
 
 
 classes = (VIEW3D_PT_eegt, VIEW3D_PT_eegt_params, VIEW3D_PT_eegt_last_run)

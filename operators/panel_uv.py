@@ -6,6 +6,7 @@ from __future__ import annotations
 import bpy
 
 from . import props
+from .result import draw_last_run
 
 
 class _EEGTUVTab:
@@ -71,25 +72,10 @@ class IMAGE_PT_eegt_uv_last_run(_EEGTUVTab, bpy.types.Panel):
     bl_parent_id = "IMAGE_PT_eegt_uv"
 
     def draw(self, context: bpy.types.Context) -> None:
-        layout = self.layout
         obj = context.active_object
         lr = getattr(obj, "eegt_last_uv_run", None) if obj is not None else None
-        if lr is None or not lr.has_run:
-            layout.label(text="No UV run on the active object yet")
-            return
-        col = layout.column(align=True)
-        col.label(text=f"{obj.name} '{lr.uv_map}': {lr.status}")
-        if lr.status in ("error", "cancelled"):
-            col.label(text=lr.message)
-            return
-        col.label(text=f"Flipped: {lr.flipped_before} -> {lr.flipped_after}")
-        col.label(text=f"Inverted: {lr.inverted_before} -> {lr.inverted_after}")
-        col.label(text=f"Overlapping: {lr.overlapping_before} -> {lr.overlapping_after}")
-        col.label(text=f"Distortion mean: {lr.distortion_mean_before:.3f} -> "
-                       f"{lr.distortion_mean_after:.3f}")
-        col.label(text=f"Distortion worst: {lr.distortion_worst_before:.3f} -> "
-                       f"{lr.distortion_worst_after:.3f}")
-        col.label(text=f"{lr.seconds:.2f} s")
+        title = f"{obj.name} '{lr.uv_map}'" if lr is not None else ""
+        draw_last_run(self.layout, obj, "uv", title)
 
 
 def _menu_uv(self: bpy.types.Menu, _context: bpy.types.Context) -> None:

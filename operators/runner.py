@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import bpy
 import numpy as np
@@ -24,6 +24,7 @@ from ..core.reference_shapes import reference_targets, reference_to_2d
 from ..core.topology import EdgeInfo
 from . import mesh_io, reference_input
 from .reference_input import ReferenceSource
+from .result import RunResult
 
 Progress = Callable[[int, str, Any], bool]
 
@@ -61,30 +62,13 @@ def stats_from_quality(q: np.ndarray) -> dict[str, Any]:
 
 
 @dataclass
-class ObjectResult:
-    """Outcome of one object's run, for reports, the sidebar and the JSON report."""
+class ObjectResult(RunResult):
+    """Outcome of one object's mesh run (``result.RunResult``, stats kind "mesh":
+    n_inverted / q_min / q_avg)."""
 
-    object: str
-    mesh: str = ""
-    status: str = "error"  # valid | untangled | failed | cancelled | error
-    message: str = ""
-    written: bool = False
-    before: dict[str, Any] | None = None
-    after: dict[str, Any] | None = None
-    untangle_iterations: int = 0
-    smooth_iterations: int = 0
-    global_iterations: int = 0
-    seconds: float = 0.0
-    backend: str = ""
+    KIND: ClassVar[str] = "mesh"
+
     n_nodes: int = 0
-    n_faces: int = 0
-    n_free: int = 0
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def ok(self) -> bool:
-        """True when the mesh ended with no inverted face."""
-        return self.status in ("valid", "untangled")
 
     def claim_no_more_than_result(self) -> None:
         """Make a 'valid' / 'untangled' status 'failed' when the kept or written positions
@@ -123,20 +107,6 @@ class ObjectResult:
             return (f"{self.untangle_iterations}+{self.global_iterations}+"
                     f"{self.smooth_iterations} iterations (untangle+optimize+smooth)")
         return f"{self.untangle_iterations}+{self.smooth_iterations} iterations"
-
-    def as_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the per-object entry of the CLI report)."""
-        return {
-            "object": self.object, "mesh": self.mesh, "status": self.status,
-            "message": self.message, "written": self.written,
-            "before": self.before, "after": self.after,
-            "untangle_iterations": self.untangle_iterations,
-            "smooth_iterations": self.smooth_iterations,
-            "global_iterations": self.global_iterations,
-            "seconds": round(self.seconds, 6), "backend": self.backend,
-            "n_nodes": self.n_nodes, "n_faces": self.n_faces, "n_free": self.n_free,
-            "notes": list(self.notes),
-        }
 
 
 @dataclass
@@ -455,28 +425,6 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
         out.after = out.before if job.new_co is not None else out.after
     out.claim_no_more_than_result()
     return out
-
-
-def store_last_run(obj: bpy.types.Object, result: ObjectResult) -> None:
-    """Keep the stats of the last run on the object, for the sidebar."""
-    lr = getattr(obj, "eegt_last_run", None)
-    if lr is None:
-        return
-    lr.has_run = True
-    lr.status = result.status
-    lr.message = result.line()
-    lr.backend = result.backend
-    b, a = result.before or {}, result.after or {}
-    lr.inverted_before = int(b.get("n_inverted", 0))
-    lr.inverted_after = int(a.get("n_inverted", 0))
-    lr.q_min_before = float(b.get("q_min", 0.0))
-    lr.q_min_after = float(a.get("q_min", 0.0))
-    lr.q_avg_before = float(b.get("q_avg", 0.0))
-    lr.q_avg_after = float(a.get("q_avg", 0.0))
-    lr.untangle_iterations = result.untangle_iterations
-    lr.smooth_iterations = result.smooth_iterations
-    lr.global_iterations = result.global_iterations
-    lr.seconds = result.seconds
 
 
 def run_object(obj: bpy.types.Object, params: EEGTParams, *, backend: str = "numpy",

@@ -77,23 +77,6 @@ class EEGT_PG_uv_last_run(bpy.types.PropertyGroup):
     seconds: FloatProperty(default=0.0)  # type: ignore[valid-type]
 
 
-def store_last_run(obj: bpy.types.Object, result: Any) -> None:
-    """Keep a UV run's outcome (``uv_runner.UVObjectResult``) on the object."""
-    lr = getattr(obj, "eegt_last_uv_run", None)
-    if lr is None:
-        return
-    lr.has_run = True
-    lr.status, lr.message, lr.uv_map = result.status, result.line(), result.uv_map
-    b, a = result.before or {}, result.after or {}
-    for key in ("flipped", "inverted", "overlapping"):
-        setattr(lr, f"{key}_before", int(b.get(key, 0)))
-        setattr(lr, f"{key}_after", int(a.get(key, 0)))
-    for key in ("distortion_mean", "distortion_worst"):
-        setattr(lr, f"{key}_before", float(b.get(key, 0.0)))
-        setattr(lr, f"{key}_after", float(a.get(key, 0.0)))
-    lr.seconds = result.seconds
-
-
 classes = (EEGT_PG_uv_settings, EEGT_PG_uv_last_run)
 
 

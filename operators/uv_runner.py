@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import ClassVar
 
 import bpy
 import numpy as np
@@ -29,41 +29,26 @@ from ..core.uv_untangle import (
     untangle_uv,
 )
 from . import mesh_io, runner, uv_mesh
+from .result import RunResult
 
 TARGETS = ("3D", "REGULAR")  # target shape of a UV face: its 3D face, or the regular polygon
 
 
 @dataclass
-class UVObjectResult:
-    """Outcome of one object's UV run, for reports, the sidebar and the JSON report."""
+class UVObjectResult(RunResult):
+    """Outcome of one object's UV run (``result.RunResult``, stats kind "uv": flipped /
+    inverted / overlapping faces, distortion mean and worst; ``n_faces``: the faces
+    worked on). ``ok``: the selection ended with no flipped or inverted face."""
 
-    object: str
-    mesh: str = ""
+    KIND: ClassVar[str] = "uv"
+
     uv_map: str = ""
-    status: str = "error"  # valid | untangled | failed | cancelled | error
-    message: str = ""
-    written: bool = False
-    before: dict[str, Any] | None = None
-    after: dict[str, Any] | None = None
     targets: str = "3D"
     islands: int = 0
     islands_run: int = 0
     mirrored_islands: int = 0
-    untangle_iterations: int = 0
-    global_iterations: int = 0
-    smooth_iterations: int = 0
-    seconds: float = 0.0
-    backend: str = ""
     n_uv_vertices: int = 0
-    n_faces: int = 0
-    n_free: int = 0
     target_fallback: int = 0
-    notes: list[str] = field(default_factory=list)
-
-    @property
-    def ok(self) -> bool:
-        """True when the selection ended with no flipped or inverted face."""
-        return self.status in ("valid", "untangled")
 
     def line(self) -> str:
         """The one report line of this object."""
@@ -89,22 +74,6 @@ class UVObjectResult:
         if self.notes:
             text += "; " + "; ".join(self.notes)
         return text
-
-    def as_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the per-object entry of the CLI report with ``--uv``)."""
-        return {
-            "object": self.object, "mesh": self.mesh, "uv_map": self.uv_map,
-            "status": self.status, "message": self.message, "written": self.written,
-            "before": self.before, "after": self.after, "targets": self.targets,
-            "islands": self.islands, "islands_run": self.islands_run,
-            "mirrored_islands": self.mirrored_islands,
-            "untangle_iterations": self.untangle_iterations,
-            "global_iterations": self.global_iterations,
-            "smooth_iterations": self.smooth_iterations,
-            "seconds": round(self.seconds, 6), "backend": self.backend,
-            "n_uv_vertices": self.n_uv_vertices, "n_faces": self.n_faces, "n_free": self.n_free,
-            "target_fallback": self.target_fallback, "notes": list(self.notes),
-        }
 
 
 @dataclass

@@ -99,3 +99,59 @@ def test_reports_json_and_csv_written_side_by_side(tmp_path):
 def test_csv_path_for_names_without_json_extension():
     assert summary.csv_path_for("a/report.JSON") == "a/report.csv"
     assert summary.csv_path_for("a/report") == "a/report.csv"
+
+
+def uv_obj(name, n_faces, before, after, status="untangled"):
+    keys = ("flipped", "inverted", "overlapping", "distortion_mean", "distortion_worst")
+    return {"kind": "uv", "object": name, "uv_map": "UVMap", "status": status,
+            "n_faces": n_faces, "backend": "numpy",
+            "before": {"n_faces": n_faces, "zero_area": 0, **dict(zip(keys, before))},
+            "after": {"n_faces": n_faces, "zero_area": 0, **dict(zip(keys, after))}}
+
+
+def test_file_entry_of_a_uv_run_combines_uv_stats():
+    e = summary.file_entry(result("ok", 0, [
+        uv_obj("A", 100, (10, 12, 20, 0.5, 0.0), (0, 0, 0, 0.9, 0.6)),
+        uv_obj("B", 300, (5, 6, 8, 0.7, 0.1), (0, 0, 2, 0.8, 0.3))]))
+    assert e["kind"] == "uv"
+    assert e["before"] == {"flipped": 15, "inverted": 18, "overlapping": 28,
+                           "distortion_mean": pytest.approx(0.65), "distortion_worst": 0.0}
+    assert e["after"] == {"flipped": 0, "inverted": 0, "overlapping": 2,
+                          "distortion_mean": pytest.approx(0.825), "distortion_worst": 0.3}
+
+
+def test_file_entry_kind_of_mesh_runs_and_of_a_uv_entry_without_kind():
+    e = summary.file_entry(result("ok", 0, [obj("A", 4, (1, 0.0, 0.5), (0, 0.7, 0.9))]))
+    assert e["kind"] == "mesh"
+    old = uv_obj("A", 4, (1, 1, 0, 0.5, 0.1), (0, 0, 0, 0.9, 0.7))
+    del old["kind"]  # a report of an older worker: its stats tell the kind
+    assert summary.file_entry(result("ok", 0, [old]))["kind"] == "uv"
+    assert summary.file_entry(result("timeout", None))["kind"] is None
+    entries = [summary.file_entry(result("ok", 0, [obj("A", 4, (1, 0.0, 0.5), (0, 0.7, 0.9))])),
+               summary.file_entry(result("ok", 0, [old])),
+               summary.file_entry(result("ok", 0, [old])),
+               summary.file_entry(result("timeout", None))]
+    assert summary.kinds(entries) == {"mesh": 1, "uv": 2}
+
+
+def test_reports_csv_has_the_uv_columns_beside_the_mesh_ones(tmp_path):
+    entries = [summary.file_entry(result("ok", 0, [obj("A", 4, (1, 0.0, 0.5), (0, 0.7, 0.9))])),
+               summary.file_entry(result("ok", 0, [
+                   uv_obj("U", 4, (2, 3, 4, 0.25, 0.0), (0, 0, 1, 0.75, 0.5))]))]
+    csv_path = summary.write_reports(str(tmp_path / "r.json"), {"files": entries})
+    rows = list(csv.reader(open(csv_path, newline="")))
+    head = rows[0]
+    for col in ("kind", "inverted_before", "q_avg_after", "uv_flipped_before",
+                "uv_flipped_after", "uv_inverted_before", "uv_inverted_after",
+                "uv_overlapping_before", "uv_overlapping_after",
+                "uv_distortion_mean_before", "uv_distortion_mean_after",
+                "uv_distortion_worst_before", "uv_distortion_worst_after"):
+        assert col in head
+    mesh, uv = (dict(zip(head, r)) for r in rows[1:])
+    assert mesh["kind"] == "mesh" and mesh["inverted_before"] == "1"
+    assert mesh["uv_flipped_before"] == "" and mesh["q_min_after"] == "0.700000"
+    assert uv["kind"] == "uv" and uv["inverted_before"] == "" and uv["q_avg_before"] == ""
+    assert (uv["uv_flipped_before"], uv["uv_flipped_after"]) == ("2", "0")
+    assert (uv["uv_inverted_before"], uv["uv_overlapping_after"]) == ("3", "1")
+    assert uv["uv_distortion_mean_after"] == "0.750000"
+    assert uv["uv_distortion_worst_after"] == "0.500000"

@@ -284,3 +284,40 @@ def test_served_files_match_fresh_runs_and_each_leaves_its_report(bpy, ext, tmp_
         fresh = tmp_path / "fresh.obj"
         assert cli(ext).execute([t["input"], "-o", str(fresh), "--quiet", *t["args"]]) == 0
         assert fresh.read_bytes() == open(t["output"], "rb").read()
+
+
+def test_uv_batch_files_are_summed_up_with_uv_stats(bpy, ext, tmp_path):
+    """``eegt DIR -o OUT --uv``: each worker's UV report (served in turn, as a batch's
+    worker Blender does) goes into the batch's JSON + CSV summary with its UV stats (it
+    once raised KeyError 'q_avg')."""
+    from .uvtools import tangled
+    worker, summary = (importlib.import_module(f"{ext.__name__}.batch.{m}")
+                       for m in ("worker", "summary"))
+    tasks = []
+    for i, kind in enumerate(("sphere", "organic")):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        tangled(bpy, kind, "jitter").name = f"{kind.title()}UV"
+        path = tmp_path / f"{kind}.blend"
+        bpy.ops.wm.save_as_mainfile(filepath=str(path))
+        tasks.append({"index": i, "input": str(path), "output": str(tmp_path / "out" /
+                                                                      f"{kind}.blend"),
+                      "args": ["--uv"]})
+    (tmp_path / "out").mkdir()
+    lines = [json.dumps(worker.file_args(t, str(tmp_path / f"{t['index']}.json"))) + "\n"
+             for t in tasks]
+    assert batch(ext).serve(lines) == 0
+    entries = []
+    for t in tasks:
+        rep = json.loads((tmp_path / f"{t['index']}.json").read_text())
+        assert rep["exit_code"] == 0 and all(o["kind"] == "uv" for o in rep["objects"])
+        entries.append(summary.file_entry(worker._from_report(t, rep, 1.0, 0, "")))
+    for e, name in zip(entries, ("SphereUV", "OrganicUV")):
+        assert e["status"] == "ok" and e["kind"] == "uv"
+        assert [o["object"] for o in e["objects"]] == [name]
+        assert e["before"]["inverted"] > 0 and e["after"]["inverted"] == 0
+        assert e["after"]["flipped"] == 0 and "q_avg" not in e["after"]
+    csv_path = summary.write_reports(str(tmp_path / "r.json"), {"files": entries})
+    rows = list(csv.reader(open(csv_path, newline="")))
+    got = [dict(zip(rows[0], r)) for r in rows[1:]]
+    assert [r["kind"] for r in got] == ["uv", "uv"]
+    assert all(int(r["uv_inverted_before"]) > 0 and r["uv_inverted_after"] == "0" for r in got)

@@ -255,7 +255,7 @@ def test_cli_without_metrics_keeps_the_report_unchanged(bpy, ext, tmp_path):
                                       "--quiet"]) == 0
     (o,) = json.loads(rep.read_text())["objects"]
     assert "metrics" not in o
-    assert set(o) == {"object", "mesh", "status", "message", "written", "before", "after",
+    assert set(o) == {"kind", "object", "mesh", "status", "message", "written", "before", "after",
                       "untangle_iterations", "smooth_iterations", "global_iterations",
                       "seconds", "backend", "n_nodes", "n_faces", "n_free", "notes"}
 
