@@ -19,10 +19,54 @@ from .quality import Stats, group_quality, stats_of
 from .targets import Targets
 from .transform import _edge_sum, group_transform_delta
 
-__all__ = ["NumpyEngine"]
+__all__ = ["NumpyEngine", "distance_weight", "quality_weight", "step_size", "stitch"]
 
 _DIST_FLOOR = 1e-3  # d_j never below this fraction of the mean edge length
 _DIRECT_PAIRS = 1 << 14  # centroid/fixed-node pairs up to which distances skip the quadtree
+
+
+# -- the paper's terms (twins in opencl_kernels.cl under the same names) ----------------------
+def step_size(q: np.ndarray, a: float) -> np.ndarray:
+    """lambda = a (1 - q) per element (paper eq. 17): a good element moves little."""
+    return a * (1.0 - q)
+
+
+def distance_weight(d: np.ndarray, lbar: float, c: float) -> np.ndarray:
+    """The distance weight f(d) = (lbar / d)^c (paper eq. 20): elements near the fixed
+    boundary pull harder. d is clamped to _DIST_FLOOR lbar, so a centroid on a fixed node
+    weighs a finite amount."""
+    return power(lbar / np.maximum(d, _DIST_FLOOR * lbar), c)
+
+
+def quality_weight(q: np.ndarray, eta: float, inverted_weight: float) -> np.ndarray:
+    """The quality weight g(q) = (1 - q)^eta, `inverted_weight` (the paper's 5) for an
+    inverted element, q = 0 (paper eq. 21): bad elements pull harder. q may round to
+    1 + 1 ulp on a regular face, so 1 - q is clamped at 0 (a negative base gives NaN for
+    eta not an integer)."""
+    return np.where(q > 0, power(np.maximum(1.0 - q, 0.0), eta), inverted_weight)
+
+
+def stitch(
+    corner_nodes: np.ndarray,
+    wdx: np.ndarray,
+    wdy: np.ndarray,
+    w: np.ndarray,
+    free: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The stitching (paper eq. 18): every free node moves by the weighted mean
+    sum_j w_j d_j / sum_j w_j of its corners' moves d_j (`wdx`, `wdy`: w_j d_j, `w`: w_j, one
+    per corner, the corners' nodes in `corner_nodes`); a node whose weights sum to 0 stays.
+    np.bincount adds each node's corners in corner order (the OpenCL gather's order)."""
+    n = free.size
+    sx = np.bincount(corner_nodes, wdx, minlength=n)
+    sy = np.bincount(corner_nodes, wdy, minlength=n)
+    sw = np.bincount(corner_nodes, w, minlength=n)
+    moving = free & (sw > 0)
+    dx = np.zeros(n)
+    dy = np.zeros(n)
+    np.divide(sx, sw, out=dx, where=moving)
+    np.divide(sy, sw, out=dy, where=moving)
+    return dx, dy
 
 
 def edge_lengths(x: np.ndarray, y: np.ndarray, groups) -> tuple[float, float]:
@@ -174,10 +218,8 @@ class NumpyEngine:
         if self._distance is _UNIFORM:  # no anchors: every element weighs the same
             self.inv_d_pow = [np.ones(g.size) for g in self.groups]
             return
-        c = self.params.c
-        floor = _DIST_FLOOR * self.lbar
         cx, cy = self._centroids() if centroids is None else centroids
-        f = power(self.lbar / np.maximum(self._distance.query(cx, cy), floor), c)
+        f = distance_weight(self._distance.query(cx, cy), self.lbar, self.params.c)
         self.inv_d_pow = np.split(f, np.cumsum([g.size for g in self.groups])[:-1])
 
     def _quality_all(self) -> list[np.ndarray]:
@@ -192,29 +234,19 @@ class NumpyEngine:
         return stats_of(self.q)
 
     def _node_moves(self) -> tuple[np.ndarray, np.ndarray]:
-        """Weighted mean of the transformed-corner moves at every free node (eq. 18)."""
+        """Every free node's move: each element's transform (stretch and shrink, step size
+        lambda) weighted by w = f(d) g(q) (eq. 20-21), then stitched (eq. 18)."""
         p = self.params
         wx, wy, ww = [], [], []
         for g, q, f, t in zip(self.groups, self.q, self.inv_d_pow, self.group_targets):
             X, Y = self._gather(g)
-            DX, DY = group_transform_delta(X, Y, p.a * (1.0 - q), p.scaling, t)
-            # q may round to 1 + 1 ulp on a regular face: 1 - q < 0 gives NaN for eta not integer
-            gq = np.where(q > 0, power(np.maximum(1.0 - q, 0.0), p.eta), p.inverted_weight)
-            w = f * gq
+            DX, DY = group_transform_delta(X, Y, step_size(q, p.a), p.scaling, t)
+            w = f * quality_weight(q, p.eta, p.inverted_weight)
             wx.append((DX * w).ravel())
             wy.append((DY * w).ravel())
             ww.append(np.broadcast_to(w, DX.shape).ravel())
         cat = np.concatenate if len(self.groups) > 1 else (lambda parts: parts[0])
-        n = self.n_nodes
-        sx = np.bincount(self.corner_nodes, cat(wx), minlength=n)
-        sy = np.bincount(self.corner_nodes, cat(wy), minlength=n)
-        sw = np.bincount(self.corner_nodes, cat(ww), minlength=n)
-        moving = self.free & (sw > 0)
-        dx = np.zeros(n)
-        dy = np.zeros(n)
-        np.divide(sx, sw, out=dx, where=moving)
-        np.divide(sy, sw, out=dy, where=moving)
-        return dx, dy
+        return stitch(self.corner_nodes, cat(wx), cat(wy), cat(ww), self.free)
 
     def step(self, phase: str) -> Stats:
         """One transform + stitch iteration; in 'smooth', nodes of new inverted faces go back.

@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import re
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,16 +39,26 @@ from .quality import Stats, corner_constants
 from .targets import Targets
 from .transform import stretch_radius
 
-__all__ = ["ENV_DEVICE", "OpenCLEngine", "available", "list_devices", "select_device"]
+__all__ = [
+    "ENV_DEVICE",
+    "OpenCLEngine",
+    "available",
+    "cl_defines",
+    "fpmath_options",
+    "kernel_source",
+    "list_devices",
+    "program_source",
+    "select_device",
+]
 
 ENV_DEVICE = "EEGT_OPENCL_DEVICE"
 KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
+COMMON_FILE = Path(__file__).with_name("cl_common.cl")  # in front of every program
 _NO_PLATFORM_HINT = (
     "install an OpenCL driver (e.g. pocl-opencl-icd), or register one with an .icd file "
     "in /etc/OpenCL/vendors or a folder named by OCL_ICD_VENDORS"
 )
 _WG = 64  # work-group size for face and node kernels
-_BLOCK = 128  # NumPy's pairwise_sum base-case length (PW_BLOCKSIZE)
 _NCACHE = 8  # nearest boundary nodes cached per face for the distance refresh
 _NGON_MAXN = 16  # private-array size of the generic n-gon kernels (bigger faces: own build)
 _TREE_LBAR = 8  # where lbar sits in OpenCLEngine.tree_args (the distance floor follows it)
@@ -66,9 +77,17 @@ def _import_cl():
     return cl
 
 
+def program_source(path: Path) -> str:
+    """The OpenCL C source of a program: the shared header (cl_common.cl: fpmath, NumPy's
+    pairwise sums), then the file's own text, its lines numbered as in the file (a build
+    error names the file's line)."""
+    return (f'#line 1 "{COMMON_FILE.name}"\n{COMMON_FILE.read_text()}\n'
+            f'#line 1 "{path.name}"\n{path.read_text()}')
+
+
 def kernel_source() -> str:
-    """The OpenCL C source of every kernel."""
-    return KERNEL_FILE.read_text()
+    """The OpenCL C source of the EEGT kernels."""
+    return program_source(KERNEL_FILE)
 
 
 def select_device(spec: str | None) -> None:
@@ -225,9 +244,24 @@ def _runtime() -> _Runtime:
     return rt
 
 
+def cl_defines(values: Mapping[str, float]) -> list[str]:
+    """Build options `-DNAME=value` that give the kernels the host's constants: integers in
+    decimal, floats as hex floats (the exact double, no decimal round trip)."""
+    out = []
+    for name, v in values.items():
+        if isinstance(v, (bool, int, np.integer)):
+            out.append(f"-D{name}={int(v)}")
+        elif np.isfinite(v):
+            out.append(f"-D{name}=({float(v).hex()})")
+        else:
+            raise ValueError(f"{name} = {v}: not a finite constant")
+    return out
+
+
 def fpmath_options() -> list[str]:
-    """Build options defining core.fpmath's constants for the kernels' log / exp, as hex
-    floats: the kernel computes with the exact doubles the host's fpmath uses."""
+    """Build options defining core.fpmath's constants, which every program is built with:
+    the log / exp constants (hex floats: the kernels compute with the exact doubles the
+    host's fpmath uses), power's fast-path codes and NumPy's summation cut points."""
 
     def hexes(values) -> str:
         return ",".join(float(v).hex() for v in values)
@@ -239,18 +273,15 @@ def fpmath_options() -> list[str]:
         "FP_INV_LN2": fpmath._INV_LN2,
         "FP_EXP_MAX": fpmath._EXP_MAX,
         "FP_EXP_MIN": fpmath._EXP_MIN,
+        "PW_BLOCK": fpmath.PAIRWISE_BLOCK,
+        "CHUNK": fpmath.REDUCE_CHUNK,
+        **fpmath.POW_CODES,
     }
     return [
         f"-DFP_LOG_C={hexes(fpmath.LOG_COEFFS)}",
         f"-DFP_EXP_C={hexes(fpmath.EXP_COEFFS)}",
-        *(f"-D{name}=({float(v).hex()})" for name, v in scalars.items()),
+        *cl_defines(scalars),
     ]
-
-
-def _pow_mode(e: float) -> int:
-    """How core.fpmath.power evaluates x ** e: NumPy's exact fast paths (1-5), else 0,
-    exp(e log x) by fpmath's algorithm (kernel np_pow)."""
-    return {2.0: 1, 1.0: 2, 0.0: 3, 0.5: 4, -1.0: 5}.get(float(e), 0)
 
 
 class _SumPlan:
@@ -266,7 +297,7 @@ class _SumPlan:
         bounds = [0]
 
         def tree(off: int, m: int):  # a block's index, or (left, right)
-            if m <= _BLOCK:
+            if m <= fpmath.PAIRWISE_BLOCK:
                 bounds.append(off + m)
                 return len(bounds) - 2
             m2 = m // 2 - (m // 2) % 8
@@ -407,7 +438,7 @@ class OpenCLEngine:
             np.float64(self.lbar),
             np.float64(_DIST_FLOOR * self.lbar),
             np.float64(params.c),
-            np.int32(_pow_mode(params.c)),
+            np.int32(fpmath.power_code(params.c)),
             # per-face nearest-node cache: nodes, leaf level (-1: empty), leaf cell, q0 and gap
             empty(4 * _NCACHE * nf),
             buf(np.full((nf, 4), -1, dtype=np.int32)),
@@ -495,7 +526,7 @@ class OpenCLEngine:
                     self.wf,
                     np.float64(params.a),
                     np.float64(params.eta),
-                    np.int32(_pow_mode(params.eta)),
+                    np.int32(fpmath.power_code(params.eta)),
                     np.float64(params.inverted_weight),
                     area,
                     np.int32(refresh),

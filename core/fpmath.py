@@ -16,11 +16,15 @@ from functools import lru_cache
 import numpy as np
 
 __all__ = [
+    "PAIRWISE_BLOCK",
+    "POW_CODES",
+    "REDUCE_CHUNK",
     "atan2",
     "exp",
     "float64_copy",
     "log",
     "power",
+    "power_code",
     "regular_corner",
     "sin_cos",
     "tan_pi_over",
@@ -35,6 +39,23 @@ LOG_COEFFS = tuple(1.0 / (2 * k + 1) for k in range(12))
 # exp(r) = sum_j r^j / j!, |r| <= ln(2) / 2
 EXP_COEFFS = tuple(1.0 / math.factorial(j) for j in range(14))
 _EXP_MAX, _EXP_MIN = 709.782712893384, -745.1332191019412
+# `power`'s exact fast paths (what NumPy's `x ** e` computes for these e), as codes for the
+# OpenCL kernels' np_pow; POW_GENERAL: exp(e log x)
+POW_CODES = {"POW_GENERAL": 0, "POW_SQUARE": 1, "POW_IDENTITY": 2, "POW_ONE": 3, "POW_SQRT": 4,
+             "POW_RECIPROCAL": 5}
+_POW_FAST = {2.0: "POW_SQUARE", 1.0: "POW_IDENTITY", 0.0: "POW_ONE", 0.5: "POW_SQRT",
+             -1.0: "POW_RECIPROCAL"}
+# NumPy's float64 add.reduce order, which the OpenCL kernels reproduce: buffers of
+# REDUCE_CHUNK values in order (np.getbufsize()'s default), each by pairwise_sum, which
+# halves a run at n / 2 rounded down to a multiple of 8 down to blocks of at most
+# PAIRWISE_BLOCK values (NumPy's PW_BLOCKSIZE), added with 8 interleaved partial sums
+PAIRWISE_BLOCK = 128
+REDUCE_CHUNK = 8192
+
+
+def power_code(e: float) -> int:
+    """How `power` evaluates x ** e: a POW_CODES value (a fast path, or POW_GENERAL)."""
+    return POW_CODES[_POW_FAST.get(float(e), "POW_GENERAL")]
 
 
 def float64_copy(values) -> np.ndarray:

@@ -1,110 +1,28 @@
 // EEGT iteration kernels (float64). Every formula is written in the same operation order as
 // the NumPy reference (core/quality.py, core/transform.py, core/engine_numpy.py) and FP
 // contraction is off, so results match NumPy to the last bit (no math library calls: powers
-// are core.fpmath's algorithm, sums are added in NumPy's order, both below). Faces come in
-// arity groups laid out like NumPy's (n, F) arrays: corner k of face j of a group is
-// nodes[k * F + j]. Host-side defines:
-//   MAXN  largest arity of a generic n-gon group (private array size)
-//   NCACHE, FP_*  the distance cache size and core.fpmath's constants (see below)
+// are core.fpmath's algorithm, sums are added in NumPy's order; both are in cl_common.cl,
+// which the loader puts in front of this file). Faces come in arity groups laid out like
+// NumPy's (n, F) arrays: corner k of face j of a group is nodes[k * F + j].
+// Host-side defines (core/engine_opencl.py; a missing one stops the build):
+//   MAXN    largest arity of a generic n-gon group (private array size)
+//   NCACHE  nearest boundary nodes cached per face (the distance refresh)
+//   FP_*, POW_*, PW_BLOCK, CHUNK  core.fpmath's constants (fpmath_options(); cl_common.cl)
 // Parameters are kernel arguments (one build per device serves every parameter set); the
-// pow modes say how core.fpmath.power evaluates x ** c and x ** eta (0 exp(e log x), 1 square,
-// 2 identity, 3 ones, 4 sqrt, 5 reciprocal: NumPy's exact fast paths for those exponents).
+// pow codes (core.fpmath.POW_CODES) say how core.fpmath.power evaluates x ** c and x ** eta:
+// NumPy's exact fast paths for e in {2, 1, 0, 0.5, -1}, else exp(e log x).
+// The paper's terms: step_size (lambda, eq. 17), stretch_vector / TRI_PAPER_STRETCH (the
+// stretch), transform_moves (stretch and shrink), distance_weight (f, eq. 20),
+// quality_weight (g, eq. 21), FACE_WEIGHT (w = f g), stitch (eq. 18); NumPy's twins in
+// core/engine_numpy.py (same names) and core/transform.py.
 // Per-face targets (core/targets.py): the *_tgt kernels read a group's (6, n, F) target
 // array tg (fields x, y, c_n K_x, c_n K_y, cos_a, inv_sin; corner k of face j of field m is
 // tg[(m * n + k) * F + j]) and take the general formulas for every arity (triangles written
 // out with scalars, quads and n-gons by the generic functions).
 
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-#pragma OPENCL FP_CONTRACT OFF
-
 #ifndef MAXN
-#define MAXN 8
+#error "build with MAXN (core.engine_opencl: _Runtime.program)"
 #endif
-
-// Inline IEEE operations (correctly rounded, like NumPy's): pocl otherwise calls its
-// library functions for sqrt / fabs / fmin / floor, which blocks inlining and vectorization.
-#define SQRT(x) __builtin_sqrt(x)
-#define FABS(x) __builtin_fabs(x)
-#define FMIN(x, y) __builtin_fmin((x), (y))
-#define FMAX(x, y) __builtin_fmax((x), (y))
-#define FLOOR(x) __builtin_floor(x)
-
-// ---- NumPy-compatible helpers ----------------------------------------------------------
-
-// core.fpmath's log / exp / power, operation for operation: +, -, *, / (FP_CONTRACT off),
-// exact bit-level frexp / ldexp and rint only, so these give NumPy's core.fpmath bits on every
-// device. The host passes fpmath's constants as hex-float defines (the exact same doubles):
-// FP_LOG_C / FP_EXP_C (polynomial coefficients, lowest order first), FP_SQRT_HALF,
-// FP_LN2_HI, FP_LN2_LO, FP_INV_LN2, FP_EXP_MAX, FP_EXP_MIN.
-#ifndef FP_LOG_C
-#error "build with core.engine_opencl's fpmath defines (fpmath_options())"
-#endif
-__constant double fp_log_c[] = {FP_LOG_C};
-__constant double fp_exp_c[] = {FP_EXP_C};
-#define FP_N_LOG ((int)(sizeof(fp_log_c) / sizeof(double)))
-#define FP_N_EXP ((int)(sizeof(fp_exp_c) / sizeof(double)))
-
-// 2^e for -1022 <= e <= 1023, exactly
-static inline double fp_pow2(const int e) { return as_double((long)(e + 1023) << 52); }
-
-// p 2^k rounded once (like C's ldexp), for p a positive normal double near 1 and
-// -1100 < k < 1100: one exact scaling, then at most one rounding (subnormal or overflow)
-static inline double fp_ldexp(const double p, const int k)
-{
-    if (k > 1000) return (p * fp_pow2(k - 100)) * fp_pow2(100);
-    if (k < -1000) return (p * fp_pow2(k + 100)) * fp_pow2(-100);
-    return p * fp_pow2(k);
-}
-
-// fpmath.log: x = m 2^e (frexp, 0.5 <= m < 1), m doubled below sqrt(1/2), then
-// log(m) = 2 f sum_k s^k / (2k + 1) with f = (m - 1) / (m + 1), s = f^2 (Horner)
-static inline double fp_log(const double x)
-{
-    if (!(x > 0.0)) return x == 0.0 ? -INFINITY : NAN;
-    if (isinf(x)) return INFINITY;
-    double xs = x;
-    int bias = 0;
-    if (xs < 0x1p-1022) {  // subnormal: scale into the normal range first (exact)
-        xs = xs * 0x1p54;
-        bias = 54;
-    }
-    const long bits = as_long(xs);
-    const int e = (int)((bits >> 52) & 0x7ff) - 1022 - bias;
-    double m = as_double((bits & 0x800fffffffffffffL) | (1022L << 52));
-    const int low = m < FP_SQRT_HALF;
-    if (low) m = m * 2.0;
-    const double k = (double)(e - low);
-    const double f = (m - 1.0) / (m + 1.0);
-    const double s = f * f;
-    double p = fp_log_c[FP_N_LOG - 1];
-    for (int i = FP_N_LOG - 2; i >= 0; --i) p = p * s + fp_log_c[i];
-    return k * FP_LN2_HI + (k * FP_LN2_LO + (2.0 * f) * p);
-}
-
-// fpmath.exp: k = rint(x / ln 2), r = x - k ln 2 (two parts), e^r by Taylor (Horner), 2^k
-static inline double fp_exp(const double x)
-{
-    if (isnan(x)) return x;
-    if (x > FP_EXP_MAX) return INFINITY;
-    if (x < FP_EXP_MIN) return 0.0;
-    const double k = __builtin_rint(x * FP_INV_LN2);
-    const double r = (x - k * FP_LN2_HI) - k * FP_LN2_LO;
-    double p = fp_exp_c[FP_N_EXP - 1];
-    for (int i = FP_N_EXP - 2; i >= 0; --i) p = p * r + fp_exp_c[i];
-    return fp_ldexp(p, (int)k);
-}
-
-static inline double np_pow(const double x, const double e, const int mode)
-{
-    switch (mode) {
-    case 1: return x * x;
-    case 2: return x;
-    case 3: return 1.0;
-    case 4: return SQRT(x);
-    case 5: return 1.0 / x;
-    default: return fp_exp(e * fp_log(x));  // fpmath.power's general case
-    }
-}
 
 static inline void load_face(const int n, __global const int *nodes, const int F, const int j,
                              __global const double2 *P, double *X, double *Y)
@@ -120,73 +38,25 @@ static inline void load_face(const int n, __global const int *nodes, const int F
 // A sum over the corners of an (n, F) arity group (axis 0) runs the corners as NumPy's outer
 // loop when F > 1: sequential. With F == 1 (a group of one face) NumPy's iterator drops the
 // size-1 axis and the corners become its inner loop: pairwise_sum, whose base case adds 8
-// interleaved partial sums once n >= 8, and which halves runs longer than 128 (at n / 2
-// rounded down to a multiple of 8). Result: 0 + pairwise(V[0..n)) (n <= 8192, NumPy's
+// interleaved partial sums once n >= 8, and which halves runs longer than PW_BLOCK (at n / 2
+// rounded down to a multiple of 8). Result: 0 + pairwise(V[0..n)) (n <= CHUNK, NumPy's
 // buffer size, beyond which it would also fold buffer-sized blocks in order).
 
-// pairwise_sum's base case (n <= 128): sequential below 8, else 8 interleaved partial sums
-// added as a fixed tree, then the remainder in order
+// pairwise_sum's base case (n <= PW_BLOCK) of V[0..n)
 static inline double np_block_sum(const double *V, const int n)
 {
-    if (n < 8) {
-        double r = -0.0;
-        for (int i = 0; i < n; ++i) r = r + V[i];
-        return r;
-    }
-    double r0 = V[0], r1 = V[1], r2 = V[2], r3 = V[3];
-    double r4 = V[4], r5 = V[5], r6 = V[6], r7 = V[7];
-    int i = 8;
-    for (; i < n - (n % 8); i += 8) {
-        r0 = r0 + V[i];
-        r1 = r1 + V[i + 1];
-        r2 = r2 + V[i + 2];
-        r3 = r3 + V[i + 3];
-        r4 = r4 + V[i + 4];
-        r5 = r5 + V[i + 5];
-        r6 = r6 + V[i + 6];
-        r7 = r7 + V[i + 7];
-    }
-    double res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7));
-    for (; i < n; ++i) res = res + V[i];
-    return res;
+    double r;
+    PAIRWISE_LEAF(r, int, n, V[pw_i]);
+    return r;
 }
 
-// NumPy's pairwise_sum of V[0..n): the recursion n -> (n2, n - n2), n2 = n / 2 - (n / 2) % 8,
-// down to blocks of <= 128, evaluated with an explicit stack (OpenCL C has no recursion)
+// NumPy's pairwise_sum of V[0..n) (cl_common.cl: PAIRWISE_TREE)
 static inline double np_pairwise(const double *V, const int n)
 {
-    if (n <= 128) return np_block_sum(V, n);
-#if MAXN > 128
-    int off[32], len[32], stage[32];  // stage 1: left half pending, 2: right half pending
-    double left[32];
-    int sp = 0;
-    off[0] = 0;
-    len[0] = n;
-    for (;;) {
-        if (len[sp] > 128) {  // descend into the left half
-            const int n2 = len[sp] / 2 - (len[sp] / 2) % 8;
-            stage[sp] = 1;
-            off[sp + 1] = off[sp];
-            len[sp + 1] = n2;
-            ++sp;
-            continue;
-        }
-        double r = np_block_sum(V + off[sp], len[sp]);
-        for (;;) {  // hand r up: a finished left half starts its right sibling
-            if (sp == 0) return r;
-            --sp;
-            if (stage[sp] == 1) {
-                const int n2 = len[sp] / 2 - (len[sp] / 2) % 8;
-                left[sp] = r;
-                stage[sp] = 2;
-                off[sp + 1] = off[sp] + n2;
-                len[sp + 1] = len[sp] - n2;
-                ++sp;
-                break;
-            }
-            r = left[sp] + r;
-        }
-    }
+#if MAXN > PW_BLOCK
+    double r;
+    PAIRWISE_TREE(r, int, n, np_block_sum(V + pw_off, pw_len));
+    return r;
 #else
     return np_block_sum(V, n);
 #endif
@@ -284,9 +154,46 @@ static inline double target_ratio(const int n, const double *X, const double *Y,
     return ok ? mean_axis0(n, QK, F) : 0.0;
 }
 
+// ---- the paper's terms (engine_numpy.py / transform.py, same names) ----------------------
+
+// lambda = a (1 - q), the element's step size (eq. 17; engine_numpy.step_size)
+static inline double step_size(const double q, const double a) { return a * (1.0 - q); }
+
+// The distance weight f(d) = (lbar / d)^c (eq. 20; engine_numpy.distance_weight), d clamped
+// to dfloor = _DIST_FLOOR lbar (the host's); pow_c = core.fpmath.power_code(c)
+static inline double distance_weight(const double d, const double lbar, const double dfloor,
+                                     const double c, const int pow_c)
+{
+    return np_pow(lbar / FMAX(d, dfloor), c, pow_c);
+}
+
+// The quality weight g(q) = (1 - q)^eta, inverted_weight for an inverted element (q = 0)
+// (eq. 21; engine_numpy.quality_weight); 1 - q clamped at 0 (q may round to 1 + 1 ulp)
+static inline double quality_weight(const double q, const double eta, const int pow_eta,
+                                    const double inverted_weight)
+{
+    return q > 0.0 ? np_pow(FMAX(1.0 - q, 0.0), eta, pow_eta) : inverted_weight;
+}
+
+// The paper's stretch vector of corner k (transform.py: _stretch):
+// n_k = sum_{r=1..R} rot(p_{k+r} - p_{k-r}), rot(x, y) = (y, -x)
+static inline double2 stretch_vector(const int n, const int R, const int k, const double *X,
+                                     const double *Y)
+{
+    double nx = 0.0, ny = 0.0;
+    for (int r = 1; r <= R; ++r) {
+        const int kp = (k + r) % n;
+        const int km = (k - r + n) % n;
+        nx = nx + (Y[kp] - Y[km]);
+        ny = ny + (X[km] - X[kp]);
+    }
+    return (double2)(nx, ny);
+}
+
 #define NO_TARGET ((__global const double *)0)
 
-// p^s - p for every corner of one face (transform.py: group_transform_delta), times w.
+// p^s - p for every corner of one face (transform.py: group_transform_delta), times w: the
+// stretch p' = p + lambda n_k, then the shrink about the centroid c by s = before / after.
 // tg: the group's targets (transform.py: _target_stretch), or NO_TARGET (the paper's stretch).
 static inline void transform_moves(const int n, const int R, const double *X, const double *Y,
                                    const double lam, const double w, const int area,
@@ -315,15 +222,9 @@ static inline void transform_moves(const int n, const int R, const double *X, co
         }
     } else {
         for (int k = 0; k < n; ++k) {
-            double nx = 0.0, ny = 0.0;
-            for (int r = 1; r <= R; ++r) {
-                const int kp = (k + r) % n;
-                const int km = (k - r + n) % n;
-                nx = nx + (Y[kp] - Y[km]);
-                ny = ny + (X[km] - X[kp]);
-            }
-            NX[k] = nx * lam;  // lambda n_k
-            NY[k] = ny * lam;
+            const double2 nk = stretch_vector(n, R, k, X, Y);
+            NX[k] = nk.x * lam;  // lambda n_k
+            NY[k] = nk.y * lam;
             SX[k] = X[k] + NX[k];
             SY[k] = Y[k] + NY[k];
         }
@@ -375,7 +276,7 @@ static inline void transform_moves(const int n, const int R, const double *X, co
 // is the value the full search would return, bit for bit.
 
 #ifndef NCACHE
-#define NCACHE 8
+#error "build with NCACHE (core.engine_opencl: _Runtime.program)"
 #endif
 #define GAP_MARGIN 1e-9
 
@@ -522,12 +423,13 @@ static inline double nearest_d(const double qx, const double qy,
         __global long2 *restrict cache_c, __global double4 *restrict cache_d
 
 // Quality: work-item g computes q of the faces [bounds[g], bounds[g + 1]) of its group, one
-// of the blocks (<= 128 faces) into which NumPy's pairwise q.sum() splits the group (the
+// of the blocks (<= PW_BLOCK faces) into which NumPy's pairwise q.sum() splits the group (the
 // host's _SumPlan), and writes (count q == 0, min q, the block's sum, 0) to part[ro + g]:
-// the sum as pairwise_sum's base case adds it (8 interleaved partial sums over the first
-// m - m % 8 faces once m >= 8, a fixed tree of them, then the rest in order), so the host
-// can finish q.sum() in NumPy's order. The partial sums rotate through r0..r7 (face t adds
-// to r0, then r0 moves to r7), which keeps them in registers. QUALITY_BODY(j) defines v.
+// the sum as pairwise_sum's base case adds it (cl_common.cl: PAIRWISE_LEAF, streamed here:
+// 8 interleaved partial sums over the first m - m % 8 faces once m >= 8, a fixed tree of
+// them, then the rest in order), so the host can finish q.sum() in NumPy's order. The
+// partial sums rotate through r0..r7 (face t adds to r0, then r0 moves to r7), which keeps
+// them in registers. QUALITY_BODY(j) defines v.
 #define QUALITY_KERNEL(SUF, QUALITY_BODY) QUALITY_KERNEL_X(SUF, QUALITY_BODY, )
 // EXTRA: more kernel arguments (a leading comma), or nothing
 #define QUALITY_KERNEL_X(SUF, QUALITY_BODY, EXTRA)                                           \
@@ -633,23 +535,22 @@ QUALITY_KERNEL_X(tgt_quad, QUALITY_TGT_QUAD, TGT_ARG)
         __global double *restrict wf, const double a, const double eta, const int pow_eta,   \
         const double inv_weight, const int area, const int refresh_arg, TREE_ARGS
 
-// the face weight w = f_j g(q_j) and lambda; refresh != 0: f_j first (nearest boundary node
-// to the centroid CXm, CYm)
-#define MOVE_WEIGHT(CXm, CYm)                                                                \
+// The face weight w = f(d_j) g(q_j) (eq. 20-21) and lambda (eq. 17); refresh != 0: f first
+// (d_j: nearest boundary node to the centroid CXm, CYm), else the stored one
+#define FACE_WEIGHT(CXm, CYm)                                                                \
     double fj;                                                                               \
     if (refresh) {                                                                           \
         const double d = nearest_d(CXm, CYm, tree_int, bxy, cxy, ox, oy, scale, lim, top, depth,  \
                                    n_levels, n_bnd, cache_k, cache_l, cache_c, cache_d,      \
                                    fo + j);                                                  \
-        fj = np_pow(lbar / FMAX(d, dfloor), c, pow_c);                                       \
+        fj = distance_weight(d, lbar, dfloor, c, pow_c);                                     \
         fdist[fo + j] = fj;                                                                  \
     } else {                                                                                 \
         fj = fdist[fo + j];                                                                  \
     }                                                                                        \
     const double qj = q[fo + j];                                                             \
-    const double lam = a * (1.0 - qj);                                                       \
-    const double g = qj > 0.0 ? np_pow(FMAX(1.0 - qj, 0.0), eta, pow_eta) : inv_weight;      \
-    const double w = fj * g;                                                                 \
+    const double lam = step_size(qj, a);                                                     \
+    const double w = fj * quality_weight(qj, eta, pow_eta, inv_weight);                      \
     wf[fo + j] = w;
 
 // move_SUF: plain; move_SUF_d: the distance refresh first (separate builds of the body,
@@ -664,7 +565,7 @@ QUALITY_KERNEL_X(tgt_quad, QUALITY_TGT_QUAD, TGT_ARG)
         if (j >= F) return;                                                                  \
         double X[MAXN], Y[MAXN];                                                             \
         load_face(NN, nodes, F, j, P, X, Y);                                                 \
-        MOVE_WEIGHT(mean_axis0(NN, X, F), mean_axis0(NN, Y, F))                                          \
+        FACE_WEIGHT(mean_axis0(NN, X, F), mean_axis0(NN, Y, F))                              \
         transform_moves(NN, R, X, Y, lam, w, area, cmove, co, F, j, TG);                     \
     }
 #define MAKE_KERNELS(SUF, NN)                                                                \
@@ -690,7 +591,8 @@ MOVE_KERNEL_X(move_tgt_d, n, 1, TGT_ARG, tgt)
 MOVE_KERNEL_X(move_tgt_quad, 4, 0, TGT_ARG, tgt)
 MOVE_KERNEL_X(move_tgt_quad_d, 4, 1, TGT_ARG, tgt)
 
-// transform_moves for n = 3 (R = 1), scalar: lambda n_k, p^s - p for corner k.
+// transform_moves for n = 3 (R = 1), scalar: lambda n_k, p^s - p for corner k. The paper's
+// stretch of a triangle: TRI_PAPER_STRETCH (stretch_vector with n = 3).
 #define TRI_EDGE_LEN(AX, AY, BX, BY) SQRT(((BX) - (AX)) * ((BX) - (AX)) + ((BY) - (AY)) * ((BY) - (AY)))
 #define TRI_CROSS(AX, AY, BX, BY) ((AX) * (BY) - (BX) * (AY))
 // corner k: kp = k + 1, km = k - 1 (mod 3); nx = 0 + (Y[kp] - Y[km]), ny = 0 + (X[km] - X[kp])
@@ -731,7 +633,7 @@ __kernel void NAME(MOVE_ARGS EXTRA)                                             
     const double X0 = p0.x, X1 = p1.x, X2 = p2.x, Y0 = p0.y, Y1 = p1.y, Y2 = p2.y;           \
     const double CX = ((X0 + X1) + X2) / 3.0;                                                \
     const double CY = ((Y0 + Y1) + Y2) / 3.0;                                                \
-    MOVE_WEIGHT(CX, CY)                                                                      \
+    FACE_WEIGHT(CX, CY)                                                                      \
     STRETCH                                                                                  \
     const double SX0 = X0 + NX0, SX1 = X1 + NX1, SX2 = X2 + NX2;                             \
     const double SY0 = Y0 + NY0, SY1 = Y1 + NY1, SY2 = Y2 + NY2;                             \

@@ -28,7 +28,8 @@ def stretch_radius(n: int) -> int:
 
 
 def _stretch(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Stretch vectors n_k of every corner, as (n, F) arrays."""
+    """The paper's stretch vectors n_k of every corner, as (n, F) arrays (OpenCL:
+    stretch_vector, TRI_PAPER_STRETCH)."""
     n = X.shape[0]
     NX = np.empty_like(X)
     NY = np.empty_like(Y)
@@ -88,13 +89,15 @@ def _abs_area(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
 def group_transform_delta(
     X: np.ndarray, Y: np.ndarray, lam: np.ndarray, scaling: str = "edge", target=None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(DX, DY) = p^s - p for every corner of an (n, F) group, lam an (F,) array; `target`
+    """(DX, DY) = p^s - p for every corner of an (n, F) group, lam an (F,) array: the stretch
+    p' = p + lambda n_k, then the shrink about the centroid (OpenCL: transform_moves). `target`
     (a core.targets.GroupTargets) stretches towards per-face targets, None as the paper."""
     NX, NY = _stretch(X, Y) if target is None else _target_stretch(X, Y, target)
     NX *= lam
     NY *= lam  # now lambda n_k
     SX = X + NX
     SY = Y + NY
+    # the shrink: s = size before / size after
     if scaling == "edge":
         before, after = _edge_sum(X, Y), _edge_sum(SX, SY)
     elif scaling == "area":

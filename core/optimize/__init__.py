@@ -24,9 +24,13 @@ Where things live (NumPy and OpenCL twins side by side):
 - boundary sliding (a sliding node's parameter on its curve as its variable, order kept in
   the line search): `slide.SlideState`, `slide.SlideProblem` (host solver only).
 
-The EEGT iteration itself (transform, stitching with the weights f(d) g(q) of eq. 20-21) is
-in `core/transform.py` and `core/engine_numpy.py`, twinned by `core/engine_opencl.py` and
-`core/opencl_kernels.cl`.
+- the kernels' constants (energy.THETA, LIFT_PENALTY, LIFT_BARRIER, TRIALS, LIMIT_MARGIN,
+  the state buffers' layouts, NumPy's summation cut points) are defined in Python only and
+  reach the .cl sources as `-D` build defines: `solver_opencl.build_options`,
+  `solver_parallel.build_options`.
+
+The EEGT iteration itself (stretch, stitching with the weights f(d) g(q) of eq. 20-21) and
+the rest of the core are mapped in `core/__init__.py`.
 """
 
 from .options import GlobalOptions

@@ -15,21 +15,18 @@
 // only). S and T: parameters and solver state (see lbfgs_run). W (scratch, double): X Y [nn] |
 // vt gt q s y [2nf] | corner arrays e1x e2x e1y e2y, terms, 1/u [nc4] | element terms, de_dq,
 // -1/n [ne].
+//
+// Host-side defines (solver_opencl.build_options(); a missing one stops the build): M
+// (LBFGS_MEMORY), TRIALS (line-search halvings), THETA, PENALTY, BARRIER (energy.py's THETA,
+// LIFT_PENALTY, LIFT_BARRIER), E_WINDOW (the stop test's energy window), the slots of T and S
+// (T_*, S_*) and the status codes (ST_*), and core.fpmath's (cl_common.cl, which the loader
+// puts in front of this file: fp64, FP_CONTRACT off, NumPy's pairwise sums).
 
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-#pragma OPENCL FP_CONTRACT OFF
-
-#define SQRT(x) __builtin_sqrt(x)
-#define FABS(x) __builtin_fabs(x)
-
-#ifndef M
-#define M 4  // LBFGS_MEMORY (the host passes it)
+#if !defined(M) || !defined(TRIALS) || !defined(THETA) || !defined(PENALTY) || \
+    !defined(BARRIER) || !defined(E_WINDOW) || !defined(T_TICK) || !defined(S_V) || \
+    !defined(ST_TICK) || !defined(PW_BLOCK) || !defined(CHUNK)
+#error "build with core.optimize.solver_opencl.build_options()"
 #endif
-#define THETA 0.0625     // energy.THETA
-#define PENALTY 1000.0   // LIFT_PENALTY
-#define BARRIER 0.01     // LIFT_BARRIER
-#define CHUNK 8192       // NumPy's reduction buffer size
-#define PW_BLOCK 128     // NumPy's pairwise block
 
 // ---- NumPy's pairwise summation of terms TERM(i), i in [0, n) -----------------------------
 // kind 0: a[i]; 1: a[i] * b[i]; 2: a[i] * (b[i] * c[i])
@@ -44,76 +41,26 @@ static inline double term(__global const double *a, __global const double *b,
     return a[i] * (b[i] * c[i]);
 }
 
-static double pw_leaf(__global const double *a, __global const double *b,
+// pairwise_sum's base case over the n terms from o
+static double np_leaf(__global const double *a, __global const double *b,
                       __global const double *c, const int kind, const long o, const long n)
 {
-    if (n < 8) {
-        double res = 0.0;
-        for (long i = 0; i < n; ++i)
-            res += term(a, b, c, kind, o + i);
-        return res;
-    }
-    double r[8];
-    for (int j = 0; j < 8; ++j)
-        r[j] = term(a, b, c, kind, o + j);
-    long i = 8;
-    for (; i < n - (n % 8); i += 8)
-        for (int j = 0; j < 8; ++j)
-            r[j] += term(a, b, c, kind, o + i + j);
-    double res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]));
-    for (; i < n; ++i)
-        res += term(a, b, c, kind, o + i);
-    return res;
+    double r;
+    PAIRWISE_LEAF(r, long, n, term(a, b, c, kind, o + pw_i));
+    return r;
 }
 
-static double pw_range(__global const double *a, __global const double *b,
-                       __global const double *c, const int kind, const long off, const long n)
-{
-    // the recursion pairwise(o, n) = pairwise(o, n2) + pairwise(o + n2, n - n2), unrolled
-    long fo[24], fn[24];
-    int fs[24];
-    double fl[24];
-    int sp = 0;
-    double ret = 0.0;
-    fo[0] = off;
-    fn[0] = n;
-    fs[0] = 0;
-    while (sp >= 0) {
-        const long o = fo[sp], m = fn[sp];
-        long n2 = m / 2;
-        n2 -= n2 % 8;
-        if (fs[sp] == 0) {
-            if (m <= PW_BLOCK) {
-                ret = pw_leaf(a, b, c, kind, o, m);
-                --sp;
-            } else {
-                fs[sp] = 1;
-                ++sp;
-                fo[sp] = o;
-                fn[sp] = n2;
-                fs[sp] = 0;
-            }
-        } else if (fs[sp] == 1) {
-            fl[sp] = ret;
-            fs[sp] = 2;
-            ++sp;
-            fo[sp] = o + n2;
-            fn[sp] = m - n2;
-            fs[sp] = 0;
-        } else {
-            ret = fl[sp] + ret;
-            --sp;
-        }
-    }
-    return ret;
-}
-
+// np.add.reduce: the chunks in order from 0.0, each by pairwise_sum (cl_common.cl)
 static double np_sum(__global const double *a, __global const double *b,
                      __global const double *c, const int kind, const long n)
 {
     double acc = 0.0;
-    for (long s = 0; s < n; s += CHUNK)
-        acc += pw_range(a, b, c, kind, s, (n - s < CHUNK) ? n - s : CHUNK);
+    for (long s = 0; s < n; s += CHUNK) {
+        double r;
+        PAIRWISE_TREE(r, long, (n - s < CHUNK) ? n - s : CHUNK,
+                      np_leaf(a, b, c, kind, s + pw_off, pw_len));
+        acc += r;
+    }
     return acc;
 }
 
@@ -314,26 +261,23 @@ static double evaluate(const Problem *P, __global const double *v, __global doub
 
 // ---- the solver ----------------------------------------------------------------------------
 
-enum { T_IT, T_LEN, T_START, T_NHIST, T_FRESH, T_STATUS, T_NN, T_NF, T_NC, T_NE, T_MODE,
-       T_MAXIT, T_GUARD, T_TICK };
-enum { ST_DONE = 0, ST_TICK = 1 };
-
 // Scalars travel in the state buffers (pyopencl's scalar arguments cost ~10 us each):
-// T as above, S = [eps, qc, h0, rel_tol, e, ehist[6], rho[M], v, g, hs, hy].
+// T = counters, sizes and settings (T_*), S = [eps, qc, h0, rel_tol, e, ehist[E_WINDOW],
+// rho[M], v, g, hs, hy] (S_*), both laid out by the host.
 __kernel void lbfgs_run(__global const int *I, __global const double *D, __global double *S,
                         __global int *T, __global double *W)
 {
     const int nn = T[T_NN], nf = T[T_NF], nc = T[T_NC], ne = T[T_NE], nc4 = (nc + 3) & ~3;
     const int max_it = T[T_MAXIT], guard = T[T_GUARD], tick_every = T[T_TICK];
-    const double h0 = S[2], rel_tol = S[3];
+    const double h0 = S[S_H0], rel_tol = S[S_REL_TOL];
     Problem P;
     P.nf = nf;
     P.nc = nc;
     P.nc4 = nc4;
     P.ne = ne;
     P.mode = T[T_MODE];
-    P.eps = S[0];
-    P.qc = S[1];
+    P.eps = S[S_EPS];
+    P.qc = S[S_QC];
     P.fidx = I;
     P.i0 = I + nf;
     P.i1 = P.i0 + nc4;
@@ -351,7 +295,7 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
     P.dpre = P.weight + nc4;
     P.ncorn = P.dpre + 2 * nf;
     const int n2 = 2 * nf;
-    __global double *pe = S + 4, *ehist = S + 5, *rho = ehist + 6, *v = rho + M;
+    __global double *pe = S + S_E, *ehist = S + S_EHIST, *rho = S + S_RHO, *v = S + S_V;
     __global double *g = v + n2, *hs = g + n2, *hy = hs + M * n2;
     P.X = W;
     P.Y = W + nn;
@@ -437,7 +381,7 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
         }
         int accepted = 0;
         double et = 0.0;
-        for (int ls = 0; ls < 40; ++ls) {
+        for (int ls = 0; ls < TRIALS; ++ls) {
             for (int i = 0; i < n2; ++i)
                 vt[i] = v[i] + step * q[i];
             et = evaluate(&P, vt, gt, &dmin_t, 1);
@@ -481,10 +425,10 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
         e = et;
         if (!guard && dmin_t > 0.0)
             break;
-        ehist[nh % 6] = e;
+        ehist[nh % E_WINDOW] = e;
         ++nh;
-        if (nh > 5) {
-            const double old = ehist[(nh - 6) % 6];
+        if (nh > E_WINDOW - 1) {
+            const double old = ehist[(nh - E_WINDOW) % E_WINDOW];
             if (old - e <= rel_tol * FABS(old))
                 break;
         }

@@ -17,16 +17,45 @@ from pathlib import Path
 import numpy as np
 
 from ..csr import bincount_csr
-from ..engine_opencl import LOCK, _runtime
-from .energy import FoldoverEnergy, LiftEnergy
+from ..engine_opencl import LOCK, _runtime, cl_defines, fpmath_options, program_source
+from .energy import LIFT_BARRIER, LIFT_PENALTY, THETA, FoldoverEnergy, LiftEnergy
 from .solver import lbfgs
-from .state import LBFGS_MEMORY, State, stops
+from .state import LBFGS_MEMORY, TRIALS, State, stops
 
-__all__ = ["KERNEL_FILE", "OpenCLLbfgs", "device_solver"]
+__all__ = ["KERNEL_FILE", "OpenCLLbfgs", "build_options", "device_solver", "energy_defines",
+           "kernel_source"]
 
 KERNEL_FILE = Path(__file__).with_name("solver_opencl.cl")
-_ST_TICK = 1  # kernel status: paused for a progress tick
+# T (int32): the kernel's counters, problem sizes and settings, a slot each (T_* defines)
+_T = {name: k for k, name in enumerate((
+    "T_IT", "T_LEN", "T_START", "T_NHIST", "T_FRESH", "T_STATUS", "T_NN", "T_NF", "T_NC",
+    "T_NE", "T_MODE", "T_MAXIT", "T_GUARD", "T_TICK"))}
+_ST = {"ST_DONE": 0, "ST_TICK": 1}  # T_STATUS: finished, or paused for a progress tick
+# S (double): eps, qc, h0, rel_tol, the energy e, the last E_WINDOW energies (solver.lbfgs's
+# stop test compares e with the energy E_WINDOW - 1 iterations back), rho [M], then v, g and
+# the memory pairs (S_* defines)
+_E_WINDOW = 6
+_S = {"S_EPS": 0, "S_QC": 1, "S_H0": 2, "S_REL_TOL": 3, "S_E": 4, "S_EHIST": 5,
+      "S_RHO": 5 + _E_WINDOW, "S_V": 5 + _E_WINDOW + LBFGS_MEMORY}
 _solvers: dict[str, OpenCLLbfgs] = {}
+
+
+def energy_defines() -> dict[str, float]:
+    """The energies' constants (core.optimize.energy) under their kernel names."""
+    return {"THETA": THETA, "PENALTY": LIFT_PENALTY, "BARRIER": LIFT_BARRIER}
+
+
+def kernel_source() -> str:
+    """The OpenCL C source of the single-work-item L-BFGS kernel (with the shared header)."""
+    return program_source(KERNEL_FILE)
+
+
+def build_options() -> list[str]:
+    """The kernel's defines: core.fpmath's (NumPy's summation cut points), the energies'
+    constants, the line search's and the layout of its state buffers."""
+    return [*fpmath_options(), *cl_defines({
+        "M": LBFGS_MEMORY, "TRIALS": TRIALS, "E_WINDOW": _E_WINDOW, **energy_defines(),
+        **_T, **_ST, **_S})]
 
 
 def device_solver() -> OpenCLLbfgs | None:
@@ -69,8 +98,8 @@ class _Tables:
         self.dbls = solver._buffer(np.concatenate([np.asarray(a, np.float64) for a in dbls]))
         n2 = 2 * st.nf
         self.sizes = (nn, st.nf, nc, ne, int(lift))
-        self.state_len = 11 + LBFGS_MEMORY + 2 * n2 + 2 * LBFGS_MEMORY * n2
-        self.v_at = 11 + LBFGS_MEMORY  # where v starts in the state (see lbfgs_run)
+        self.v_at = _S["S_V"]  # where v starts in the state (see lbfgs_run)
+        self.state_len = self.v_at + 2 * n2 + 2 * LBFGS_MEMORY * n2
         self.work = solver._empty(8 * (2 * nn + 5 * n2 + 6 * nc4 + 3 * ne))
         self.n2 = n2
 
@@ -83,10 +112,7 @@ class OpenCLLbfgs:
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
         prg = rt.build(
-            f"lbfgs M={LBFGS_MEMORY}",
-            KERNEL_FILE.read_text(),
-            [f"-DM={LBFGS_MEMORY}"],
-            what="L-BFGS kernel",
+            f"lbfgs M={LBFGS_MEMORY}", kernel_source(), build_options(), what="L-BFGS kernel"
         )
         self.kernel = self.cl.Kernel(prg, "lbfgs_run")
         self._last: tuple[FoldoverEnergy, State, _Tables] | None = None  # reused per round
@@ -130,19 +156,25 @@ class OpenCLLbfgs:
             return lbfgs(en, st, v0, eps, **kw)
         cl, queue = self.cl, self.queue
         state = np.zeros(tb.state_len, dtype=np.float64)
-        state[:4] = eps, getattr(en, "qc", 0.0), 0.1 * en.h_mean, rel_tol
+        for name, value in (("S_EPS", eps), ("S_QC", getattr(en, "qc", 0.0)),
+                            ("S_H0", 0.1 * en.h_mean), ("S_REL_TOL", rel_tol)):
+            state[_S[name]] = value
         state[tb.v_at : tb.v_at + tb.n2] = v0
         S = self._buffer(state)
-        ticks = en.tick_every if tick is not None else 0
-        flags = np.array([0, 0, 0, 0, 1, 0, *tb.sizes, max_it, bool(guard), ticks], np.int32)
+        flags = np.zeros(len(_T), np.int32)
+        settings = dict(zip(("T_NN", "T_NF", "T_NC", "T_NE", "T_MODE"), tb.sizes), T_FRESH=1,
+                        T_MAXIT=max_it, T_GUARD=bool(guard),
+                        T_TICK=en.tick_every if tick is not None else 0)
+        for name, value in settings.items():
+            flags[_T[name]] = value
         T = self._buffer(flags)
         for i, buf in enumerate((tb.ints, tb.dbls, S, T, tb.work)):
             self.kernel.set_arg(i, buf)
         while True:
             cl.enqueue_nd_range_kernel(queue, self.kernel, (1,), (1,))
             cl.enqueue_copy(queue, flags, T)
-            if flags[5] != _ST_TICK or stops(tick(int(flags[0]))):
+            if flags[_T["T_STATUS"]] != _ST["ST_TICK"] or stops(tick(int(flags[_T["T_IT"]]))):
                 break
         v = np.empty(tb.n2, dtype=np.float64)
         cl.enqueue_copy(queue, v, S, src_offset=8 * tb.v_at)
-        return v, int(flags[0])
+        return v, int(flags[_T["T_IT"]])

@@ -7,15 +7,15 @@
 // Same numbers as NumPy: every floating-point operation is the NumPy code's, same operands,
 // same order, FP contraction off. np.bincount is a per-row gather in index order (CSR built
 // on the host), np.add.reduce is NumPy's pairwise summation split over work-items:
-//   - a vector of n terms is cut like NumPy cuts it: chunks of 8192, each halved (at n / 2
-//     rounded down to a multiple of 8) down to leaves of at most 128 terms;
+//   - a vector of n terms is cut like NumPy cuts it: chunks of CHUNK (8192), each halved (at n / 2
+//     rounded down to a multiple of 8) down to leaves of at most PW_BLOCK (128) terms;
 //   - a leaf is 8 partial sums r[j] (terms j, j + 8, ..., in order), combined as
 //     ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7)), then the n % 8 tail terms in order
 //     (a leaf under 8 terms: 0.0 + its terms in order). A work-item computes LPW = 8 / LANES
 //     of those partial sums: LANES 1 finishes the leaf itself, LANES > 1 writes its lanes'
 //     partial sums and tail terms, which the next stage combines in that fixed order;
 //   - one work-item per chunk adds its leaves along the same binary tree (chunk_sums; with
-//     LANES > 1 a work-group of 64 per chunk, one work-item per leaf, then one walks the
+//     LANES > 1 a work-group of WG_CHUNK per chunk, one work-item per leaf, then one walks the
 //     tree), and a single-work-item finish kernel adds the chunk sums in order, from 0.0.
 // The partition is fixed by n alone, so the bits do not depend on the work-group size or on
 // LANES. min/max reductions keep NumPy's NaN semantics (a NaN wins; otherwise the order does
@@ -38,60 +38,31 @@
 //              v = vt, g = gt, partials of s.y, s.s, y.y, y.dpre y), finish_pair (the
 //              L-BFGS memory update)
 
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-#pragma OPENCL FP_CONTRACT OFF
-
-#ifndef M
-#define M 4  // LBFGS_MEMORY (the host passes it)
-#endif
-#ifndef TRIALS
-#define TRIALS 40  // solver.TRIALS: line-search halvings (the host passes it)
-#endif
-#ifndef LIMIT_MARGIN
-#define LIMIT_MARGIN 1e-06  // solver.LIMIT_MARGIN (the host passes it)
-#endif
-#ifndef LANES
-#define LANES 1  // work-items per leaf of 128 terms: 1, 2, 4 or 8 (the host passes it)
+// Host-side defines (solver_parallel.build_options(); a missing one stops the build):
+//   M, TRIALS, LIMIT_MARGIN  LBFGS_MEMORY and the line search's (core/optimize/state.py)
+//   LANES, PPL  work-items per leaf of PW_BLOCK terms (1, 2, 4 or 8) and partials per leaf
+//               and sum (the sum, or 8 lane partials + 8 tails)
+//   WG_CHUNK  chunk_sums' work-group size (LANES > 1)
+//   THETA, PENALTY, BARRIER  energy.py's THETA, LIFT_PENALTY, LIFT_BARRIER
+//   S_*, ST_*  the slots of the scalars in S and the status codes (solver_parallel._S, _ST)
+//   PW_BLOCK, CHUNK, ...  core.fpmath's (cl_common.cl, which the loader puts in front of this
+//                         file: fp64, FP_CONTRACT off, NumPy's pairwise sums)
+#if !defined(M) || !defined(TRIALS) || !defined(LIMIT_MARGIN) || !defined(LANES) || \
+    !defined(PPL) || !defined(WG_CHUNK) || !defined(THETA) || !defined(PENALTY) || \
+    !defined(BARRIER) || !defined(S_LEN_ALL) || !defined(ST_NOT_DESCENT) || \
+    !defined(PW_BLOCK) || !defined(CHUNK)
+#error "build with core.optimize.solver_parallel.build_options(lanes)"
 #endif
 #if LANES != 1 && LANES != 2 && LANES != 4 && LANES != 8
 #error "LANES must be 1, 2, 4 or 8"
 #endif
 #define SLOTS (M + 1)  // ring slots: M pairs and a spare for the candidate pair
 #define LPW (8 / LANES)  // leaf partial sums per work-item
-#define PPL ((LANES == 1) ? 1 : 16)  // partials per leaf and sum: the sum, or 8 lanes + 8 tails
-#define THETA 0.0625  // energy.THETA
-#define PENALTY 1000.0  // LIFT_PENALTY
-#define BARRIER 0.01  // LIFT_BARRIER
-#define CHUNK 8192  // NumPy's reduction buffer size
-#define PW_BLOCK 128  // NumPy's pairwise block
-
-#define SQRT(x) __builtin_sqrt(x)
-#define FABS(x) __builtin_fabs(x)
-#define MIN_NAN(m, d) ((isnan(m) || (m) <= (d)) ? (m) : (d))  // np.minimum: NaN wins
 
 // ---- scalars in S (doubles; counts stored as exact small integers) --------------------------
-// 0..7 are the status block the host reads back after each trial.
-#define S_STATUS 0  // 0 trial rejected (step halved), 1 accepted, 2 not a descent direction
-#define S_ET 1  // the trial's energy
-#define S_DMIN 2  // the trial's smallest corner det
-#define S_LEN 3  // pairs in memory
-#define S_E 4  // energy of the current point
-#define S_START 5  // ring slot of the oldest pair
-#define S_SLOPE 6
-#define S_STEP 7
-#define S_EPS 8
-#define S_QC 9
-#define S_H0 10
-#define S_GUARD 11
-#define S_OK 12  // the first evaluation may have a gradient (lift: every det > 0)
-#define S_BAD 13  // the direction is not a descent direction
-#define S_COEF 14  // the second loop's coefficient al - rho y.q
-#define S_SKIP 15  // trial steps the step limit skipped (finish_limit)
-#define S_ALPHA 16  // [M]
-#define S_RHO (S_ALPHA + M)  // [SLOTS] per ring slot: 1 / s.y
-#define S_SY (S_RHO + SLOTS)  // [SLOTS] s.y
-#define S_YDY (S_SY + SLOTS)  // [SLOTS] y.(dpre y)
-#define S_LEN_ALL (S_YDY + SLOTS)
+// Slots S_* as solver_parallel._S lays them out; S[0:8] is the status block the host reads
+// back after each trial, S_STATUS one of ST_REJECTED (step halved), ST_ACCEPTED,
+// ST_NOT_DESCENT. Per ring slot: S_RHO 1 / s.y, S_SY s.y, S_YDY y.(dpre y); S_ALPHA [M].
 
 // ---- reduction plans --------------------------------------------------------------------
 // PI (int): n, leaves, chunks, sums | leaf bounds [leaves + 1] | first leaf of each chunk
@@ -131,8 +102,6 @@ static Plan plan_of(__global const int *PI, __global double *PD)
     const int o = (pl).lb[leaf], n = (pl).lb[leaf + 1] - o;       \
     const int full = n - n % 8;
 
-#define COMBINE8(r) ((((r)[0] + (r)[1]) + ((r)[2] + (r)[3])) + (((r)[4] + (r)[5]) + ((r)[6] + (r)[7])))
-
 // Runs the statement list BODY (reads the element index k, sets t[0 .. K-1]) on each of
 // this work-item's elements and stores the leaf partials of the K sums.
 #if LANES == 1
@@ -167,7 +136,7 @@ static Plan plan_of(__global const int *PI, __global double *PD)
                 for (int s = 0; s < K; ++s)                               \
                     r[s][jj] = (i == 0) ? t[s] : r[s][jj] + t[s];         \
             }                                                             \
-        __global double *pp = (pl).P + 16 * leaf + j0;                    \
+        __global double *pp = (pl).P + PPL * leaf + j0;                   \
         for (int jj = 0; jj < LPW; ++jj) {                                \
             for (int s = 0; s < K; ++s)                                   \
                 pp[s * (pl).ps + jj] = full ? r[s][jj] : 0.0;             \
@@ -187,7 +156,7 @@ static double leaf_sum(__global const double *P, const int leaf, const int m)
 #if LANES == 1
     return P[leaf];
 #else
-    __global const double *r = P + 16 * leaf;
+    __global const double *r = P + PPL * leaf;
     const int full = m - m % 8;
     double res = full ? COMBINE8(r) : 0.0;
     for (int t = 0; t < m - full; ++t)
@@ -196,81 +165,20 @@ static double leaf_sum(__global const double *P, const int leaf, const int m)
 #endif
 }
 
-// NumPy's pairwise sum of one chunk of m terms whose leaves start at `first`: the recursion
-// pairwise(m) = m <= 128 ? leaf : pairwise(m2) + pairwise(m - m2), unrolled on a stack
+// NumPy's pairwise sum of one chunk of m terms whose leaves start at `first` (cl_common.cl)
 static double chunk_sum(__global const double *P, const int first, const int m)
 {
-    int fn[10], fs[10];
-    double fl[10];
-    int sp = 0, leaf = first;
-    double ret = 0.0;
-    fn[0] = m;
-    fs[0] = 0;
-    while (sp >= 0) {
-        const int k = fn[sp];
-        int k2 = k / 2;
-        k2 -= k2 % 8;
-        if (fs[sp] == 0) {
-            if (k <= PW_BLOCK) {
-                ret = leaf_sum(P, leaf, k);
-                ++leaf;
-                --sp;
-            } else {
-                fs[sp] = 1;
-                ++sp;
-                fn[sp] = k2;
-                fs[sp] = 0;
-            }
-        } else if (fs[sp] == 1) {
-            fl[sp] = ret;
-            fs[sp] = 2;
-            ++sp;
-            fn[sp] = k - k2;
-            fs[sp] = 0;
-        } else {
-            ret = fl[sp] + ret;
-            --sp;
-        }
-    }
-    return ret;
+    double r;
+    PAIRWISE_TREE(r, int, m, leaf_sum(P, first + pw_k, pw_len));
+    return r;
 }
 
 // The pairwise tree of one chunk of m terms over its leaf sums L[0 ..] (local memory)
 static double chunk_tree(__local const double *L, const int m)
 {
-    int fn[10], fs[10];
-    double fl[10];
-    int sp = 0, leaf = 0;
-    double ret = 0.0;
-    fn[0] = m;
-    fs[0] = 0;
-    while (sp >= 0) {
-        const int k = fn[sp];
-        int k2 = k / 2;
-        k2 -= k2 % 8;
-        if (fs[sp] == 0) {
-            if (k <= PW_BLOCK) {
-                ret = L[leaf];
-                ++leaf;
-                --sp;
-            } else {
-                fs[sp] = 1;
-                ++sp;
-                fn[sp] = k2;
-                fs[sp] = 0;
-            }
-        } else if (fs[sp] == 1) {
-            fl[sp] = ret;
-            fs[sp] = 2;
-            ++sp;
-            fn[sp] = k - k2;
-            fs[sp] = 0;
-        } else {
-            ret = fl[sp] + ret;
-            --sp;
-        }
-    }
-    return ret;
+    double r;
+    PAIRWISE_TREE(r, int, m, L[pw_k]);
+    return r;
 }
 
 #if LANES == 1
@@ -295,11 +203,11 @@ __kernel void chunk_sums(__global const int *PI, __global double *PD, const int 
 }
 #else
 // One work-group of WG_CHUNK work-items per chunk: they combine the lane partials of the
-// chunk's leaves (64 to 128 of them: leaves of a split chunk have 64 to 128 terms), then one
-// adds the leaves along the chunk's tree (the same sums and minima as above; always run,
-// even for one chunk, so that no single work-item walks a whole chunk)
-#define WG_CHUNK 64
-#define MAX_LEAVES (CHUNK / 64)
+// chunk's leaves (up to 2 CHUNK / PW_BLOCK of them: leaves of a split chunk have PW_BLOCK / 2
+// to PW_BLOCK terms), then one adds the leaves along the chunk's tree (the same sums and
+// minima as above; always run, even for one chunk, so that no single work-item walks a
+// whole chunk)
+#define MAX_LEAVES (2 * CHUNK / PW_BLOCK)
 __kernel __attribute__((reqd_work_group_size(WG_CHUNK, 1, 1)))
 void chunk_sums(__global const int *PI, __global double *PD, const int sums, const int mins)
 {
@@ -695,16 +603,16 @@ __kernel void finish_trial(__global double *S, __global const int *PIc,
         return;
     }
     if (S[S_BAD] != 0.0) {
-        S[S_STATUS] = 2.0;
+        S[S_STATUS] = (double)ST_NOT_DESCENT;
         return;
     }
     const double step = S[S_STEP];
     const int guard = S[S_GUARD] != 0.0;
     if (isfinite(et) && et <= S[S_E] + (1e-4 * step) * S[S_SLOPE] && !(guard && dmin <= 0.0)) {
-        S[S_STATUS] = 1.0;
+        S[S_STATUS] = (double)ST_ACCEPTED;
         S[S_E] = et;
     } else {
-        S[S_STATUS] = 0.0;
+        S[S_STATUS] = (double)ST_REJECTED;
         S[S_STEP] = step * 0.5;
     }
 }

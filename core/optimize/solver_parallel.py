@@ -21,27 +21,47 @@ from pathlib import Path
 import numpy as np
 
 from ..csr import bincount_csr, point_morton
-from ..engine_opencl import LOCK, _runtime
+from ..engine_opencl import LOCK, _runtime, cl_defines, fpmath_options, program_source
+from ..fpmath import PAIRWISE_BLOCK, REDUCE_CHUNK
 from .energy import FoldoverEnergy, LiftEnergy
 from .solver import lbfgs
+from .solver_opencl import energy_defines
 from .state import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, stops
 
-__all__ = ["KERNEL_FILE", "ParallelLbfgs", "device_solver", "reduction_plan"]
+__all__ = ["KERNEL_FILE", "ParallelLbfgs", "build_options", "device_solver", "kernel_source",
+           "reduction_plan"]
 
 KERNEL_FILE = Path(__file__).with_name("solver_parallel.cl")
-CHUNK = 8192  # NumPy's reduction buffer (np.getbufsize())
-BLOCK = 128  # NumPy's pairwise base block
+CHUNK = REDUCE_CHUNK  # NumPy's reduction buffer (np.getbufsize())
+BLOCK = PAIRWISE_BLOCK  # NumPy's pairwise base block
+WG_CHUNK = 64  # work-group size of chunk_sums with lanes > 1 (a work-item per leaf)
 LOCAL_SIZE = 64  # work-group size (any value gives the same bits; 64 was fastest on pocl)
 INDEX_LIMIT = 2**31  # the kernels' indices are 32-bit: larger tables use the host solver
 # Below this many energy corners the single-work-item kernel beats the parallel kernels on
 # the pocl CPU device (~35 launches and a read per iteration, ~0.15 ms; crossover measured
 # at 10-20k corners by bench/lbfgs_parallel_bench.py)
 SMALL_CORNERS = 20_000
-# status block (S[0:8], see the kernel source)
-_STATUS, _ET, _DMIN, _LEN = 0, 1, 2, 3
-_S_EPS, _S_QC, _S_H0, _S_GUARD = 8, 9, 10, 11
-_SKIP = 15
-_REJECTED, _ACCEPTED, _NOT_DESCENT = 0, 1, 2
+# S, the solver's scalars on the device (doubles; counts as exact small integers), one slot
+# each (S_* defines). S[0:8] is the status block the host reads back after each trial:
+# STATUS (a ST_* code), ET and DMIN (the trial's energy and smallest corner det), LEN (pairs
+# in memory), E (the current point's energy), START (ring slot of the oldest pair), SLOPE,
+# STEP. Then EPS, QC, H0, GUARD (set by the host), OK (the first point has a gradient),
+# BAD (not a descent direction), COEF (the second loop's al - rho y.q), SKIP (trial steps the
+# step limit skipped), and per pair or ring slot (M pairs and a spare): ALPHA [M], RHO = 1 /
+# s.y, SY = s.y, YDY = y.(dpre y) [M + 1]; LEN_ALL: the length.
+_S = {name: k for k, name in enumerate((
+    "S_STATUS", "S_ET", "S_DMIN", "S_LEN", "S_E", "S_START", "S_SLOPE", "S_STEP", "S_EPS",
+    "S_QC", "S_H0", "S_GUARD", "S_OK", "S_BAD", "S_COEF", "S_SKIP", "S_ALPHA"))}
+_S["S_RHO"] = _S["S_ALPHA"] + LBFGS_MEMORY
+_S["S_SY"] = _S["S_RHO"] + LBFGS_MEMORY + 1
+_S["S_YDY"] = _S["S_SY"] + LBFGS_MEMORY + 1
+_S["S_LEN_ALL"] = _S["S_YDY"] + LBFGS_MEMORY + 1
+_STATUS, _ET, _DMIN, _LEN = _S["S_STATUS"], _S["S_ET"], _S["S_DMIN"], _S["S_LEN"]
+_S_EPS, _S_QC, _S_H0, _S_GUARD = _S["S_EPS"], _S["S_QC"], _S["S_H0"], _S["S_GUARD"]
+_SKIP = _S["S_SKIP"]
+# S_STATUS after a trial: the step was halved, the trial accepted, or no descent direction
+_ST = {"ST_REJECTED": 0, "ST_ACCEPTED": 1, "ST_NOT_DESCENT": 2}
+_REJECTED, _ACCEPTED, _NOT_DESCENT = _ST["ST_REJECTED"], _ST["ST_ACCEPTED"], _ST["ST_NOT_DESCENT"]
 _solvers: dict[tuple, ParallelLbfgs] = {}
 
 
@@ -71,6 +91,25 @@ def device_solver(
             solver = ParallelLbfgs(lanes, local_size, small=small, small_corners=small_corners)
             _solvers[key] = solver
     return solver
+
+
+def _partials_per_leaf(lanes: int) -> int:
+    """Leaf partials per sum (PPL): the leaf's sum (one lane), or its 8 partial sums and 8
+    tail slots (several lanes, combined by the next stage)."""
+    return 1 if lanes == 1 else 16
+
+
+def kernel_source() -> str:
+    """The OpenCL C source of the parallel L-BFGS kernels (with the shared header)."""
+    return program_source(KERNEL_FILE)
+
+
+def build_options(lanes: int) -> list[str]:
+    """The kernels' defines for `lanes` work-items per leaf: core.fpmath's (NumPy's
+    summation cut points), the energies' constants, the line search's and the layout of S."""
+    return [*fpmath_options(), *cl_defines({
+        "M": LBFGS_MEMORY, "LANES": lanes, "PPL": _partials_per_leaf(lanes), "TRIALS": TRIALS,
+        "LIMIT_MARGIN": LIMIT_MARGIN, "WG_CHUNK": WG_CHUNK, **energy_defines(), **_S, **_ST})]
 
 
 def reduction_plan(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -148,7 +187,7 @@ class _Plan:
         self.n, self.n_leaves, self.n_chunks = n, bounds.size - 1, first.size - 1
         head = np.array([n, self.n_leaves, self.n_chunks, sums], dtype=np.int64)
         self.ints = np.concatenate([head, bounds, first])
-        per_leaf = 1 if solver.lanes == 1 else 16
+        per_leaf = _partials_per_leaf(solver.lanes)
         self.pd_len = (sums * per_leaf + solver.lanes) * self.n_leaves + (sums + 1) * self.n_chunks
         self.leaf_items = self.n_leaves * solver.lanes
 
@@ -300,9 +339,8 @@ class ParallelLbfgs:
         self.local_size = local_size
         prg = rt.build(
             f"lbfgs_parallel M={LBFGS_MEMORY} LANES={self.lanes}",
-            KERNEL_FILE.read_text(),
-            [f"-DM={LBFGS_MEMORY}", f"-DLANES={self.lanes}", f"-DTRIALS={TRIALS}",
-             f"-DLIMIT_MARGIN={LIMIT_MARGIN!r}"],
+            kernel_source(),
+            build_options(self.lanes),
             what="parallel L-BFGS kernels",
         )
 
@@ -324,10 +362,10 @@ class ParallelLbfgs:
         self._k["gather_init"] = kern("gather_grad")
         self._k["finish_trial"] = kern("finish_trial")
         self._k["finish_init"] = kern("finish_trial")
-        s_len = 16 + m + 3 * (m + 1)
+        s_len = _S["S_LEN_ALL"]
         self._S_host = np.zeros(s_len)
         self.S = self._empty(8 * s_len)
-        self._rb = np.zeros(16)  # S[0:16]: the status block and the skip count
+        self._rb = np.zeros(_SKIP + 1)  # S[0:16]: the status block and the skip count
         self._last: tuple[FoldoverEnergy, State, _Tables] | None = None
 
     def release(self) -> None:
@@ -372,12 +410,11 @@ class ParallelLbfgs:
 
     def _chunks(self, chunk: str, plan: _Plan) -> None:
         """The chunk sums of a plan: one work-item per chunk when there are several chunks
-        (one chunk: its finish kernel walks it); with lanes > 1 a work-group of 64 per
+        (one chunk: its finish kernel walks it); with lanes > 1 a work-group of WG_CHUNK per
         chunk, always (see chunk_sums in the kernel source)."""
         if self.lanes > 1:
-            n = 64  # WG_CHUNK in the kernel source
             self.cl.enqueue_nd_range_kernel(
-                self.queue, self._k[chunk], (n * plan.n_chunks,), (n,)
+                self.queue, self._k[chunk], (WG_CHUNK * plan.n_chunks,), (WG_CHUNK,)
             )
         elif plan.n_chunks > 1:
             self._go(chunk, plan.n_chunks)

@@ -190,8 +190,8 @@ def test_device_sums_are_numpys_pairwise_sums_bit_for_bit(device, lanes):
     every boundary of NumPy's scheme (8, 128, 8192), on values spanning 30 decades where any
     other order of additions gives other bits; the minimum with NumPy's NaN rule."""
     rt = eo._runtime()
-    src = lp.KERNEL_FILE.read_text() + PROBE
-    prg = rt.cl.Program(rt.ctx, src).build(options=["-DM=4", f"-DLANES={lanes}"])
+    src = lp.kernel_source() + PROBE
+    prg = rt.cl.Program(rt.ctx, src).build(options=lp.build_options(lanes))
     rng = np.random.default_rng(lanes)
     sizes = [1, 5, 8, 9, 15, 127, 128, 129, 136, 1000, 8191, 8192, 8193, 8200, 20_000, 70_001]
     other = 0
