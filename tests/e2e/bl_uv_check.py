@@ -6,33 +6,15 @@ import json
 import os
 import sys
 
-import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import meshcheck
-
-
-def read(path):
-    bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
-    me = bpy.data.objects["Tangled"].data
-    n = len(me.loops)
-    uv = np.empty(2 * n, np.float32)
-    me.attributes[me.uv_layers.active.name].data.foreach_get("vector", uv)
-    pins = np.zeros(n, bool)
-    if len(me.uv_layers.active.pin) == n:
-        me.uv_layers.active.pin.foreach_get("value", pins)
-    co = np.empty(3 * len(me.vertices), np.float32)
-    me.attributes["position"].data.foreach_get("vector", co)
-    cv = np.empty(n, np.int64)
-    me.loops.foreach_get("vertex_index", cv)
-    faces = [list(range(p.loop_start, p.loop_start + p.loop_total)) for p in me.polygons]
-    return uv.reshape(-1, 2), pins, co, cv, faces
-
+from bl_uv_read import read
 
 inp, out, result = sys.argv[sys.argv.index("--") + 1:][:3]
-uv0, pins0, co0, cv, faces = read(inp)
-uv1, pins1, co1, _, _ = read(out)
+uv0, pins0, co0, cv, faces = read(inp, "Tangled")
+uv1, pins1, co1, _, _ = read(out, "Tangled")
 c0, c1 = meshcheck.uv_check(uv0, faces, cv), meshcheck.uv_check(uv1, faces, cv)
 border = c0.pop("border_loops")
 c1.pop("border_loops")

@@ -72,27 +72,10 @@ import numpy as np
 inp, out, res = sys.argv[sys.argv.index("--") + 1:][:3]
 sys.path.insert(0, sys.argv[sys.argv.index("--") + 4])
 import meshcheck
+from bl_uv_read import read
 
-
-def read(path):
-    bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
-    me = bpy.data.objects["Grid"].data
-    n = len(me.loops)
-    uv = np.empty(2 * n, np.float32)
-    me.attributes[me.uv_layers.active.name].data.foreach_get("vector", uv)
-    pins = np.zeros(n, bool)
-    if len(me.uv_layers.active.pin) == n:
-        me.uv_layers.active.pin.foreach_get("value", pins)
-    co = np.empty(3 * len(me.vertices), np.float32)
-    me.attributes["position"].data.foreach_get("vector", co)
-    cv = np.empty(n, np.int64)
-    me.loops.foreach_get("vertex_index", cv)
-    faces = [list(range(p.loop_start, p.loop_start + p.loop_total)) for p in me.polygons]
-    return uv.reshape(-1, 2), pins, co.reshape(-1, 3), cv, faces
-
-
-uv0, pins, co0, cv, faces = read(inp)
-uv1, _, co1, _, _ = read(out)
+uv0, pins, co0, cv, faces = read(inp, "Grid")
+uv1, _, co1, _, _ = read(out, "Grid")
 side = meshcheck.uv_check(uv0, faces, cv)["orientation"]  # one island: its total area
 q = [meshcheck.face_quality(uv1.astype(np.float64) * [side, 1.0], np.asarray(f))
      for f in faces]
