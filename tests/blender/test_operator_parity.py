@@ -41,7 +41,7 @@ from core.uv_layout import weld_uv
 from core.uv_untangle import untangle_uv
 
 from .conftest import import_obj, positions
-from .uvtools import tangled, uv_values
+from .uvtools import mesh_csr, tangled, uv_values
 
 pytestmark = pytest.mark.blender
 
@@ -52,18 +52,6 @@ FLOAT32_PARAMS = ("Blender stores FloatProperty values as float32: the operators
                   "positions written)")
 PLANE_FIT = ("untangle_and_smooth_3d normalises before fitting the plane, the operator fits it "
              "on the positions as they are: round-off apart 2D inputs, different result bits")
-
-
-def csr(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(loop_start, loop_total, corner_verts) of the mesh, read with foreach_get."""
-    me = obj.data
-    ls = np.empty(len(me.polygons), np.int64)
-    lt = np.empty(len(me.polygons), np.int64)
-    cv = np.empty(len(me.loops), np.int64)
-    me.polygons.foreach_get("loop_start", ls)
-    me.polygons.foreach_get("loop_total", lt)
-    me.loops.foreach_get("vertex_index", cv)
-    return ls, lt, cv
 
 
 def operator_params(settings) -> EEGTParams:
@@ -93,7 +81,7 @@ def operator_run(bpy, name: str) -> tuple[np.ndarray, np.ndarray, object]:
     v, faces = load(name)
     before = positions(obj)
     assert np.array_equal(before, v.astype(np.float32))
-    ls, lt, cv = csr(obj)
+    ls, lt, cv = mesh_csr(obj)
     assert np.array_equal(ls, faces.offsets[:-1]) and np.array_equal(lt, np.diff(faces.offsets))
     assert np.array_equal(cv, faces.indices)
     assert bpy.ops.mesh.eegt_untangle_smooth(backend="NUMPY") == {"FINISHED"}
@@ -149,7 +137,7 @@ def test_uv_operator_writes_the_core_result_bit_for_bit(bpy, ext):
     me = obj.data
     uv0 = uv_values(obj)
     co = positions(obj)
-    ls, lt, cv = csr(obj)
+    ls, lt, cv = mesh_csr(obj)
     pins = np.zeros(len(me.loops), bool)
     if len(me.uv_layers.active.pin) == len(me.loops):
         me.uv_layers.active.pin.foreach_get("value", pins)
