@@ -40,8 +40,8 @@ def write_uv(obj: Any, uv: np.ndarray) -> None:
     me.update()
 
 
-def layout(obj: Any, uv: np.ndarray | None = None) -> UVLayout:
-    """The welded UV map of ``obj`` (Object Mode)."""
+def mesh_csr(obj: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(loop_start, loop_total, corner_verts) of ``obj``'s mesh, read with foreach_get."""
     me = obj.data
     ls = np.empty(len(me.polygons), np.int64)
     lt = np.empty(len(me.polygons), np.int64)
@@ -49,7 +49,12 @@ def layout(obj: Any, uv: np.ndarray | None = None) -> UVLayout:
     me.polygons.foreach_get("loop_start", ls)
     me.polygons.foreach_get("loop_total", lt)
     me.loops.foreach_get("vertex_index", cv)
-    return weld_uv(ls, lt, cv, read_uv(obj) if uv is None else uv)
+    return ls, lt, cv
+
+
+def layout(obj: Any, uv: np.ndarray | None = None) -> UVLayout:
+    """The welded UV map of ``obj`` (Object Mode)."""
+    return weld_uv(*mesh_csr(obj), read_uv(obj) if uv is None else uv)
 
 
 def _positions(me: Any) -> np.ndarray:

@@ -44,18 +44,14 @@ def install(bpy) -> None:
 
 def measure(obj, uv, border_loops, pins) -> dict:
     """Counts and distortion of the UV values ``uv`` of ``obj`` (its 3D shapes as targets)."""
+    from bench import uv_assets
     from core import faces_from_csr
     from core.targets import face_shapes_2d
     from core.uv_layout import weld_uv
     from core.uv_untangle import measure as uv_measure
 
     me = obj.data
-    ls = np.empty(len(me.polygons), np.int64)
-    lt = np.empty(len(me.polygons), np.int64)
-    cv = np.empty(len(me.loops), np.int64)
-    me.polygons.foreach_get("loop_start", ls)
-    me.polygons.foreach_get("loop_total", lt)
-    me.loops.foreach_get("vertex_index", cv)
+    ls, lt, cv = uv_assets.mesh_csr(obj)
     co = np.empty(len(me.vertices) * 3, np.float32)
     me.attributes["position"].data.foreach_get("vector", co)
     lay = weld_uv(ls, lt, cv, uv)

@@ -34,6 +34,7 @@ import numpy as np
 import pytest
 from meshdata import load
 
+from bench import uv_assets
 from core import EEGTParams, PlaneFrame, faces_from_csr, untangle_and_smooth
 from core.planar import untangle_and_smooth_3d
 from core.targets import face_shapes_2d
@@ -41,7 +42,7 @@ from core.uv_layout import weld_uv
 from core.uv_untangle import untangle_uv
 
 from .conftest import import_obj, positions
-from .uvtools import mesh_csr, tangled, uv_values
+from .uvtools import tangled, uv_values
 
 pytestmark = pytest.mark.blender
 
@@ -81,7 +82,7 @@ def operator_run(bpy, name: str) -> tuple[np.ndarray, np.ndarray, object]:
     v, faces = load(name)
     before = positions(obj)
     assert np.array_equal(before, v.astype(np.float32))
-    ls, lt, cv = mesh_csr(obj)
+    ls, lt, cv = uv_assets.mesh_csr(obj)
     assert np.array_equal(ls, faces.offsets[:-1]) and np.array_equal(lt, np.diff(faces.offsets))
     assert np.array_equal(cv, faces.indices)
     assert bpy.ops.mesh.eegt_untangle_smooth(backend="NUMPY") == {"FINISHED"}
@@ -137,7 +138,7 @@ def test_uv_operator_writes_the_core_result_bit_for_bit(bpy, ext):
     me = obj.data
     uv0 = uv_values(obj)
     co = positions(obj)
-    ls, lt, cv = mesh_csr(obj)
+    ls, lt, cv = uv_assets.mesh_csr(obj)
     pins = np.zeros(len(me.loops), bool)
     if len(me.uv_layers.active.pin) == len(me.loops):
         me.uv_layers.active.pin.foreach_get("value", pins)

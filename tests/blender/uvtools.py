@@ -16,18 +16,6 @@ def uv_values(obj, name: str | None = None) -> np.ndarray:
     return buf.reshape(-1, 2)
 
 
-def mesh_csr(obj) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(loop_start, loop_total, corner_verts) of the mesh, read with foreach_get."""
-    me = obj.data
-    ls = np.empty(len(me.polygons), np.int64)
-    lt = np.empty(len(me.polygons), np.int64)
-    cv = np.empty(len(me.loops), np.int64)
-    me.polygons.foreach_get("loop_start", ls)
-    me.polygons.foreach_get("loop_total", lt)
-    me.loops.foreach_get("vertex_index", cv)
-    return ls, lt, cv
-
-
 def corner_verts(obj) -> np.ndarray:
     me = obj.data
     cv = np.empty(len(me.loops), np.int64)
