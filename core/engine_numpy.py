@@ -13,7 +13,7 @@ import numpy as np
 from .boundary import BoundaryMotion
 from .distance import NearestBoundary
 from .faces import FaceSet
-from .fpmath import power
+from .fpmath import add_reduce, power
 from .params import EEGTParams
 from .quality import Stats, group_quality, stats_of
 from .targets import Targets
@@ -73,7 +73,7 @@ def edge_lengths(x: np.ndarray, y: np.ndarray, groups) -> tuple[float, float]:
     """(lbar, smallest element mean edge length > 0) of the positions (x, y): lbar is the
     mean over all elements of their mean edge length (the span when that is not positive)."""
     m = np.concatenate([_edge_sum(x[g.nodes], y[g.nodes]) / g.n for g in groups])
-    lbar = float(m.mean())
+    lbar = add_reduce(m) / m.size
     positive = m[m > 0]
     span = float(max(np.ptp(x), np.ptp(y))) or 1.0
     if not np.isfinite(lbar) or lbar <= 0:

@@ -285,15 +285,15 @@ def fpmath_options() -> list[str]:
 
 
 class _SumPlan:
-    """`np.sum` of a contiguous float64 array of n values, split for the device. NumPy adds
-    buffer-sized chunks (np.getbufsize(), 8192) in order, each by pairwise_sum: halves
+    """`fpmath.add_reduce` of a contiguous float64 array of n values, split for the device:
+    chunks of fpmath.REDUCE_CHUNK values in order, each by NumPy's pairwise_sum: halves
     (at n / 2 rounded down to a multiple of 8) down to blocks of <= 128 values, which it adds
     with 8 interleaved partial sums. `bounds` delimits those blocks (the quality kernel sums
     one per work-item, the same way); `total(block_sums)` adds the block sums in NumPy's
-    order: the result is `q.sum()`'s bits."""
+    order: the result is `add_reduce(q)`'s bits."""
 
     def __init__(self, n: int, bufsize: int | None = None):
-        bufsize = int(bufsize or np.getbufsize())
+        bufsize = int(bufsize or fpmath.REDUCE_CHUNK)
         bounds = [0]
 
         def tree(off: int, m: int):  # a block's index, or (left, right)

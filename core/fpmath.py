@@ -19,6 +19,8 @@ __all__ = [
     "PAIRWISE_BLOCK",
     "POW_CODES",
     "REDUCE_CHUNK",
+    "add_reduce",
+    "add_reduce_rows",
     "atan2",
     "exp",
     "float64_copy",
@@ -46,11 +48,35 @@ POW_CODES = {"POW_GENERAL": 0, "POW_SQUARE": 1, "POW_IDENTITY": 2, "POW_ONE": 3,
 _POW_FAST = {2.0: "POW_SQUARE", 1.0: "POW_IDENTITY", 0.0: "POW_ONE", 0.5: "POW_SQRT",
              -1.0: "POW_RECIPROCAL"}
 # NumPy's float64 add.reduce order, which the OpenCL kernels reproduce: buffers of
-# REDUCE_CHUNK values in order (np.getbufsize()'s default), each by pairwise_sum, which
+# REDUCE_CHUNK values in order (NumPy 1's reduction buffer), each by pairwise_sum, which
 # halves a run at n / 2 rounded down to a multiple of 8 down to blocks of at most
 # PAIRWISE_BLOCK values (NumPy's PW_BLOCKSIZE), added with 8 interleaved partial sums
 PAIRWISE_BLOCK = 128
 REDUCE_CHUNK = 8192
+
+
+def add_reduce(values: np.ndarray) -> float:
+    """The sum of a float64 array (all its values, C order) in the order above, whatever the
+    NumPy: NumPy 2 sums more than REDUCE_CHUNK values as one pairwise tree, NumPy 1 chunk by
+    chunk, and the two differ in the last bits. Each chunk goes to NumPy as a row of its own
+    (rows of at most REDUCE_CHUNK values are summed alike by every NumPy), the chunk sums are
+    added in order."""
+    a = values.reshape(-1)
+    n = a.size
+    if n <= REDUCE_CHUNK:
+        return float(np.add.reduce(a))
+    full = n - n % REDUCE_CHUNK
+    parts = np.add.reduce(a[:full].reshape(-1, REDUCE_CHUNK), axis=1)
+    if full < n:
+        parts = np.append(parts, np.add.reduce(a[full:]))
+    return float(np.add.accumulate(parts)[-1])
+
+
+def add_reduce_rows(values: np.ndarray) -> list[float]:
+    """`add_reduce` of each row of a 2-D float64 array."""
+    if values.shape[1] <= REDUCE_CHUNK:
+        return np.add.reduce(values, axis=1).tolist()
+    return [add_reduce(row) for row in values]
 
 
 def power_code(e: float) -> int:

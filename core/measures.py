@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .faces import FaceSet, as_faceset
-from .fpmath import atan2, regular_corner, tan_pi_over
+from .fpmath import add_reduce, atan2, regular_corner, tan_pi_over
 from .quality import _check_points, scaled_group_quality, unit_scaled
 
 __all__ = [
@@ -288,7 +288,7 @@ def summarize(measure: str, values: np.ndarray, arity: np.ndarray) -> MeasureSum
     present = [int(a) for a in np.unique(arity)]
     return MeasureSummary(
         measure=m.name, n_faces=int(values.size), min=float(values.min()),
-        mean=float(values.mean()), max=float(values.max()),
+        mean=add_reduce(values) / values.size, max=float(values.max()),
         n_beyond=int(np.count_nonzero(m.beyond(values, arity))),
         thresholds={n: float(m.threshold(n)) for n in present},
         higher_is_better=m.higher_is_better)

@@ -12,6 +12,7 @@ import numpy as np
 from .backends import make_engine
 from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .faces import FaceSet, as_faceset
+from .fpmath import add_reduce
 from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
 from .optimize.reference import Factors
@@ -249,7 +250,7 @@ def _check_orientation(p: np.ndarray, fs: FaceSet) -> None:
     total = 0.0
     for g in fs.groups:
         x, y = p[g.nodes, 0], p[g.nodes, 1]
-        total += float(np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y))
+        total += add_reduce(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y)
     if total < 0.0:
         raise ValueError(
             "faces are clockwise (the mesh's total signed area is negative): reverse every "

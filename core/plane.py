@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .faces import FaceSet, as_faceset
+from .fpmath import add_reduce
 from .quality import _check_points
 from .topology import EdgeInfo, checked_edges, free_nodes
 
@@ -48,7 +49,7 @@ def _vector_area(q: np.ndarray, edges: tuple[np.ndarray, np.ndarray, np.ndarray]
     only boundary and non-manifold nodes enter."""
     e0, e1, w = edges
     c = np.cross(q[e0], q[e1])
-    return np.array([0.5 * float(np.sum(w * c[:, k])) for k in range(3)])
+    return np.array([0.5 * add_reduce(w * c[:, k]) for k in range(3)])
 
 
 @dataclass(frozen=True)

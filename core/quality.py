@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .faces import as_faceset
-from .fpmath import float64_copy, regular_corner
+from .fpmath import add_reduce, float64_copy, regular_corner
 from .targets import prepare_targets
 
 __all__ = [
@@ -168,7 +168,7 @@ def stats_of(qs: list[np.ndarray]) -> Stats:
     total = sum(q.size for q in qs)
     n_inv = sum(int(np.count_nonzero(q == 0.0)) for q in qs)
     q_min = min(float(q.min()) for q in qs if q.size)
-    q_avg = sum(float(q.sum()) for q in qs) / total
+    q_avg = sum(add_reduce(q) for q in qs) / total
     return Stats(n_inv, q_min, q_avg)
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .faces import FaceSet, as_faceset
-from .fpmath import float64_copy
+from .fpmath import add_reduce, float64_copy
 from .plane import PlaneFrame
 
 __all__ = ["reference_targets", "reference_to_2d"]
@@ -25,7 +25,7 @@ def _signed_area(p: np.ndarray, fs: FaceSet) -> float:
     total = 0.0
     for g in fs.groups:
         x, y = p[g.nodes, 0], p[g.nodes, 1]
-        total += float(np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y))
+        total += add_reduce(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y)
     return 0.5 * total
 
 

@@ -182,8 +182,8 @@ class FoldoverEnergy:
         size, hnode = reference_sizes(points, arity, edges, edge_elem)
         # Diagonal L-BFGS preconditioner: with uniform weights the Hessian at a node scales
         # like 1 / size^2, so moves are scaled by size^2.
-        self.precond = (hnode / float(np.mean(hnode))) ** 2
-        self.h_mean = float(np.mean(size))
+        self.precond = (hnode / (fpmath.add_reduce(hnode) / hnode.size)) ** 2
+        self.h_mean = fpmath.add_reduce(size) / size.size
         return arity, size
 
     def _set_corners(
@@ -315,7 +315,7 @@ class FoldoverEnergy:
         u = num / ch
         if self.power != 1.0:
             u = fpmath.power(0.5 * u, self.power)
-        return float(np.add.reduce(self.weight * u))
+        return fpmath.add_reduce(self.weight * u)
 
     def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
         """(F_eps, min det J, whether `_grad` may follow) at the flat coordinates z."""
@@ -335,11 +335,11 @@ class FoldoverEnergy:
         if self.power != 1.0:  # F = sum w (u / 2)^p with u = num / chi
             u = 0.5 * num / chi
             up = fpmath.power(u, self.power)
-            energy = float(np.add.reduce(self.weight * up))
+            energy = fpmath.add_reduce(self.weight * up)
             np.multiply(inv_chi, 0.5 * self.power, inv_chi)  # inv_chi (p / 2) (up / u)
             np.multiply(inv_chi, up / u, inv_chi)
         else:
-            energy = float(np.add.reduce(np.multiply(num, inv_chi, bk.tmp)))
+            energy = fpmath.add_reduce(np.multiply(num, inv_chi, bk.tmp))
         return energy, dmin, True
 
     def _grad(self, layout) -> np.ndarray:
@@ -448,8 +448,8 @@ class LiftEnergy(FoldoverEnergy):
         gap = np.subtract(qc, q)  # (qc - q)_+ / qc
         np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
         w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
-        energy = float(np.add.reduce(np.subtract(np.multiply(w, gap, w), q, w)))
-        energy += LIFT_BARRIER * float(np.add.reduce(np.multiply(self.weight, u, bk.tmp)))
+        energy = fpmath.add_reduce(np.subtract(np.multiply(w, gap, w), q, w))
+        energy += LIFT_BARRIER * fpmath.add_reduce(np.multiply(self.weight, u, bk.tmp))
         self._gap = gap
         return energy, dmin, True
 

@@ -117,7 +117,7 @@ def reference_sizes(
     elen = np.sqrt(dx * dx + dy * dy)
     del dx, dy
     positive = elen[elen > 0]
-    floor = 1e-3 * (float(np.mean(positive)) if positive.size else 1.0)
+    floor = 1e-3 * (fpmath.add_reduce(positive) / positive.size if positive.size else 1.0)
     elen = np.maximum(elen, floor)
     cnt = np.bincount(edges[0], minlength=n_nodes).astype(np.float64)
     hn = np.bincount(edges[0], weights=elen, minlength=n_nodes)
@@ -133,8 +133,8 @@ def reference_sizes(
         le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
     size = fpmath.exp(le)
     ref_area = arity * size**2 / (4.0 * per_arity(arity, fpmath.tan_pi_over))
-    dom_area = 0.5 * float(np.sum(x0 * y1 - x1 * y0))
-    total = float(np.sum(ref_area))
+    dom_area = 0.5 * fpmath.add_reduce(x0 * y1 - x1 * y0)
+    total = fpmath.add_reduce(ref_area)
     if dom_area > 0.0 and total > 0.0:
         size = size * np.sqrt(dom_area / total)
     return size, fpmath.exp(lh)

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..fpmath import add_reduce, add_reduce_rows
 from .state import LBFGS_MEMORY, TRIALS, State, skipped_trials, stops
 
 if TYPE_CHECKING:
@@ -39,14 +40,15 @@ def lbfgs(
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
     comments: the energy sees z = [v, fixed coordinates] (`FoldoverEnergy._packed`), whose first
     2 nf gradient entries are the packed gradient, and only accepted points get a gradient;
-    a dot product dot(a, b) is `np.add.reduce(a * b)`, NumPy's pairwise sum, never BLAS's
-    `a @ b`, whose result depends on its thread count (one scratch buffer; the four of a new pair as
-    the rows of one reduce, each row summed exactly as alone); a scalar factor is filled into
-    an array first (a cheaper NumPy operand than a float or a 0-d array).
+    a dot product dot(a, b) is `fpmath.add_reduce(a * b)`, NumPy's pairwise sum in one order
+    under every NumPy, never BLAS's `a @ b`, whose result depends on its thread count (one
+    scratch buffer; the four of a new pair as the rows of one array, each row summed exactly
+    as alone); a scalar factor is filled into an array first (a cheaper NumPy operand than a
+    float or a 0-d array).
     """
     layout, fixed = en._packed(st)
     evaluate, gradient = en._eval, en._grad
-    mul, red, amax = np.multiply, np.add.reduce, np.maximum.reduce
+    mul, red, amax = np.multiply, add_reduce, np.maximum.reduce
     n2 = st.size
     z = np.concatenate([v0, fixed])  # the energy's input: trial points go into z[:n2]
     zv = z[:n2]
@@ -131,7 +133,7 @@ def lbfgs(
         mul(s, s, ss_)
         mul(yv, yv, yy_)
         mul(yv, mul(dpre, yv, tmp), ydy_)
-        sy, ss, yy, ydy = red(prods, 1).tolist()  # dot(s, y), dot(s, s), ...
+        sy, ss, yy, ydy = add_reduce_rows(prods)  # dot(s, y), dot(s, s), ...
         if sy > 1e-12 * math.sqrt(ss * yy):
             mem.append((s, yv, 1.0 / sy, sy, ydy))
             if len(mem) > LBFGS_MEMORY:

@@ -32,7 +32,7 @@ __all__ = ["KERNEL_FILE", "ParallelLbfgs", "build_options", "device_solver", "ke
            "reduction_plan"]
 
 KERNEL_FILE = Path(__file__).with_name("solver_parallel.cl")
-CHUNK = REDUCE_CHUNK  # NumPy's reduction buffer (np.getbufsize())
+CHUNK = REDUCE_CHUNK  # fpmath.add_reduce's chunk
 BLOCK = PAIRWISE_BLOCK  # NumPy's pairwise base block
 WG_CHUNK = 64  # work-group size of chunk_sums with lanes > 1 (a work-item per leaf)
 LOCAL_SIZE = 64  # work-group size (any value gives the same bits; 64 was fastest on pocl)

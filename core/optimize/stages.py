@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..boundary import SlideView
+from ..fpmath import add_reduce
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
 from .options import GlobalOptions, Solver
 from .reference import Factors
@@ -301,7 +302,7 @@ def lift_min_quality(
     info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
     q = en.element_quality(st.x, st.y) if en.n_elem else np.zeros(0)
     m0 = float(q.min()) if q.size else 0.0
-    a0 = float(q.mean()) if q.size else 0.0
+    a0 = add_reduce(q) / q.size if q.size else 0.0
     info.update(q_min_in=m0, q_avg_in=a0, q_min_out=m0, q_avg_out=a0)
     if q.size == 0 or st.size == 0 or not m0 > 0.0 or not np.all(np.isfinite(P)):
         info["seconds"] = time.perf_counter() - t_start
@@ -358,7 +359,7 @@ def lift_min_quality(
         else:  # only the sub-mesh's elements changed
             qt = q.copy()
             qt[elems] = en.element_quality_of(elems, xt, yt)
-        qm, qa = float(qt.min()), float(qt.mean())
+        qm, qa = float(qt.min()), add_reduce(qt) / qt.size
         trail.append((qm, qa))
         if cancel or (progress is not None and stops(progress(total, r, cur_m, cur_a))):
             info.update(iterations=total, status="cancelled", seconds=time.perf_counter() - t_start)

@@ -4,6 +4,7 @@ other kernels gives points bit-identical to the unrestricted run on the shared m
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import subprocess
@@ -47,14 +48,20 @@ def _numpy_cpu() -> tuple[list[str], dict[str, bool]]:
     return list(mu.__cpu_dispatch__), dict(mu.__cpu_features__)
 
 
-def _run(env_extra: dict[str, str]) -> dict:
+def _run(env_extra: dict[str, str], python: str = sys.executable) -> dict:
     env = {k: v for k, v in os.environ.items()
            if k not in ("NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE")}
     env.update(env_extra)
-    done = subprocess.run([sys.executable, "-c", CHILD, str(ROOT)], env=env,
+    done = subprocess.run([python, "-c", CHILD, str(ROOT)], env=env,
                           capture_output=True, text=True, timeout=600, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@functools.cache
+def _reference() -> dict:
+    """This interpreter's results with its NumPy unrestricted."""
+    return _run({})
 
 
 @pytest.mark.slow
@@ -63,7 +70,7 @@ def test_shared_meshes_bit_identical_without_avx512_and_on_baseline_simd() -> No
     have = [f for f in dispatch if found.get(f)]
     if not have:
         pytest.skip("this NumPy dispatches no SIMD extension on this CPU: nothing to restrict")
-    reference = _run({})
+    reference = _reference()
     assert all(v[1] == "untangled" for v in reference.values()), reference
     no_avx512 = [f for f in have if f.startswith("AVX512")]
     variants = {"baseline": {"NPY_DISABLE_CPU_FEATURES": " ".join(have),
@@ -75,6 +82,34 @@ def test_shared_meshes_bit_identical_without_avx512_and_on_baseline_simd() -> No
         got = _run(env)
         differ = sorted(k for k in reference if got[k] != reference[k])
         assert not differ, f"{label}: {differ}: {[(reference[k], got[k]) for k in differ]}"
+
+
+NUMPY2_PYTHON = "EEGT_NUMPY2_PYTHON"  # an interpreter with NumPy >= 2.3 (`make numpy2`)
+
+
+def _numpy_version(python: str) -> tuple[int, int]:
+    done = subprocess.run([python, "-c", "import numpy; print(numpy.__version__)"],
+                          capture_output=True, text=True, timeout=120, check=True)
+    major, minor = done.stdout.strip().split(".")[:2]
+    return int(major), int(minor)
+
+
+@pytest.mark.slow
+def test_shared_meshes_bit_identical_under_numpy_2_3_and_later() -> None:
+    """NumPy 2.3 sums a long array as one pairwise tree where NumPy 1 and 2.2 add chunks in
+    order; the core sums through fpmath.add_reduce, so both give the same points."""
+    other = os.environ.get(NUMPY2_PYTHON) or str(ROOT / "build" / "numpy2" / "bin" / "python")
+    if not Path(other).exists():
+        pytest.skip(f"no NumPy >= 2.3 interpreter ({NUMPY2_PYTHON} unset, `make numpy2` "
+                    "builds build/numpy2; `make test` does)")
+    mine, theirs = _numpy_version(sys.executable), _numpy_version(other)
+    assert theirs >= (2, 3), f"{other} has NumPy {theirs}, not >= 2.3"
+    if mine >= (2, 3):
+        pytest.skip(f"this interpreter's NumPy {mine} sums like the other's: nothing to compare")
+    reference = _reference()
+    got = _run({}, python=other)
+    differ = sorted(k for k in reference if got[k] != reference[k])
+    assert not differ, f"NumPy {theirs}: {[(k, reference[k], got[k]) for k in differ]}"
 
 
 def code_only(text: str) -> list[str]:
