@@ -15,7 +15,7 @@ pytestmark = pytest.mark.blender
 
 
 def cli(ext):
-    return ext.operators.cli
+    return ext.operators.command.entry
 
 
 def read_obj_vertices(path) -> np.ndarray:

@@ -13,7 +13,7 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..core import MEASURES, EEGTParams
+from ...core import MEASURES, EEGTParams
 
 # Choices of string parameters (dataclass fields carry no choice list).
 STRING_CHOICES: dict[str, tuple[tuple[str, str, str], ...]] = {

@@ -9,24 +9,22 @@ No algorithm lives here.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import bpy
 import numpy as np
 
-from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
-from ..core.csr import ragged_arange
-from ..core.pipeline import frozen_note
-from ..core.plane import PlaneFrame
-from ..core.reference_shapes import reference_targets, reference_to_2d
-from ..core.topology import EdgeInfo
-from . import mesh_io, reference_input
-from .reference_input import ReferenceSource
-from .result import RunResult
-
-Progress = Callable[[int, str, Any], bool]
+from ...core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
+from ...core.csr import ragged_arange
+from ...core.pipeline import frozen_note
+from ...core.plane import PlaneFrame
+from ...core.reference_shapes import reference_targets, reference_to_2d
+from ...core.topology import EdgeInfo
+from ..shared.progress import Progress
+from ..shared.result import RunResult
+from . import mesh_io, reference_mesh
+from .reference_mesh import ReferenceSource
 
 PLANE_TOL = 1e-5
 QUALITY_EPS = 1e-6  # quality changes smaller than this are float32 round-off, not a gain
@@ -158,7 +156,7 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     ``selected_only``: only the selected faces move; vertices of unselected faces (the
     selection border and everything outside) stay fixed. Loose vertices and the vertices of
     loose edges never move. ``reference`` (target "reference"): where the reference shapes
-    come from (``reference_input``); a missing, mismatched or non-planar one is an error.
+    come from (``reference_mesh``); a missing, mismatched or non-planar one is an error.
     """
     me = obj.data
     job = Job(object=obj.name, mesh=me.name, co=np.zeros((0, 3), np.float32))
@@ -240,7 +238,7 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     job.project = project
     if reference is not None:
         try:
-            ref3d, what = reference_input.reference_positions(obj, reference, job.key_name)
+            ref3d, what = reference_mesh.reference_positions(obj, reference, job.key_name)
             job.reference2d = reference_to_2d(ref3d[nodes].astype(np.float64), job.faces,
                                               nodes.size, PLANE_TOL)
             job.targets = reference_targets(job.reference2d, job.faces, nodes.size)
@@ -274,7 +272,7 @@ def _edge_info(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.M
 def select_opencl_device(device: str | None) -> None:
     """Tell the core's OpenCL backend which device to use ("AUTO"/None: automatic)."""
     try:
-        from ..core import engine_opencl
+        from ...core import engine_opencl
     except ImportError:  # no OpenCL backend in this core: the core falls back to NumPy itself
         return
     engine_opencl.select_device(None if device in (None, "", "AUTO") else device)

@@ -8,7 +8,7 @@ from typing import Any
 import bpy
 from bpy.props import EnumProperty
 
-from .. import __package__ as base_package
+from ... import __package__ as base_package
 
 DEFAULT_BACKEND_ITEMS = (
     ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
@@ -32,7 +32,7 @@ def _list_devices() -> list[tuple[str, str]]:
     global _devices_found
     if _devices_found is None:
         try:
-            from ..core import engine_opencl
+            from ...core import engine_opencl
             _devices_found = [(str(i), str(label)) for i, label in engine_opencl.list_devices()]
         except Exception:  # no backend module, no pyopencl, or a broken driver: "Automatic" only
             _devices_found = []
