@@ -7,6 +7,7 @@ import argparse
 from typing import Any
 
 from ...core import EEGTParams
+from ...core.choices import BACKEND, UV_SCOPE, ids
 from ..ui import props
 from . import metrics
 from .usage import EXIT_OK, EXIT_USAGE, UsageError
@@ -41,7 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "it): it is replaced whole once the result is saved and checked")
     p.add_argument("--object", action="append", default=[], metavar="NAME",
                    help="only this mesh object (repeatable)")
-    p.add_argument("--backend", choices=("numpy", "opencl", "auto"), default=None,
+    p.add_argument("--backend", choices=ids(BACKEND), default=None,
                    help="compute backend (default: the add-on preference, else numpy)")
     p.add_argument("--device", metavar="SPEC", default=None,
                    help="OpenCL device: 'platform:device' indices or part of its name "
@@ -70,7 +71,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="untangle and smooth the UV map MAP (default: the active one) of "
                         "every chosen object instead of its vertex positions; objects "
                         "without it are skipped")
-    p.add_argument("--uv-scope", choices=("tangles", "selection"), default="tangles",
+    p.add_argument("--uv-scope", choices=ids(UV_SCOPE), default=UV_SCOPE[0].id,
                    help="with --uv: move only tangled faces and the faces around them "
                         "(tangles, default) or every face (selection)")
     p.add_argument("--project", action="store_true",

@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 
 from ...core import EEGTParams, faces_from_csr
+from ...core.choices import UV_TARGET, ids
 from ...core.targets import face_shapes_2d
 from ...core.uv_layout import UVLayout, weld_uv
 from ...core.uv_untangle import (
@@ -33,7 +34,7 @@ from ..shared.progress import Progress
 from ..shared.result import RunResult
 from . import uv_mesh
 
-TARGETS = ("3D", "REGULAR")  # target shape of a UV face: its 3D face, or the regular polygon
+TARGETS = ids(UV_TARGET)  # target shape of a UV face: its 3D face, or the regular polygon
 
 
 @dataclass
