@@ -5,12 +5,12 @@ refusal of clashing names, and the CLI report's before/after summaries."""
 from __future__ import annotations
 
 import json
-from importlib import import_module
 
+import meshdata
 import numpy as np
 import pytest
 
-from .conftest import DATA, MODULE, import_obj, positions, snapshot
+from .conftest import DATA, import_obj, positions, snapshot
 
 pytestmark = pytest.mark.blender
 
@@ -197,7 +197,10 @@ def test_a_user_attribute_named_like_another_measure_is_left_alone(bpy, ext):
 # -- the batch command ---------------------------------------------------------------------
 
 def read_points_faces(ext, path):
-    pts, faces = import_module(f"{MODULE}.core.obj_io").read_obj(path)
+    """The OBJ's 2D points (as float32 positions) and faces, as the installed extension's
+    FaceSet (its core is a module apart from the checkout's)."""
+    pts, read = meshdata.read(path)
+    faces = ext.core.faces.FaceSet(read.offsets, read.indices)
     return pts[:, :2].astype(np.float32).astype(np.float64), faces
 
 
