@@ -6,7 +6,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: venv numpy2 test lint test-core test-blender test-compat e2e demo build bench bench-paper bench-batch clean
+.PHONY: venv numpy2 test test-fast lint test-core test-blender test-compat e2e demo build bench bench-paper bench-batch clean
 
 venv: $(STAMP)
 
@@ -21,6 +21,11 @@ $(STAMP): pyproject.toml
 
 lint: $(STAMP)
 	$(PY) -m ruff check .
+
+# Lint and the headless-Blender and batch tests not marked slow or e2e (they cover the
+# operators, the command and the batch): the check while working; `make test` runs all.
+test-fast: lint
+	$(PY) -m pytest -q -m "not slow and not e2e" tests/blender tests/batch
 
 test-core: $(STAMP)
 	$(PY) -m pytest -q -m "not blender and not e2e" tests

@@ -4,5 +4,5 @@
 Plain Python (no bpy, no algorithm): every file is run by the single-file command in its own
 ``blender -b`` process; this package only finds the files, starts and watches those processes
 and sums their reports up. The command side (argument parsing, Blender's binary) is
-``operators/batch.py``.
+``operators/command/batch.py``.
 """

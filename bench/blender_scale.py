@@ -75,7 +75,7 @@ def mesh_object(bpy, kind: str, n: int):
 def command_child(blend: str, backend: str) -> None:
     """One `eegt` command run on `blend` in this fresh process; prints a JSON line."""
     _, ext = install()
-    cli = sys.modules[f"{ext.__name__}.operators.cli"]
+    cli = sys.modules[f"{ext.__name__}.operators.command.cli"]
     out = str(Path(tempfile.mkdtemp(prefix="eegt_bench_cli_")) / "out.blend")
     t = time.perf_counter()
     code, rep = cli.run([blend, "-o", out, "--backend", backend, "--quiet"])
@@ -179,7 +179,7 @@ def main() -> None:
         core_child(kind, int(n), backend)
         return
     bpy, ext = install()
-    cli = sys.modules[f"{ext.__name__}.operators.cli"]
+    cli = sys.modules[f"{ext.__name__}.operators.command.cli"]
     work = Path(tempfile.mkdtemp(prefix="eegt_bench_cli_"))
     src, out = work / "in.blend", work / "out.blend"
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -202,7 +202,7 @@ def in_process(bpy, cli, args, src: Path, out: Path) -> None:
     lr = obj.eegt_last_run
     rows.append(("operator (Object Mode, one undo step)", len(obj.data.polygons), total,
                  lr.seconds, lr.q_min_after, lr.q_avg_after, lr.inverted_after))
-    core_pkg = sys.modules[f"{cli.__package__.rsplit('.', 1)[0]}.core"]  # the extension's
+    core_pkg = sys.modules[f"{cli.__package__.rsplit('.', 2)[0]}.core"]  # the extension's
     p2, fs = command_input(core_pkg, args.kind, args.faces)
     cmd, core = [], []
     for _ in range(args.repeat):

@@ -10,19 +10,30 @@ from __future__ import annotations
 import numpy as np
 
 from .boundary import BoundaryMotion
+from .choices import BACKEND, ids
 from .engine_numpy import NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
 from .targets import Targets
 
-__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine",
-           "warm_up"]
+__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU",
+           "global_stage_on_device", "make_engine", "warm_up"]
 
-BACKENDS = ("numpy", "opencl", "auto")
+BACKENDS = ids(BACKEND)
 AUTO_ENGINE_MIN_FACES = 4000  # 'auto': the OpenCL engine from this many faces on
 HYBRID = "opencl (global stage) + numpy (EEGT steps, small mesh)"
 SMALL_ON_GPU = "numpy (auto: a small mesh; a GPU's set-up costs more than it saves)"
+OPENCL_ENGINE = "opencl"  # the OpenCL engine's name (``engine_opencl.OpenCLEngine.name``)
+# Engines whose global stage runs on the OpenCL device; the names are what a run reports.
+DEVICE_GLOBAL_STAGE = frozenset({OPENCL_ENGINE, HYBRID})
 _warned: set[str] = set()
+
+
+def global_stage_on_device(engine: str) -> bool:
+    """Whether a run on the engine ``make_engine`` named ``engine`` solves its global stage
+    on the OpenCL device (the OpenCL engine, or NumPy's EEGT steps beside the device's
+    global stage); the others solve it with NumPy."""
+    return engine in DEVICE_GLOBAL_STAGE
 
 
 def _opencl_engine_class():

@@ -1,4 +1,5 @@
-"""EEGT parameters: the paper's values and our defaults."""
+"""EEGT parameters: the paper's values and our defaults (their bounds and choice lists:
+``choices``)."""
 
 from __future__ import annotations
 
@@ -6,11 +7,13 @@ import math
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
 
+from .choices import BOUNDARY, PARAMETERS, TARGET, UNTANGLE, ids, violation
+
 __all__ = ["BOUNDARY_MODES", "TARGETS", "UNTANGLE_METHODS", "EEGTParams"]
 
-UNTANGLE_METHODS = ("auto", "global", "eegt+local", "eegt+global", "eegt")
-BOUNDARY_MODES = ("fixed", "slide", "free")  # core.boundary
-TARGETS = ("regular", "reference")
+UNTANGLE_METHODS = ids(UNTANGLE)
+BOUNDARY_MODES = ids(BOUNDARY)  # core.boundary
+TARGETS = ids(TARGET)
 
 
 @dataclass(frozen=True)
@@ -114,33 +117,9 @@ class EEGTParams:
 
     def __post_init__(self) -> None:
         self._check_types()
-        checks = [
-            (self.a > 0, "a must be > 0"),
-            (self.eta >= 0, "eta must be >= 0"),
-            (self.c >= 0, "c must be >= 0"),
-            (self.inverted_weight > 0, "inverted_weight must be > 0"),
-            (self.tol >= 0, "tol must be >= 0"),
-            (self.tol_min >= 0, "tol_min must be >= 0"),
-            (self.max_untangle_iterations >= 0, "max_untangle_iterations must be >= 0"),
-            (self.max_smooth_iterations >= 0, "max_smooth_iterations must be >= 0"),
-            (self.distance_refresh >= 1, "distance_refresh must be >= 1"),
-            (self.scaling in ("edge", "area"), "scaling must be 'edge' or 'area'"),
-            (self.stall_iterations >= 1, "stall_iterations must be >= 1"),
-            (
-                self.untangle in UNTANGLE_METHODS,
-                f"untangle must be one of {', '.join(UNTANGLE_METHODS)}",
-            ),
-            (self.polish_iterations >= 0, "polish_iterations must be >= 0"),
-            (self.lift_rounds >= 0, "lift_rounds must be >= 0"),
-            (
-                self.boundary in BOUNDARY_MODES,
-                f"boundary must be one of {', '.join(BOUNDARY_MODES)}",
-            ),
-            (0.0 <= self.feature_angle <= 180.0, "feature_angle must be in [0, 180] degrees"),
-            (self.target in TARGETS, f"target must be one of {', '.join(TARGETS)}"),
-        ]
-        for ok, message in checks:
-            if not ok:
+        for name in PARAMETERS:
+            message = violation(name, getattr(self, name))
+            if message:
                 raise ValueError(f"invalid parameter: {message}")
 
     def _check_types(self) -> None:

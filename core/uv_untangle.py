@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from . import choices
 from .faces import FaceSet
 from .params import EEGTParams
 from .pipeline import untangle_and_smooth
@@ -172,7 +173,7 @@ def _strictly_better(after: Stats, before: Stats) -> bool:
     return after.better_than(before)
 
 
-SCOPES = ("tangles", "selection")
+SCOPES = choices.ids(choices.UV_SCOPE)
 
 
 def tangled_faces(layout: UVLayout, points: np.ndarray, faces: np.ndarray,

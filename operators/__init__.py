@@ -1,25 +1,19 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Everything that touches bpy: mesh I/O, operators, properties, panels, preferences, CLI.
+"""Everything that touches bpy, by role: ``mesh/`` (vertex-position runs and their
+operators), ``uv/`` (UV runs), ``command/`` (the ``eegt`` command line), ``ui/`` (settings,
+preferences, panel) and ``shared/`` (run result, modes).
 
 Thin by design: the algorithm lives in ``core`` (NumPy only).
 """
 
 from __future__ import annotations
 
-from . import (
-    cli,
-    ops_pin,
-    ops_quality,
-    ops_untangle,
-    ops_uv,
-    panel,
-    panel_uv,
-    prefs,
-    props,
-    uv_props,
-)
+from .command import entry
+from .mesh import ops_pin, ops_quality, ops_untangle
+from .ui import panel, prefs, props
+from .uv import ops_uv, panel_uv, uv_props
 
-_modules = (props, prefs, ops_untangle, ops_quality, ops_pin, panel, cli,
+_modules = (props, prefs, ops_untangle, ops_quality, ops_pin, panel, entry,
             uv_props, ops_uv, panel_uv)
 
 

@@ -37,9 +37,14 @@ def path(name: str) -> Path:
     return p
 
 
+def read(obj_path: Path | str) -> tuple[np.ndarray, FaceSet]:
+    """(N, 3) float64 points and the faces of any OBJ file (a test's output, say)."""
+    return read_obj(obj_path)
+
+
 def load(name: str) -> tuple[np.ndarray, FaceSet]:
     """(N, 3) float64 points and the faces of tests/data/NAME.obj."""
-    return read_obj(path(name))
+    return read(path(name))
 
 
 def load2d(name: str) -> tuple[np.ndarray, FaceSet]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warnings
 
+from ..backends import global_stage_on_device
 from .options import Solver
 
 __all__ = ["solver_for"]
@@ -14,7 +15,7 @@ def solver_for(backend_name: str) -> Solver | None:
     many work-items, and on a CPU device the single-work-item kernel for small problems);
     None = NumPy. Kernels that do not build warn once and leave NumPy, which gives the same
     result."""
-    if not backend_name.startswith("opencl"):
+    if not global_stage_on_device(backend_name):
         return None
     from .solver_parallel import device_solver
 

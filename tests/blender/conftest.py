@@ -130,5 +130,5 @@ def snapshot(obj, skip=("position",)) -> dict:
 def mesh_quality(ext, obj) -> np.ndarray:
     """Per-face mean ratio of the object's current positions (the packaged core's definition)."""
     from importlib import import_module
-    ops_quality = import_module(f"{MODULE}.operators.ops_quality")
+    ops_quality = import_module(f"{MODULE}.operators.mesh.ops_quality")
     return ops_quality.face_quality(obj)

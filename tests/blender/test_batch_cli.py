@@ -22,13 +22,13 @@ pytestmark = pytest.mark.blender
 
 
 def cli(ext):
-    return ext.operators.cli
+    return ext.operators.command.entry
 
 
 def batch(ext):
     # the command imports its batch module on first use: import it here too, so a test
     # run alone does not depend on one that ran before it
-    return importlib.import_module(f"{ext.__name__}.operators.batch")
+    return importlib.import_module(f"{ext.__name__}.operators.command.batch")
 
 
 @pytest.fixture
@@ -137,7 +137,7 @@ def test_in_place_batch_writes_each_input_over_itself(bpy, ext, tmp_path, meshes
     assert [(t["input"], t["output"]) for t in p.tasks] == list(zip(files, files))
     assert all("--in-place" in t["args"] for t in p.tasks)
     argv = ext.batch.worker.file_args(p.tasks[0], "r.json")
-    back = cli(ext).build_parser().parse_args(argv)
+    back = ext.operators.command.parser.build_parser().parse_args(argv)
     assert back.output == back.input == files[0] and back.in_place is True
 
 
@@ -209,7 +209,7 @@ def _a_value(a) -> str:
 def test_every_single_file_flag_reaches_the_workers_unchanged(bpy, ext):
     """Each single-file flag given a non-default value, through the batch parser and the
     hand-on, reads back to the same value in the single-file parser."""
-    single = cli(ext).build_parser()
+    single = ext.operators.command.parser.build_parser()
     argv = ["a.obj", "b.obj", "-o", "out", "--report", "r.json", "--jobs", "2"]
     for a in single._actions:
         if not a.option_strings or a.dest in ("help", "output", "report"):

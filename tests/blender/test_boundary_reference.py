@@ -134,7 +134,7 @@ def test_boundary_and_target_everywhere_with_tooltips(bpy, ext):
             assert len(rna[name].description) > 30, name
         assert (rna["feature_angle"].hard_min, rna["feature_angle"].hard_max) == (0.0, 180.0)
     assert settings.bl_rna.properties["reference_object"].fixed_type.identifier == "Object"
-    parser = ext.operators.cli.build_parser()
+    parser = ext.operators.command.parser.build_parser()
     flags = {a.dest: a for a in parser._actions}
     assert flags["boundary"].choices == ["fixed", "slide", "free"]
     assert flags["target"].choices == ["regular", "reference"]
@@ -273,7 +273,7 @@ def test_bad_reference_is_one_line_and_leaves_the_mesh(bpy, ext, case, needle):
 
 
 def test_cli_slide_and_reference_file(bpy, ext, tmp_path):
-    cli = ext.operators.cli
+    cli = ext.operators.command.entry
     out, rep = tmp_path / "out.obj", tmp_path / "r.json"
     assert cli.execute([str(DATA / "quad_hole.obj"), "-o", str(out), "--report", str(rep),
                         "--boundary", "slide", "--quiet"]) == 0
@@ -354,7 +354,7 @@ def test_cli_bad_reference_is_exit_2_before_any_work_and_writes_nothing(bpy, ext
         inp = uv_blend(bpy, tmp_path)
     out, rep = tmp_path / f"out{inp.suffix}", tmp_path / "r.json"
     capfd.readouterr()
-    code = ext.operators.cli.execute([str(inp), "-o", str(out), "--report", str(rep),
+    code = ext.operators.command.entry.execute([str(inp), "-o", str(out), "--report", str(rep),
                                       *map(str, args)])
     captured = capfd.readouterr()
     assert code == 2
@@ -367,7 +367,7 @@ def test_cli_bad_reference_is_exit_2_before_any_work_and_writes_nothing(bpy, ext
 
 
 def test_cli_bad_reference(bpy, ext, tmp_path, capsys):
-    cli = ext.operators.cli
+    cli = ext.operators.command.entry
     inp = str(DATA / "quad_hole.obj")
     # contradictions and unreadable files: usage errors (exit 2), one line on stderr
     for args, needle in (
@@ -395,7 +395,7 @@ def test_cli_reference_key_of_a_blend_checks_every_chosen_object(bpy, ext, tmp_p
     src = tmp_path / "in.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(src))
     out, rep = tmp_path / "out.blend", tmp_path / "r.json"
-    cli = ext.operators.cli
+    cli = ext.operators.command.entry
     capfd.readouterr()
     assert cli.execute([str(src), "-o", str(out), "--target", "reference", "--quiet"]) == 2
     assert capfd.readouterr().err.strip() == (
@@ -424,8 +424,8 @@ def test_cli_reference_key_with_a_nan_is_exit_2_and_writes_nothing(bpy, ext, tmp
     bpy.ops.wm.save_as_mainfile(filepath=str(src))
     out = tmp_path / "out.blend"
     capfd.readouterr()
-    assert ext.operators.cli.execute([str(src), "-o", str(out), "--reference-key", "Basis",
-                                      "--quiet"]) == 2
+    execute = ext.operators.command.entry.execute
+    assert execute([str(src), "-o", str(out), "--reference-key", "Basis", "--quiet"]) == 2
     assert capfd.readouterr().err.strip() == (
         "eegt: object 'quad_hole': reference shape key 'Basis' has 1 vertex with a NaN or "
         "infinite coordinate")

@@ -6,8 +6,11 @@ import json
 import os
 import shutil
 
+import meshdata
 import numpy as np
 import pytest
+
+from core.topology import boundary_nodes
 
 from .conftest import DATA, import_obj, positions
 
@@ -15,12 +18,11 @@ pytestmark = pytest.mark.blender
 
 
 def cli(ext):
-    return ext.operators.cli
+    return ext.operators.command.entry
 
 
 def read_obj_vertices(path) -> np.ndarray:
-    rows = [line.split()[1:4] for line in open(path) if line.startswith("v ")]
-    return np.array(rows, dtype=np.float64)
+    return meshdata.read(path)[0]
 
 
 def test_obj_in_obj_out_with_report(bpy, ext, tmp_path):
@@ -38,10 +40,20 @@ def test_obj_in_obj_out_with_report(bpy, ext, tmp_path):
     assert o["untangle_iterations"] + o["global_iterations"] > 0
     assert o["seconds"] > 0 and o["backend"] == "numpy"
     assert (o["n_nodes"], o["n_faces"]) == (168, 140)
-    # the written OBJ has the same vertex count, boundary where it was, no inverted face
+    # the written OBJ has the same vertex count, every boundary vertex kept its bits (the
+    # positions written, in this session, against the input as Blender reads it), the
+    # inside moved, no inverted face
     src, dst = read_obj_vertices(DATA / "quad_hole.obj"), read_obj_vertices(out)
     assert src.shape == dst.shape
     assert np.allclose(dst[:, 2], 0.0)
+    written = positions(bpy.data.objects["quad_hole"])
+    bpy.ops.wm.read_homefile(use_empty=True)
+    given = positions(import_obj(bpy, "quad_hole"))
+    faces = meshdata.load("quad_hole")[1]
+    boundary = boundary_nodes(len(src), faces)
+    assert boundary.dtype == bool and boundary.sum() == 56
+    assert np.array_equal(written[boundary].view(np.uint32), given[boundary].view(np.uint32))
+    assert (written[~boundary] != given[~boundary]).any(axis=1).sum() > 50
     bpy.ops.wm.read_homefile(use_empty=True)
     obj = import_obj(bpy, "out", out)
     from .conftest import mesh_quality

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.blender
 
 
 def run(ext, *argv) -> tuple[int, dict]:
-    return ext.operators.cli.run([str(a) for a in argv])
+    return ext.operators.command.cli.run([str(a) for a in argv])
 
 
 def leftovers(folder) -> list[str]:
@@ -166,7 +166,7 @@ def test_truncated_output_is_detected_by_its_format(bpy, ext, tmp_path, fmt):
     out = tmp_path / f"whole.{fmt}"
     code, _ = run(ext, DATA / "tri_two_holes.obj", "-o", out, "--quiet")
     assert code == 0
-    check = ext.operators.cli._incomplete
+    check = ext.operators.command.output_files.incomplete
     data = out.read_bytes()
     assert check(str(out), f".{fmt}") is None
     cut = tmp_path / f"cut.{fmt}"
@@ -184,7 +184,7 @@ def test_compressed_blend_truncation_is_detected_by_its_seek_table(bpy, ext, tmp
     from .conftest import import_obj
 
     import_obj(bpy, "tri_two_holes")
-    check = ext.operators.cli._incomplete
+    check = ext.operators.command.output_files.incomplete
     for compress in (True, False):
         whole = tmp_path / f"whole{int(compress)}.blend"
         bpy.ops.wm.save_as_mainfile(filepath=str(whole), copy=True, compress=compress)
@@ -207,7 +207,7 @@ def test_stl_and_ply_cut_anywhere_are_refused(bpy, ext, tmp_path, fmt):
     data, cut = out.read_bytes(), tmp_path / f"cut.{fmt}"
     for n in (1, 50, len(data) - 1):
         cut.write_bytes(data[:n])
-        assert "truncated" in ext.operators.cli._incomplete(str(cut), f".{fmt}"), n
+        assert "truncated" in ext.operators.command.output_files.incomplete(str(cut), f".{fmt}"), n
 
 
 def test_report_that_fails_at_the_end_leaves_no_output(bpy, ext, tmp_path, capfd, full_disk):
@@ -308,7 +308,7 @@ def test_background_progress_prints_at_least_every_second(ext, capfd):
     """A line when a phase starts, every 100 iterations, and once a second in between (a
     1M-face run printed nothing for 39 s)."""
     now = [0.0]
-    progress = ext.operators.ops_untangle._printer("m", clock=lambda: now[0])
+    progress = ext.operators.shared.progress.printer("m", clock=lambda: now[0])
     stats = ext.core.Stats(5, 0.0, 0.5)
     for it, t in [(0, 0.0), (1, 0.3), (2, 0.9), (3, 1.05), (4, 1.5), (5, 2.2), (100, 2.3)]:
         now[0] = t

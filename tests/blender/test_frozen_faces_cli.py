@@ -30,7 +30,7 @@ def _obj_with_straight_boundary_corner(path, tangle: bool) -> None:
 def test_cli_frozen_straight_corner_exits_3_and_names_the_face(ext, bpy, tmp_path):
     src, out, rep = tmp_path / "frozen.obj", tmp_path / "out.obj", tmp_path / "r.json"
     _obj_with_straight_boundary_corner(src, tangle=True)
-    code = ext.operators.cli.execute([str(src), "-o", str(out), "--report", str(rep),
+    code = ext.operators.command.entry.execute([str(src), "-o", str(out), "--report", str(rep),
                                       "--quiet"])
     assert code == 3
     (o,) = json.loads(rep.read_text())["objects"]

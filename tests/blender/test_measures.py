@@ -5,12 +5,12 @@ refusal of clashing names, and the CLI report's before/after summaries."""
 from __future__ import annotations
 
 import json
-from importlib import import_module
 
+import meshdata
 import numpy as np
 import pytest
 
-from .conftest import DATA, MODULE, import_obj, positions, snapshot
+from .conftest import DATA, import_obj, positions, snapshot
 
 pytestmark = pytest.mark.blender
 
@@ -197,14 +197,18 @@ def test_a_user_attribute_named_like_another_measure_is_left_alone(bpy, ext):
 # -- the batch command ---------------------------------------------------------------------
 
 def read_points_faces(ext, path):
-    pts, faces = import_module(f"{MODULE}.core.obj_io").read_obj(path)
+    """The OBJ's 2D points (as float32 positions) and faces, as the installed extension's
+    FaceSet (its core is a module apart from the checkout's)."""
+    pts, read = meshdata.read(path)
+    faces = ext.core.faces.FaceSet(read.offsets, read.indices)
     return pts[:, :2].astype(np.float32).astype(np.float64), faces
 
 
 def test_cli_metrics_all_reports_before_and_after_of_every_measure(bpy, ext, tmp_path):
     out, rep = tmp_path / "out.obj", tmp_path / "r.json"
-    code = ext.operators.cli.execute([str(DATA / "quad_hole.obj"), "-o", str(out), "--report",
-                                      str(rep), "--metrics", "all", "--quiet"])
+    execute = ext.operators.command.entry.execute
+    code = execute([str(DATA / "quad_hole.obj"), "-o", str(out), "--report", str(rep),
+                    "--metrics", "all", "--quiet"])
     assert code == 0
     (o,) = json.loads(rep.read_text())["objects"]
     assert tuple(o["metrics"]) == NAMES
@@ -241,7 +245,7 @@ def test_cli_metrics_list_and_unwritten_result(bpy, ext, tmp_path):
     rep = tmp_path / "r.json"
     args = [str(DATA / "quad_hole.obj"), "--report", str(rep), "--quiet", "--untangle", "eegt",
             "--max-untangle-iterations", "1", "--no-write-on-fail"]
-    assert ext.operators.cli.execute([*args, "--metrics", "skewness,min_angle"]) == 3
+    assert ext.operators.command.entry.execute([*args, "--metrics", "skewness,min_angle"]) == 3
     (o,) = json.loads(rep.read_text())["objects"]
     assert o["status"] == "failed" and o["written"] is False
     assert tuple(o["metrics"]) == ("skewness", "min_angle")
@@ -251,7 +255,7 @@ def test_cli_metrics_list_and_unwritten_result(bpy, ext, tmp_path):
 
 def test_cli_without_metrics_keeps_the_report_unchanged(bpy, ext, tmp_path):
     rep = tmp_path / "r.json"
-    assert ext.operators.cli.execute([str(DATA / "quad_hole.obj"), "--report", str(rep),
+    assert ext.operators.command.entry.execute([str(DATA / "quad_hole.obj"), "--report", str(rep),
                                       "--quiet"]) == 0
     (o,) = json.loads(rep.read_text())["objects"]
     assert "metrics" not in o
@@ -265,7 +269,7 @@ def test_cli_without_metrics_keeps_the_report_unchanged(bpy, ext, tmp_path):
     (",", "unknown measure ','")])
 def test_cli_unknown_metric_is_a_usage_error(bpy, ext, tmp_path, capfd, value, needle):
     rep = tmp_path / "r.json"
-    code = ext.operators.cli.execute([str(DATA / "quad_hole.obj"), "--metrics", value,
+    code = ext.operators.command.entry.execute([str(DATA / "quad_hole.obj"), "--metrics", value,
                                       "--report", str(rep)])
     assert code == 2
     err = capfd.readouterr().err.strip().splitlines()[-1]

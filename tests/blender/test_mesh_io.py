@@ -19,7 +19,7 @@ def _rna(collection, prop: str, dtype, width: int = 1) -> np.ndarray:
 
 
 def test_topology_and_edges_equal_the_item_properties_on_a_mixed_mesh(bpy, ext):
-    mesh_io = ext.operators.mesh_io
+    mesh_io = ext.operators.mesh.mesh_io
     me = import_obj(bpy, "mixed_quad_tri").data
     topo = mesh_io.read_topology(me)
     assert np.unique(topo.loop_total).size >= 2  # triangles and quads
@@ -32,7 +32,7 @@ def test_topology_and_edges_equal_the_item_properties_on_a_mixed_mesh(bpy, ext):
 
 
 def test_selection_and_hiding_equal_the_item_properties_set_or_not(bpy, ext):
-    mesh_io = ext.operators.mesh_io
+    mesh_io = ext.operators.mesh.mesh_io
     me = import_obj(bpy, "tri_two_holes").data
     nf, nv = len(me.polygons), len(me.vertices)
     me.polygons.foreach_set("select", np.zeros(nf, dtype=bool))

@@ -14,7 +14,7 @@ reads them (Blender keeps them as float32, see
 ``core.untangle_and_smooth_3d``, the core's own entry point for a plane in 3D, gives those
 bits on quad_hole but not on mixed_quad_tri or tilted_plane: it centres the points on the
 boundary's bounding box and scales them before it fits the plane, while the operator
-(operators/runner.py ``prepare``) fits the plane on the positions as they are. The two 2D
+(operators/mesh/runner.py ``prepare``) fits the plane on the positions as they are. The two 2D
 inputs differ by round-off, which the iterations turn into results up to ~3e-4 apart (both
 untangled). ``test_mesh_operator_is_the_core_3d_entry`` says so with strict xfails: it
 starts failing (XPASS) the day the two paths agree.

@@ -385,7 +385,7 @@ def test_shared_mesh_runs_once_and_modifiers_noted(bpy, ext):
     twin.select_set(True)
     obj.modifiers.new("Sub", "SUBSURF")
     bpy.ops.mesh.eegt_untangle_smooth()
-    ops = ext.operators.ops_untangle
+    ops = ext.operators.mesh.ops_untangle
     assert len(ops.LAST_RESULTS) == 1
     assert "base mesh (modifiers not applied)" in ops.LAST_RESULTS[0].line()
     assert ops.LAST_RESULTS[0].after["n_inverted"] == 0
@@ -405,7 +405,7 @@ def test_linked_library_mesh_is_refused(bpy, ext, tmp_path):
     before = positions(obj)
     assert bpy.ops.mesh.eegt_untangle_smooth() == {"CANCELLED"}
     assert np.array_equal(positions(obj), before)
-    assert "linked from a library" in ext.operators.ops_untangle.LAST_RESULTS[0].line()
+    assert "linked from a library" in ext.operators.mesh.ops_untangle.LAST_RESULTS[0].line()
 
 
 def test_backend_choice_does_not_list_devices_while_the_device_was_never_chosen(bpy, ext,
@@ -435,9 +435,9 @@ def test_backend_choice_does_not_list_devices_while_the_device_was_never_chosen(
 def test_preferences_and_backend_choice(bpy, ext):
     prefs = bpy.context.preferences.addons[MODULE].preferences
     assert prefs.default_backend == "NUMPY"
-    items = ext.operators.prefs.device_items(prefs, bpy.context)
+    items = ext.operators.ui.prefs.device_items(prefs, bpy.context)
     assert items[0][0] == "AUTO" and prefs.opencl_device == "AUTO"
-    resolve = ext.operators.prefs.resolve_backend
+    resolve = ext.operators.ui.prefs.resolve_backend
     assert resolve("PREFS")[0] == "numpy"
     assert resolve("AUTO") == ("auto", "AUTO") and resolve("NUMPY") == ("numpy", None)
     assert resolve("AUTO")[0] == "auto" and resolve("OPENCL")[0] == "opencl"
@@ -458,7 +458,7 @@ def test_result_with_an_inverted_face_left_is_failed_whatever_the_core_said(ext,
     face still inverted there makes 'untangled' and 'valid' 'failed', with the count."""
     from importlib import import_module
 
-    runner = import_module(f"{MODULE}.operators.runner")
+    runner = import_module(f"{MODULE}.operators.mesh.runner")
     for status in ("untangled", "valid"):
         out = runner.ObjectResult(object="Plate", status=status, written=written,
                                   after={"n_inverted": 2, "q_min": 0.0, "q_avg": 0.7})

@@ -49,7 +49,7 @@ def tilt() -> np.ndarray:
 
 
 def line(ext) -> str:
-    return ext.operators.ops_untangle.LAST_RESULTS[0].line()
+    return ext.operators.mesh.ops_untangle.LAST_RESULTS[0].line()
 
 
 # -- Project to Plane ------------------------------------------------------------------------
@@ -78,7 +78,7 @@ def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy,
     """The operator analyses the edges from Blender's edge table (no sort of every corner);
     a loose edge and a face selection change nothing: the same edges, counts and open
     edges as the sorted analysis of the chosen faces, the same frame."""
-    runner, plane = ext.operators.runner, ext.core.plane
+    runner, plane = ext.operators.mesh.runner, ext.core.plane
     obj = import_obj(bpy, "tri_two_holes")
     me = obj.data
     co = positions(obj).astype(np.float64) @ tilt().T + [1.0, 2.0, -3.0]
@@ -95,7 +95,7 @@ def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy,
     job = runner.prepare(obj, selected_only=selected_only, project=True)
     assert job.error is None
     n = job.nodes.size
-    topo = ext.operators.mesh_io.read_topology(me)
+    topo = ext.operators.mesh.mesh_io.read_topology(me)
     faces = np.flatnonzero(np.asarray([p.select for p in me.polygons])) if selected_only \
         else np.arange(len(me.polygons))
     idx = np.concatenate([np.arange(topo.loop_start[f], topo.loop_start[f] + topo.loop_total[f])
@@ -103,7 +103,7 @@ def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy,
     lut = np.zeros(len(me.vertices), dtype=np.int64)
     lut[job.nodes] = np.arange(n)
     offsets = np.concatenate([[0], np.cumsum(topo.loop_total[faces])])
-    got = runner._edge_info(idx, offsets, topo, ext.operators.mesh_io.read_edges(me), lut, n)
+    got = runner._edge_info(idx, offsets, topo, ext.operators.mesh.mesh_io.read_edges(me), lut, n)
     assert got is not None and job.edges is not None
     sorted_info = ext.core.topology.EdgeInfo(job.faces, n)
     for info in (got, job.edges):
@@ -128,7 +128,7 @@ def test_an_edge_table_naming_an_interior_edge_twice_falls_back_to_the_sorted_an
     the edge table: the table's counts would call it an open edge (its nodes fixed); the
     operator sees the table does not fit and analyses the faces themselves, so the result
     is the intact mesh's, bit for bit."""
-    runner, topology = ext.operators.runner, ext.core.topology
+    runner, topology = ext.operators.mesh.runner, ext.core.topology
     good, _ = grid_object(bpy, "intact", jitter=0.7)
     bad, _ = grid_object(bpy, "split", jitter=0.7)
     me = bad.data
@@ -190,19 +190,20 @@ def test_optimal_mesh_is_not_rewritten(bpy, ext, tmp_path, tilted):
     before = snapshot(obj, skip=())
     assert bpy.ops.mesh.eegt_untangle_smooth() == {"CANCELLED"}
     assert snapshot(obj, skip=()) == before
-    res = ext.operators.ops_untangle.LAST_RESULTS[0]
+    res = ext.operators.mesh.ops_untangle.LAST_RESULTS[0]
     assert (res.status, res.written) == ("valid", False)
     assert (res.before["n_inverted"], res.after["n_inverted"]) == (0, 0)
     assert res.before["q_min"] == pytest.approx(1.0, abs=1e-6)
     assert "nothing written" in line(ext) and "mesh unchanged" in line(ext)
-    runner = ext.operators.runner
+    runner = ext.operators.mesh.runner
     r = runner.run_object(obj, ext.core.EEGTParams())
     assert (r.status, r.written) == ("valid", False)
     assert snapshot(obj, skip=()) == before
     # the command line, .blend in and out
     src, out, rep = tmp_path / "in.blend", tmp_path / "out.blend", tmp_path / "r.json"
     bpy.ops.wm.save_as_mainfile(filepath=str(src))
-    code = ext.operators.cli.execute([str(src), "-o", str(out), "--report", str(rep), "--quiet"])
+    execute = ext.operators.command.entry.execute
+    code = execute([str(src), "-o", str(out), "--report", str(rep), "--quiet"])
     assert code == 0
     (o,) = json.loads(rep.read_text())["objects"]
     assert (o["status"], o["written"]) == ("valid", False)

@@ -1,4 +1,4 @@
-"""One run result for mesh and UV runs (operators/result.py): the shared base, the stats
+"""One run result for mesh and UV runs (operators/shared/result.py): the shared base, the stats
 block described once (batch/run_stats.py), the one last-run store and sidebar section."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ pytestmark = pytest.mark.blender
 
 def mods(ext):
     return (importlib.import_module(f"{ext.__name__}.operators.{m}")
-            for m in ("result", "runner", "uv_runner"))
+            for m in ("shared.result", "mesh.runner", "uv.uv_runner"))
 
 
 class Layout:

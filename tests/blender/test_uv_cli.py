@@ -25,7 +25,7 @@ pytestmark = pytest.mark.blender
 
 
 def cli(ext):
-    return ext.operators.cli
+    return ext.operators.command.entry
 
 
 @pytest.fixture

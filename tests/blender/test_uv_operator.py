@@ -29,7 +29,7 @@ REGULAR = {"target_shape": "REGULAR"}
 
 
 def ops_uv(ext):
-    return ext.operators.ops_uv
+    return ext.operators.uv.ops_uv
 
 
 def line(ext) -> str:
@@ -335,7 +335,7 @@ def test_select_flipped_and_overlapping(bpy, ext):
     edit_all(bpy, sync=False)
     assert bpy.ops.uv.eegt_select_flipped(kind="INVERTED") == {"FINISHED"}
     bpy.ops.object.mode_set(mode="OBJECT")
-    um = ext.operators.uv_mesh
+    um = ext.operators.uv.uv_mesh
     got = um.read_uv_face_selection(me, me.uv_layers.active, False,
                                     bpy.context.scene.tool_settings.uv_select_mode)
     assert np.array_equal(got, a.masks["INVERTED"]) and got.sum() == c["INVERTED"]
@@ -357,8 +357,8 @@ def test_select_flipped_and_overlapping(bpy, ext):
 
 
 def test_worker_runs_uv_jobs_and_cancels(bpy, ext):
-    ops = ext.operators.ops_untangle
-    uvr = ext.operators.uv_runner
+    ops = ext.operators.mesh.ops_untangle
+    uvr = ext.operators.uv.uv_runner
     obj = tangled(bpy, "sphere", "jitter")
     uv0 = uv_values(obj)
     params = ext.core.EEGTParams()
@@ -400,7 +400,7 @@ def test_register_unregister_twice_keeps_uv_tools(bpy, ext):
 
 def _distortion_3d(ext, obj) -> tuple[float, float]:
     """(mean, worst) distortion of the active UV map against the 3D faces (all faces)."""
-    job = ext.operators.uv_runner.prepare(obj, targets="3D")
+    job = ext.operators.uv.uv_runner.prepare(obj, targets="3D")
     m = ext.core.uv_untangle.measure(job.layout, job.layout.points, job.selected, job.targets)
     return m.distortion_mean, m.distortion_worst
 

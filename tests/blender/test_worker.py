@@ -10,8 +10,8 @@ pytestmark = pytest.mark.blender
 
 
 def test_worker_runs_and_cancels(bpy, ext):
-    ops = ext.operators.ops_untangle
-    runner = ext.operators.runner
+    ops = ext.operators.mesh.ops_untangle
+    runner = ext.operators.mesh.runner
     obj = import_obj(bpy, "quad_hole")
     params = ext.core.EEGTParams()
     job = runner.prepare(obj)

@@ -9,8 +9,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..core import MEASURE_NAMES, summaries
-from . import runner
+from ...core import MEASURE_NAMES, summaries
+from ..mesh import runner
 
 
 def parse_names(text: str) -> tuple[str, ...]:

@@ -8,13 +8,15 @@ from typing import Any
 import bpy
 from bpy.props import EnumProperty
 
-from .. import __package__ as base_package
+from ... import __package__ as base_package
+from ...core.choices import BACKEND, ids
+from .props import enum_items
 
-DEFAULT_BACKEND_ITEMS = (
-    ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
-    ("AUTO", "Auto", "OpenCL where it is faster when a device is available, else NumPy"),
-    ("OPENCL", "OpenCL", "OpenCL (falls back to NumPy when pyopencl or a device is missing)"),
-)
+# The core's backends in the order the preferences have always listed them (Blender saves an
+# enum by its index, so a saved preference keeps its meaning).
+PREFS_ORDER = ("numpy", "auto", "opencl")
+DEFAULT_BACKEND_ITEMS = enum_items(tuple(c for i in PREFS_ORDER for c in BACKEND if c.id == i),
+                                   upper=True)
 
 # Blender needs Python to keep the strings of dynamic enum items alive.
 _device_items_cache: list[tuple[str, str, str]] = []
@@ -32,7 +34,7 @@ def _list_devices() -> list[tuple[str, str]]:
     global _devices_found
     if _devices_found is None:
         try:
-            from ..core import engine_opencl
+            from ...core import engine_opencl
             _devices_found = [(str(i), str(label)) for i, label in engine_opencl.list_devices()]
         except Exception:  # no backend module, no pyopencl, or a broken driver: "Automatic" only
             _devices_found = []
@@ -94,7 +96,8 @@ def resolve_backend(
     device = None
     if prefs is not None and choice in ("OPENCL", "AUTO"):
         device = _device_choice(prefs)
-    return {"NUMPY": "numpy", "OPENCL": "opencl", "AUTO": "auto"}.get(choice, "numpy"), device
+    name = choice.lower()
+    return (name if name in ids(BACKEND) else "numpy"), device
 
 
 classes = (EEGT_AddonPreferences,)

@@ -31,8 +31,10 @@ from typing import Any
 
 import bpy
 
-from ..batch import arguments, dask_pool, inputs, pool, summary, worker
+from ...batch import arguments, dask_pool, inputs, pool, summary, worker
 from . import cli, report
+from .parser import build_parser as single_file_parser
+from .usage import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE, OUTPUT_EXTENSIONS, UsageError, check_writable
 
 DEFAULT_REPORT = "eegt_report.json"
 REDRAW = 0.5  # seconds between progress-bar redraws on a terminal
@@ -41,7 +43,7 @@ LOG_EVERY = 10.0  # seconds between progress lines when the console is not a ter
 
 def build_parser() -> argparse.ArgumentParser:
     """The single-file parser with many inputs and the batch flags."""
-    p = cli.build_parser()
+    p = single_file_parser()
     arguments.add_batch_arguments(p)
     return p
 
@@ -55,7 +57,7 @@ def is_batch(argv: list[str]) -> bool:
         return True
     try:
         ns = build_parser().parse_intermixed_args(argv)
-    except cli.UsageError:
+    except UsageError:
         return False  # the single-file command reports it as it always did
     return arguments.is_batch(ns)
 
@@ -72,8 +74,8 @@ class _Plan:
         self.blender = ""
 
 
-def _usage(message: str) -> cli.UsageError:
-    return cli.UsageError(message)
+def _usage(message: str) -> UsageError:
+    return UsageError(message)
 
 
 def _check_flags(ns: argparse.Namespace) -> None:
@@ -106,7 +108,7 @@ def _output_kind(ns: argparse.Namespace) -> tuple[str | None, str | None]:
     if not out:
         return None, None
     ext = os.path.splitext(out)[1].lower()
-    if os.path.isdir(out) or out.endswith(("/", os.sep)) or ext not in cli.OUTPUT_EXTENSIONS:
+    if os.path.isdir(out) or out.endswith(("/", os.sep)) or ext not in OUTPUT_EXTENSIONS:
         if os.path.lexists(out) and not os.path.isdir(out):
             raise _usage(f"eegt: output folder '{out}' is a file")
         return out, None
@@ -150,14 +152,14 @@ def plan(ns: argparse.Namespace, parser: argparse.ArgumentParser, argv: list[str
             raise _usage(f"eegt: cannot create output folder '{outdir}': "
                          f"{(exc.strerror or str(exc)).lower()}") from None
     if p.report:
-        cli._check_writable(p.report, "report")
-        cli._check_writable(summary.csv_path_for(p.report), "report")
+        check_writable(p.report, "report")
+        check_writable(summary.csv_path_for(p.report), "report")
     args = arguments.passthrough(parser, argv)
     for i, (src, out) in enumerate(zip(sources, outputs, strict=True)):
         entry = None
         if src.problem:
             entry = summary.file_entry({"input": src.path, "output": out, "status": "error",
-                                        "exit_code": cli.EXIT_USAGE, "message": src.problem})
+                                        "exit_code": EXIT_USAGE, "message": src.problem})
         elif ns.skip_existing and inputs.up_to_date(src.path, out):
             entry = summary.file_entry({"input": src.path, "output": out, "status": "skipped",
                                         "exit_code": 0, "message": "output is up to date"})
@@ -270,8 +272,8 @@ def serve(lines: Any = None) -> int:
                     json.dump({"exit_code": code, "error": rep.get("error"), "objects": [],
                                "written": False}, fh)
             except OSError:
-                return code or cli.EXIT_INTERNAL
-    return cli.EXIT_OK
+                return code or EXIT_INTERNAL
+    return EXIT_OK
 
 
 def run(argv: list[str]) -> int:
@@ -284,14 +286,14 @@ def run(argv: list[str]) -> int:
     try:
         ns = parser.parse_intermixed_args(argv)  # inputs may come after flags too
         p = plan(ns, parser, argv)
-    except cli.UsageError as exc:
+    except UsageError as exc:
         if str(exc):
-            print(str(exc), file=sys.stdout if exc.code == cli.EXIT_OK else sys.stderr,
+            print(str(exc), file=sys.stdout if exc.code == EXIT_OK else sys.stderr,
                   flush=True)
         return exc.code
     except dask_pool.DaskError as exc:
         print(str(exc), file=sys.stderr, flush=True)
-        return cli.EXIT_USAGE
+        return EXIT_USAGE
     entries = p.entries
     console = _Console(len(entries), ns.quiet)
     decided = [e for e in entries if e is not None]
@@ -321,7 +323,7 @@ def run(argv: list[str]) -> int:
         except dask_pool.DaskError as exc:
             console.close()
             print(str(exc), file=sys.stderr, flush=True)
-            return cli.EXIT_USAGE
+            return EXIT_USAGE
     console.close()
     files = [e for e in entries if e is not None]
     code = summary.batch_exit(files, interrupted)
@@ -342,8 +344,8 @@ def run(argv: list[str]) -> int:
         except OSError as exc:
             print(f"eegt: cannot write report '{p.report}': {(exc.strerror or str(exc)).lower()}",
                   file=sys.stderr, flush=True)
-            code = code if code in (cli.EXIT_INTERNAL, summary.EXIT_INTERRUPTED) else \
-                cli.EXIT_USAGE
+            code = code if code in (EXIT_INTERNAL, summary.EXIT_INTERRUPTED) else \
+                EXIT_USAGE
     c = data["counts"]
     parts = ", ".join(f"{n} {s}" for s, n in c.items() if n)
     print(f"eegt: {len(files)} files in {summary.duration(data['seconds'])}: {parts} "

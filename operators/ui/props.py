@@ -13,36 +13,18 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ..core import MEASURES, EEGTParams
+from ...core import MEASURES, EEGTParams
+from ...core.choices import BACKEND, PARAMETERS, Bound, Enumeration
 
-# Choices of string parameters (dataclass fields carry no choice list).
+
+def enum_items(choices: Enumeration, upper: bool = False) -> tuple[tuple[str, str, str], ...]:
+    """EnumProperty items of a core enumeration (identifiers upper case with ``upper``)."""
+    return tuple((c.id.upper() if upper else c.id, c.label, c.description) for c in choices)
+
+
+# Choices of string parameters (the core's enumerations).
 STRING_CHOICES: dict[str, tuple[tuple[str, str, str], ...]] = {
-    "untangle": (
-        ("auto", "Auto", "Global under 20 000 faces, else EEGT + Local"),
-        ("global", "Global", "Foldover-free optimization of the whole mesh removes inverted "
-         "faces (most robust)"),
-        ("eegt+local", "EEGT + Local", "EEGT while it makes progress, the optimization only "
-         "around the folds it leaves (large meshes: fastest)"),
-        ("eegt+global", "EEGT + Global", "EEGT first, the optimization when EEGT stalls"),
-        ("eegt", "EEGT Only", "The paper's EEGT untangling only"),
-    ),
-    "scaling": (
-        ("edge", "Edge", "Shrink keeps the mean edge length (paper)"),
-        ("area", "Area", "Shrink keeps the mean area"),
-    ),
-    "boundary": (
-        ("fixed", "Fixed", "Boundary vertices stay where they are (paper)"),
-        ("slide", "Slide", "Boundary vertices slide along the input boundary and never leave "
-         "it; corners sharper than the Feature Angle, pinned and non-manifold vertices stay"),
-        ("free", "Free", "Boundary vertices move freely; only pinned and non-manifold vertices "
-         "stay"),
-    ),
-    "target": (
-        ("regular", "Regular", "Pull every face towards the regular polygon (paper)"),
-        ("reference", "Reference", "Pull every face towards its own shape in a reference of "
-         "the same topology (a shape key or an object): keeps grading and anisotropy"),
-    ),
-}
+    name: enum_items(rule) for name, rule in PARAMETERS.items() if not isinstance(rule, Bound)}
 
 LABELS: dict[str, str] = {
     "a": "Stretch Factor a",
@@ -66,27 +48,24 @@ LABELS: dict[str, str] = {
 # Fields the main panel draws itself (with the reference choice), not the Parameters list.
 MAIN_PANEL_FIELDS = ("boundary", "feature_angle", "target")
 
-# Lower bounds matching EEGTParams.__post_init__ (soft_max keeps the sliders usable).
-BOUNDS: dict[str, dict[str, float]] = {
-    "a": {"min": 1e-6, "soft_max": 1.0},
-    "eta": {"min": 0.0, "soft_max": 8.0},
-    "c": {"min": 0.0, "soft_max": 8.0},
-    "inverted_weight": {"min": 1e-6, "soft_max": 50.0},
-    "tol": {"min": 0.0, "soft_max": 0.1},
-    "tol_min": {"min": 0.0, "soft_max": 0.1},
-    "max_untangle_iterations": {"min": 0, "soft_max": 20000},
-    "stall_iterations": {"min": 1, "soft_max": 1000},
-    "polish_iterations": {"min": 0, "soft_max": 5000},
-    "max_smooth_iterations": {"min": 0, "soft_max": 5000},
-    "distance_refresh": {"min": 1, "soft_max": 100},
-    "feature_angle": {"min": 0.0, "max": 180.0, "soft_max": 180.0},
-}
+
+
+def bounds(name: str) -> dict[str, float]:
+    """A numeric parameter's min / max / soft_max for its property (core's bound)."""
+    rule = PARAMETERS.get(name)
+    if not isinstance(rule, Bound):
+        return {}
+    out = {"min": rule.ui_min if rule.low_open else rule.low}
+    if rule.high is not None:
+        out["max"] = rule.high
+    if rule.soft_max is not None:
+        out["soft_max"] = rule.soft_max
+    return out
+
 
 BACKEND_ITEMS: tuple[tuple[str, str, str], ...] = (
     ("PREFS", "Default", "Use the default backend of the add-on preferences"),
-    ("NUMPY", "NumPy", "Reference CPU backend (always available)"),
-    ("OPENCL", "OpenCL", "OpenCL device (NumPy when pyopencl or a device is missing)"),
-    ("AUTO", "Auto", "OpenCL where it is faster (small meshes: its global stage only), else NumPy"),
+    *enum_items(BACKEND, upper=True),
 )
 
 
@@ -139,18 +118,18 @@ def blender_property(f: dataclasses.Field, options: set[str] | None = None) -> A
     """A bpy property definition for one EEGTParams field (type taken from its default)."""
     default = _default(f)
     name, desc = field_label(f.name), field_help(f)
-    bounds = BOUNDS.get(f.name, {})
+    limits = bounds(f.name)
     opt = {"options": options} if options is not None else {}
     if isinstance(default, bool):
         return BoolProperty(name=name, description=desc, default=default, **opt)
     if isinstance(default, int):
         return IntProperty(name=name, description=desc, default=default, **opt,
-                           min=int(bounds.get("min", 0)),
-                           soft_max=int(bounds.get("soft_max", 2**31 - 1)))
+                           min=int(limits.get("min", 0)),
+                           soft_max=int(limits.get("soft_max", 2**31 - 1)))
     if isinstance(default, float):
         return FloatProperty(name=name, description=desc, default=default, **opt,
-                             min=bounds.get("min", -3.4e38), max=bounds.get("max", 3.4e38),
-                             soft_max=bounds.get("soft_max", 3.4e38),
+                             min=limits.get("min", -3.4e38), max=limits.get("max", 3.4e38),
+                             soft_max=limits.get("soft_max", 3.4e38),
                              precision=4 if default and abs(default) < 0.01 else 3)
     if isinstance(default, str) and f.name in STRING_CHOICES:
         return EnumProperty(name=name, description=desc, items=STRING_CHOICES[f.name],

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..core.faces import FaceSet, faces_from_csr
-from ..core.obj_io import read_obj
+from ...core.faces import FaceSet, faces_from_csr
+from ...core.obj_io import read_obj
 from . import mesh_io
 
 

@@ -16,12 +16,15 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty
 
-from ..core.uv_layout import weld_uv
-from ..core.uv_overlap import overlapping_faces
-from ..core.uv_untangle import flipped_faces
-from . import mesh_io, modes, props, uv_mesh, uv_props, uv_runner
-from .ops_untangle import EEGTRunMixin
-from .result import store_last_run
+from ...core.uv_layout import weld_uv
+from ...core.uv_overlap import overlapping_faces
+from ...core.uv_untangle import flipped_faces
+from ..mesh import mesh_io
+from ..mesh.ops_untangle import EEGTRunMixin
+from ..shared import modes
+from ..shared.result import store_last_run
+from ..ui import props
+from . import uv_mesh, uv_props, uv_runner
 
 # The results of the last UV run, newest last (read by the tests).
 LAST_RESULTS: list[uv_runner.UVObjectResult] = []

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import bpy
 
-from . import props
-from .result import draw_last_run
+from ..shared.result import draw_last_run
+from ..ui import props
 
 
 class _EEGTUVTab:

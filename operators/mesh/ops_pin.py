@@ -13,7 +13,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty
 
-from . import mesh_io, modes, runner
+from ..shared import modes
+from . import mesh_io, runner
 
 
 def set_pins(obj: bpy.types.Object, mask: np.ndarray, value: bool) -> str | None:

@@ -12,19 +12,11 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-TARGET_ITEMS: tuple[tuple[str, str, str], ...] = (
-    ("3D", "3D Faces", "Pull each UV face towards its own 3D face's shape (untangling also "
-                       "lowers stretch); distortion 1 = similar to the 3D face"),
-    ("REGULAR", "Regular", "Pull each UV face towards the regular polygon (the paper's EEGT)"),
-)
+from ...core.choices import UV_SCOPE, UV_TARGET
+from ..ui.props import enum_items
 
-SCOPE_ITEMS: tuple[tuple[str, str, str], ...] = (
-    ("TANGLES", "Around Tangles", "In an island with flipped, inverted or overlapping faces only "
-                                  "those and the faces around them move (more around them "
-                                  "until they untangle); an island without any is smoothed "
-                                  "as a whole"),
-    ("SELECTION", "Whole Selection", "Every selected face moves (untangled and smoothed)"),
-)
+TARGET_ITEMS = enum_items(UV_TARGET)
+SCOPE_ITEMS = enum_items(UV_SCOPE, upper=True)
 
 SELECT_ITEMS: tuple[tuple[str, str, str], ...] = (
     ("FLIPPED", "Flipped", "Faces whose area is reversed (or zero) against their island"),
@@ -41,10 +33,11 @@ def option_annotations(options: set[str] | None = None) -> dict[str, Any]:
     return {
         "use_pins": BoolProperty(name="Keep Pinned UVs", default=True, **opt,
                                  description="UVs pinned in the UV editor (P) stay fixed"),
-        "target_shape": EnumProperty(name="Target Shape", items=TARGET_ITEMS, default="3D",
+        "target_shape": EnumProperty(name="Target Shape", items=TARGET_ITEMS,
+                                     default=UV_TARGET[0].id,
                                      description="The shape each UV face is pulled towards",
                                      **opt),
-        "scope": EnumProperty(name="Move", items=SCOPE_ITEMS, default="TANGLES",
+        "scope": EnumProperty(name="Move", items=SCOPE_ITEMS, default=UV_SCOPE[0].id.upper(),
                               description="Which of the selected faces move", **opt),
     }
 

@@ -9,24 +9,22 @@ No algorithm lives here.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import bpy
 import numpy as np
 
-from ..core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
-from ..core.csr import ragged_arange
-from ..core.pipeline import frozen_note
-from ..core.plane import PlaneFrame
-from ..core.reference_shapes import reference_targets, reference_to_2d
-from ..core.topology import EdgeInfo
-from . import mesh_io, reference_input
-from .reference_input import ReferenceSource
-from .result import RunResult
-
-Progress = Callable[[int, str, Any], bool]
+from ...core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
+from ...core.csr import ragged_arange
+from ...core.pipeline import frozen_note
+from ...core.plane import PlaneFrame
+from ...core.reference_shapes import reference_targets, reference_to_2d
+from ...core.topology import EdgeInfo
+from ..shared.progress import Progress
+from ..shared.result import RunResult
+from . import mesh_io, reference_mesh
+from .reference_mesh import ReferenceSource
 
 PLANE_TOL = 1e-5
 QUALITY_EPS = 1e-6  # quality changes smaller than this are float32 round-off, not a gain
@@ -139,9 +137,9 @@ def refusal(obj: bpy.types.Object) -> str | None:
     if obj.library is not None or me.library is not None:
         lib = (me.library or obj.library).filepath
         return f"mesh is linked from a library ({lib}), make it local first"
-    if getattr(me, "override_library", None) is not None:
+    if me.override_library is not None:
         return "mesh is a library override (its geometry cannot be saved), make it local first"
-    if not getattr(me, "is_editable", True):
+    if not me.is_editable:
         return "mesh data is not editable"
     return None
 
@@ -158,13 +156,63 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     ``selected_only``: only the selected faces move; vertices of unselected faces (the
     selection border and everything outside) stay fixed. Loose vertices and the vertices of
     loose edges never move. ``reference`` (target "reference"): where the reference shapes
-    come from (``reference_input``); a missing, mismatched or non-planar one is an error.
+    come from (``reference_mesh``); a missing, mismatched or non-planar one is an error.
     """
     me = obj.data
     job = Job(object=obj.name, mesh=me.name, co=np.zeros((0, 3), np.float32))
     why = refusal(obj)
     if why:
         return _fail(job, why)
+    _read_positions(obj, job)
+    topo = mesh_io.read_topology(me)
+    if topo.loop_start.size == 0:
+        return _fail(job, "mesh has no faces")
+    face_mask = np.ones(topo.loop_start.size, dtype=bool)
+    if selected_only:
+        face_mask = mesh_io.read_face_selection(me)
+        if not face_mask.any():
+            return _fail(job, "no faces selected")
+    if topo.corner_verts.size and (topo.corner_verts.min() < 0
+                                   or topo.corner_verts.max() >= topo.n_verts):
+        return _fail(job, "a face uses a vertex index out of range")
+    sub = sub_mesh(topo, face_mask, job.co)
+    job.nodes = sub.nodes
+    if not np.isfinite(sub.points3d).all():
+        bad = int(np.count_nonzero(~np.isfinite(sub.points3d).all(axis=1)))
+        return _fail(job, f"{bad} vertices have NaN or infinite coordinates")
+    pins = None
+    if use_pinned:
+        try:
+            pins = mesh_io.read_pins(obj)
+        except ValueError as exc:
+            return _fail(job, str(exc))
+    fixed_all, edges = _fixed_vertices(obj, topo, face_mask, pins, selected_only)
+    job.fixed = fixed_all[sub.nodes]
+    try:
+        _fit_plane(job, sub, topo, edges, project)
+    except ValueError as exc:
+        return _fail(job, _first_line(exc))
+    job.project = project
+    if reference is not None:
+        try:
+            what = _read_reference(job, obj, reference, sub.nodes)
+        except ValueError as exc:
+            return _fail(job, _first_line(exc))
+        job.notes.append(f"quality against the face shapes of {what}")
+    if project and job.frame.fixed_offset > PLANE_TOL * job.frame.size:
+        job.notes.append(f"boundary/pinned vertices up to {job.frame.fixed_offset:.3g} off the "
+                         f"plane were kept where they are (they never move)")
+    return job
+
+
+def _first_line(exc: ValueError) -> str:
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+
+
+def _read_positions(obj: bpy.types.Object, job: Job) -> None:
+    """The positions being edited (the active shape key's, else the mesh's) into ``job.co``,
+    with a note for a shape key and for modifiers the run does not see."""
+    me = obj.data
     key = obj.active_shape_key if me.shape_keys is not None else None
     if key is not None:
         job.key_name = key.name
@@ -174,27 +222,34 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         job.co = mesh_io.read_positions(me)
     if any(m.show_viewport for m in obj.modifiers):
         job.notes.append("base mesh (modifiers not applied)")
-    topo = mesh_io.read_topology(me)
-    if topo.loop_start.size == 0:
-        return _fail(job, "mesh has no faces")
-    face_mask = np.ones(topo.loop_start.size, dtype=bool)
-    if selected_only:
-        face_mask = mesh_io.read_face_selection(me)
-        if not face_mask.any():
-            return _fail(job, "no faces selected")
+
+
+@dataclass
+class SubMesh:
+    """The chosen faces as their own mesh over local node numbers."""
+
+    nodes: np.ndarray  # (n,) mesh vertex of each node
+    lut: np.ndarray  # (N,) node of each mesh vertex (the identity when every vertex is a node)
+    local: np.ndarray  # corners of the chosen faces, face by face, in node numbers
+    corners: np.ndarray | slice  # those corners' numbers in the mesh
+    offsets: np.ndarray  # (faces + 1,) where each chosen face's corners start
+    totals: np.ndarray  # (faces,) corners per chosen face
+    points3d: np.ndarray  # (n, 3) float64 node positions
+
+
+def sub_mesh(topo: mesh_io.MeshArrays, face_mask: np.ndarray, co: np.ndarray) -> SubMesh:
+    """The faces of ``face_mask`` (in the mesh's corner order) and the vertices they use,
+    renumbered (every corner a vertex index in range)."""
     order = np.argsort(topo.loop_start[face_mask], kind="stable")
     starts = topo.loop_start[face_mask][order]
     totals = topo.loop_total[face_mask][order]
     n_all = topo.n_verts
-    if topo.corner_verts.size and (topo.corner_verts.min() < 0
-                                   or topo.corner_verts.max() >= n_all):
-        return _fail(job, "a face uses a vertex index out of range")
     offsets = np.zeros(totals.size + 1, dtype=np.int64)
     np.cumsum(totals, out=offsets[1:])
     # Corner numbers of the chosen faces, face by face (offsets are sorted in Blender): all
     # corners in order when every face is chosen.
     if np.array_equal(starts, offsets[:-1]):
-        idx = slice(0, int(offsets[-1]))
+        idx: np.ndarray | slice = slice(0, int(offsets[-1]))
     else:
         idx = ragged_arange(starts, totals)
     sub_corners = topo.corner_verts[idx].astype(np.int64)
@@ -203,54 +258,58 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
     if used.all():  # every vertex in a chosen face: nodes are the vertices
         nodes = lut = np.arange(n_all)
         local = sub_corners
-        pts3d = job.co.astype(np.float64)
+        pts3d = co.astype(np.float64)
     else:
         nodes = np.flatnonzero(used)  # = np.unique(sub_corners), by a lookup, not a sort
         lut = np.zeros(n_all, dtype=np.int64)
         lut[nodes] = np.arange(nodes.size)
         local = lut[sub_corners]
-        pts3d = job.co[nodes].astype(np.float64)
-    job.nodes = nodes
-    if not np.isfinite(pts3d).all():
-        bad = int(np.count_nonzero(~np.isfinite(pts3d).all(axis=1)))
-        return _fail(job, f"{bad} vertices have NaN or infinite coordinates")
-    fixed_all = np.zeros(n_all, dtype=bool)
-    if use_pinned:
-        try:
-            fixed_all |= mesh_io.read_pins(obj)
-        except ValueError as exc:
-            return _fail(job, str(exc))
+        pts3d = co[nodes].astype(np.float64)
+    return SubMesh(nodes=nodes, lut=lut, local=local, corners=idx, offsets=offsets,
+                   totals=totals, points3d=pts3d)
+
+
+def _fixed_vertices(obj: bpy.types.Object, topo: mesh_io.MeshArrays, face_mask: np.ndarray,
+                    pins: np.ndarray | None, selected_only: bool
+                    ) -> tuple[np.ndarray, mesh_io.EdgeArrays]:
+    """(mesh vertices that never move, the mesh's edge table): the pins, the vertices of
+    unchosen faces with ``selected_only``, loose vertices and loose edges."""
+    me = obj.data
+    fixed_all = np.zeros(topo.n_verts, dtype=bool)
+    if pins is not None:
+        fixed_all |= pins
     if selected_only:
         fixed_all[topo.corner_verts[~face_mask[mesh_io.corner_faces(topo)]]] = True
     edges = mesh_io.read_edges(me)
-    loose = mesh_io.loose_edge_vertices(n_all, edges)
+    loose = mesh_io.loose_edge_vertices(topo.n_verts, edges)
     if loose is not None:
         fixed_all |= loose
-    job.fixed = fixed_all[nodes]
-    try:
-        job.faces = faces_from_csr(offsets[:-1], totals, local.reshape(-1), nodes.size)
-        job.edges = _edge_info(idx, offsets, topo, edges, lut, nodes.size)
-        if job.edges is None:  # a table that does not fit: one sorted analysis for both
-            job.edges = EdgeInfo(job.faces, nodes.size)
-        job.frame = PlaneFrame.fit(pts3d, job.faces, tol=PLANE_TOL, project=project,
-                                   fixed=job.fixed, edges=job.edges)
-        job.points2d = job.frame.to_2d(pts3d)
-    except ValueError as exc:
-        return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
-    job.project = project
-    if reference is not None:
-        try:
-            ref3d, what = reference_input.reference_positions(obj, reference, job.key_name)
-            job.reference2d = reference_to_2d(ref3d[nodes].astype(np.float64), job.faces,
-                                              nodes.size, PLANE_TOL)
-            job.targets = reference_targets(job.reference2d, job.faces, nodes.size)
-        except ValueError as exc:
-            return _fail(job, str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
-        job.notes.append(f"quality against the face shapes of {what}")
-    if project and job.frame.fixed_offset > PLANE_TOL * job.frame.size:
-        job.notes.append(f"boundary/pinned vertices up to {job.frame.fixed_offset:.3g} off the "
-                         f"plane were kept where they are (they never move)")
-    return job
+    return fixed_all, edges
+
+
+def _fit_plane(job: Job, sub: SubMesh, topo: mesh_io.MeshArrays, edges: mesh_io.EdgeArrays,
+               project: bool) -> None:
+    """The job's faces, edge analysis, plane and 2D points; ValueError for a mesh that is
+    not planar (or cannot be projected)."""
+    n = sub.nodes.size
+    job.faces = faces_from_csr(sub.offsets[:-1], sub.totals, sub.local.reshape(-1), n)
+    job.edges = _edge_info(sub.corners, sub.offsets, topo, edges, sub.lut, n)
+    if job.edges is None:  # a table that does not fit: one sorted analysis for both
+        job.edges = EdgeInfo(job.faces, n)
+    job.frame = PlaneFrame.fit(sub.points3d, job.faces, tol=PLANE_TOL, project=project,
+                               fixed=job.fixed, edges=job.edges)
+    job.points2d = job.frame.to_2d(sub.points3d)
+
+
+def _read_reference(job: Job, obj: bpy.types.Object, reference: ReferenceSource,
+                    nodes: np.ndarray) -> str:
+    """Target "reference": the reference's 2D positions and face-corner targets into the
+    job; what the reference is (for the note). ValueError when it does not fit."""
+    ref3d, what = reference_mesh.reference_positions(obj, reference, job.key_name)
+    job.reference2d = reference_to_2d(ref3d[nodes].astype(np.float64), job.faces,
+                                      nodes.size, PLANE_TOL)
+    job.targets = reference_targets(job.reference2d, job.faces, nodes.size)
+    return what
 
 
 def _edge_info(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.MeshArrays,
@@ -273,10 +332,8 @@ def _edge_info(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.M
 
 def select_opencl_device(device: str | None) -> None:
     """Tell the core's OpenCL backend which device to use ("AUTO"/None: automatic)."""
-    try:
-        from ..core import engine_opencl
-    except ImportError:  # no OpenCL backend in this core: the core falls back to NumPy itself
-        return
+    from ...core import engine_opencl  # imports pyopencl only when a device is used
+
     engine_opencl.select_device(None if device in (None, "", "AUTO") else device)
 
 
@@ -391,7 +448,7 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
         return out
     res = job.result
     out.n_nodes = int(job.nodes.size)
-    out.n_faces = int(job.faces.n_faces) if hasattr(job.faces, "n_faces") else 0
+    out.n_faces = int(job.faces.n_faces)
     out.n_free = int(np.count_nonzero(np.asarray(res.moved)))
     out.status = res.status
     out.message = str(res.message)
@@ -401,7 +458,7 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
     out.after = job.after if job.after is not None else stats_dict(res.after)
     out.untangle_iterations = int(res.untangle_iterations)
     out.smooth_iterations = int(res.smooth_iterations)
-    out.global_iterations = int(getattr(res, "global_iterations", 0))
+    out.global_iterations = int(res.global_iterations)
     out.seconds = float(res.seconds)
     out.backend = str(res.backend)
     if res.status == "cancelled":

@@ -17,10 +17,11 @@ from typing import ClassVar
 import bpy
 import numpy as np
 
-from ..core import EEGTParams, faces_from_csr
-from ..core.targets import face_shapes_2d
-from ..core.uv_layout import UVLayout, weld_uv
-from ..core.uv_untangle import (
+from ...core import EEGTParams, faces_from_csr
+from ...core.choices import UV_TARGET, ids
+from ...core.targets import face_shapes_2d
+from ...core.uv_layout import UVLayout, weld_uv
+from ...core.uv_untangle import (
     UVMeasures,
     UVResult,
     measure,
@@ -28,10 +29,12 @@ from ..core.uv_untangle import (
     tangled_faces,
     untangle_uv,
 )
-from . import mesh_io, runner, uv_mesh
-from .result import RunResult
+from ..mesh import mesh_io, runner
+from ..shared.progress import Progress
+from ..shared.result import RunResult
+from . import uv_mesh
 
-TARGETS = ("3D", "REGULAR")  # target shape of a UV face: its 3D face, or the regular polygon
+TARGETS = ids(UV_TARGET)  # target shape of a UV face: its 3D face, or the regular polygon
 
 
 @dataclass
@@ -156,7 +159,7 @@ def prepare(obj: bpy.types.Object, uv_name: str | None = None, *, selected_only:
 
 
 def compute(job: UVJob, params: EEGTParams, backend: str = "numpy",
-            progress: runner.Progress | None = None, device: str | None = None) -> None:
+            progress: Progress | None = None, device: str | None = None) -> None:
     """Run the core on a prepared job (no bpy here: safe in a worker thread)."""
     if job.error:
         return
@@ -239,7 +242,7 @@ def run_object(obj: bpy.types.Object, params: EEGTParams, uv_name: str | None = 
                backend: str = "numpy", device: str | None = None, selected_only: bool = False,
                sync: bool = True, select_mode: str = "VERTEX", use_pins: bool = True,
                targets: str = "3D", scope: str = "tangles",
-               progress: runner.Progress | None = None, write: bool = True,
+               progress: Progress | None = None, write: bool = True,
                write_on_fail: bool = True) -> UVObjectResult:
     """Prepare, compute and apply in one call (Object Mode, main thread); with
     ``write_on_fail`` off a map that keeps flipped faces is left as it was."""

@@ -8,10 +8,12 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, FloatProperty
 
-from ..core import MEASURES, faces_from_csr, quality, summarize
-from ..core.measures import goodness
-from ..core.plane import PlaneFrame
-from . import mesh_io, modes, props, runner
+from ...core import MEASURES, faces_from_csr, quality, summarize
+from ...core.measures import goodness
+from ...core.plane import PlaneFrame
+from ..shared import modes
+from ..ui import props
+from . import mesh_io, runner
 
 
 def attribute_name(measure: str) -> str:

@@ -14,7 +14,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from ..batch.run_stats import KINDS, Kind
+from ...batch.run_stats import KINDS, Kind
 
 OK_STATUSES = ("valid", "untangled")
 # The property group (props.py / uv_props.py) that keeps an object's last run, per kind.

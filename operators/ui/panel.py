@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import bpy
 
+from ..shared.result import draw_last_run
 from . import props
-from .result import draw_last_run
 
 
 class _EEGTTab:

@@ -16,12 +16,13 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 
-from . import modes, props, runner
-from .prefs import resolve_backend
-from .reference_input import ReferenceSource
-from .result import store_last_run
-
-PRINT_EVERY = 1.0  # seconds: the longest a background run stays silent between progress lines
+from ..shared import modes
+from ..shared.progress import printer
+from ..shared.result import store_last_run
+from ..ui import props
+from ..ui.prefs import resolve_backend
+from . import runner
+from .reference_mesh import ReferenceSource
 
 # The results of the last run, newest last (read by the tests and the CLI).
 LAST_RESULTS: list[runner.ObjectResult] = []
@@ -138,7 +139,7 @@ class EEGTRunMixin:
         with modes.object_mode(context):
             objs, jobs = self._prepare(context)
             for job in jobs:
-                progress = _printer(job.object) if verbose else None
+                progress = printer(job.object) if verbose else None
                 self._compute(job, params, backend, progress, device)
             return self._finish(objs, jobs)
 
@@ -225,7 +226,7 @@ class MESH_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
 
     def draw(self, context: bpy.types.Context) -> None:
         """The redo panel: every option, the reference choice with search fields."""
-        from .panel import draw_boundary_target
+        from ..ui.panel import draw_boundary_target
 
         layout = self.layout
         layout.use_property_split = True
@@ -264,24 +265,6 @@ class MESH_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
         if not any(r.written for r in results):
             return {"CANCELLED"}
         return {"FINISHED"}
-
-
-def _printer(name: str, clock: Callable[[], float] = time.monotonic) -> runner.Progress:
-    """Background progress: one line when a phase starts, every 100 iterations and at least
-    every PRINT_EVERY seconds (the core calls back every few tenths of a second of work)."""
-    state: dict[str, Any] = {"phase": None, "at": clock()}
-
-    def progress(iteration: int, phase: str, stats: Any) -> bool:
-        now = clock()
-        if phase != state["phase"] or iteration % 100 == 0 or now - state["at"] >= PRINT_EVERY:
-            state["phase"], state["at"] = phase, now
-            print(f"EEGT {name}: {phase} iteration {iteration}: "
-                  f"inverted {getattr(stats, 'n_inverted', '?')}, "
-                  f"q_min {getattr(stats, 'q_min', float('nan')):.3f}, "
-                  f"q_avg {getattr(stats, 'q_avg', float('nan')):.3f}", flush=True)
-        return True
-
-    return progress
 
 
 classes = (MESH_OT_eegt_untangle_smooth,)
