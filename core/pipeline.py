@@ -541,7 +541,7 @@ class _Run:
     def _solver(self):
         """The global stage's device solver, or None for the host's (always with sliding
         nodes: their parameters are variables the device solvers do not have)."""
-        return None if self.slide is not None else solver_for(self.backend_name)
+        return solver_for(self.backend_name, sliding=self.slide is not None)
 
     def _adopt(self, pts: np.ndarray, start: np.ndarray) -> Stats:
         """Continue the EEGT engine from `pts` (fixed rows reset to the input's bits); the

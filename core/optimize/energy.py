@@ -43,11 +43,16 @@ from .reference import (
 )
 from .state import LIMIT_MARGIN, TICK_CORNERS, TICK_EVERY, State
 
-__all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar"]
+__all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar", "energy_defines"]
 
 THETA = 1.0 / 16.0  # weight of the area term g against the shape term f
 LIFT_PENALTY = 1000.0  # weight of the one-sided quadratic floor penalty
 LIFT_BARRIER = 0.01  # weight of sum 1/q_corner (keeps every corner away from det = 0)
+
+
+def energy_defines() -> dict[str, float]:
+    """The energies' constants under their kernel names (build defines of both solvers)."""
+    return {"THETA": THETA, "PENALTY": LIFT_PENALTY, "BARRIER": LIFT_BARRIER}
 
 
 def chi_array(d: np.ndarray, eps: float, root: np.ndarray) -> np.ndarray:

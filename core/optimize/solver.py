@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .state import LBFGS_MEMORY, TRIALS, State, skipped_trials, stops
+from .state import ARMIJO, CURVATURE, LBFGS_MEMORY, TRIALS, State, skipped_trials, stops
 
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
@@ -111,7 +111,7 @@ def lbfgs(
             et, dmin_t, ok = evaluate(z, layout, eps)
             if (
                 math.isfinite(et)
-                and et <= e + 1e-4 * step * slope
+                and et <= e + ARMIJO * step * slope
                 and not (guard and dmin_t <= 0.0)
             ):
                 accepted = True
@@ -132,7 +132,7 @@ def lbfgs(
         mul(yv, yv, yy_)
         mul(yv, mul(dpre, yv, tmp), ydy_)
         sy, ss, yy, ydy = red(prods, 1).tolist()  # dot(s, y), dot(s, s), ...
-        if sy > 1e-12 * math.sqrt(ss * yy):
+        if sy > CURVATURE * math.sqrt(ss * yy):
             mem.append((s, yv, 1.0 / sy, sy, ydy))
             if len(mem) > LBFGS_MEMORY:
                 del mem[0]

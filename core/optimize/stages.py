@@ -11,11 +11,12 @@ from typing import Any
 import numpy as np
 
 from ..boundary import SlideView
+from .dispatch import Solver
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
-from .options import GlobalOptions, Solver
+from .options import GlobalOptions
 from .reference import Factors
 from .slide import make_state
-from .solver import State, lbfgs, stops
+from .state import State, stops
 from .submesh import Neighbourhood
 
 __all__ = ["lift_min_quality", "untangle_global"]
@@ -131,7 +132,7 @@ def untangle_global(
     opt = options if options is not None else GlobalOptions()
     max_iter, polish_iter = opt.max_iter, opt.polish_iter
     en = FoldoverEnergy(P, groups, free, factors)
-    run_lbfgs = opt.run() if slide is None else lbfgs
+    run_lbfgs = opt.run(sliding=slide is not None)
     st, later = _untangle_state(P, free, slide, en)
     n_inv = en.n_inverted(st.x, st.y)
     info: dict[str, Any] = {
@@ -297,7 +298,7 @@ def lift_min_quality(
     rounds = opt.lift_rounds
     en = LiftEnergy(P, groups, free, factors)
     st = make_state(P, free, slide)
-    run_lbfgs = opt.run() if type(st) is State else lbfgs
+    run_lbfgs = opt.run(sliding=type(st) is not State)
     info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
     q = en.element_quality(st.x, st.y) if en.n_elem else np.zeros(0)
     m0 = float(q.min()) if q.size else 0.0

@@ -23,6 +23,7 @@ from core.optimize.state import State
 from core.pipeline import free_nodes
 
 eo = pytest.importorskip("core.engine_opencl")
+ort = pytest.importorskip("core.opencl.runtime")
 lp = pytest.importorskip("core.optimize.solver_parallel")
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
@@ -189,7 +190,7 @@ def test_device_sums_are_numpys_pairwise_sums_bit_for_bit(device, lanes):
     """Leaves, chunk trees and the chunks in order: np.add.reduce's bits for lengths around
     every boundary of NumPy's scheme (8, 128, 8192), on values spanning 30 decades where any
     other order of additions gives other bits; the minimum with NumPy's NaN rule."""
-    rt = eo._runtime()
+    rt = ort.runtime()
     src = lp.kernel_source() + PROBE
     prg = rt.cl.Program(rt.ctx, src).build(options=lp.build_options(lanes))
     rng = np.random.default_rng(lanes)
@@ -413,7 +414,7 @@ def test_small_problems_go_to_the_small_solver_same_result(device):
     # the lift's sub-meshes are small: the single-work-item kernel solves them
     lb = lift_min_quality(a[0], groups, free, GlobalOptions(lift_rounds=4, solver=s))
     assert np.array_equal(la[0], lb[0]) and calls and max(calls) < n_corners
-    if eo._runtime().is_cpu:
+    if ort.runtime().is_cpu:
         factory = lp.device_solver()
         assert factory.small_corners == lp.SMALL_CORNERS
         assert type(factory.small).__name__ == "OpenCLLbfgs"

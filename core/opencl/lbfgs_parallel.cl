@@ -39,15 +39,17 @@
 //              L-BFGS memory update)
 
 // Host-side defines (solver_parallel.build_options(); a missing one stops the build):
-//   M, TRIALS, LIMIT_MARGIN  LBFGS_MEMORY and the line search's (core/optimize/state.py)
+//   M, TRIALS, ARMIJO, CURVATURE, LIMIT_MARGIN  LBFGS_MEMORY, the line search's and the
+//               memory update's (core/optimize/state.py)
 //   LANES, PPL  work-items per leaf of PW_BLOCK terms (1, 2, 4 or 8) and partials per leaf
 //               and sum (the sum, or 8 lane partials + 8 tails)
 //   WG_CHUNK  chunk_sums' work-group size (LANES > 1)
 //   THETA, PENALTY, BARRIER  energy.py's THETA, LIFT_PENALTY, LIFT_BARRIER
 //   S_*, ST_*  the slots of the scalars in S and the status codes (solver_parallel._S, _ST)
-//   PW_BLOCK, CHUNK, ...  core.fpmath's (cl_common.cl, which the loader puts in front of this
+//   PW_BLOCK, CHUNK, ...  core.fpmath's (common.cl, which the loader puts in front of this
 //                         file: fp64, FP_CONTRACT off, NumPy's pairwise sums)
-#if !defined(M) || !defined(TRIALS) || !defined(LIMIT_MARGIN) || !defined(LANES) || \
+#if !defined(M) || !defined(TRIALS) || !defined(ARMIJO) || !defined(CURVATURE) || \
+    !defined(LIMIT_MARGIN) || !defined(LANES) || \
     !defined(PPL) || !defined(WG_CHUNK) || !defined(THETA) || !defined(PENALTY) || \
     !defined(BARRIER) || !defined(S_LEN_ALL) || !defined(ST_NOT_DESCENT) || \
     !defined(PW_BLOCK) || !defined(CHUNK)
@@ -165,7 +167,7 @@ static double leaf_sum(__global const double *P, const int leaf, const int m)
 #endif
 }
 
-// NumPy's pairwise sum of one chunk of m terms whose leaves start at `first` (cl_common.cl)
+// NumPy's pairwise sum of one chunk of m terms whose leaves start at `first` (common.cl)
 static double chunk_sum(__global const double *P, const int first, const int m)
 {
     double r;
@@ -608,7 +610,7 @@ __kernel void finish_trial(__global double *S, __global const int *PIc,
     }
     const double step = S[S_STEP];
     const int guard = S[S_GUARD] != 0.0;
-    if (isfinite(et) && et <= S[S_E] + (1e-4 * step) * S[S_SLOPE] && !(guard && dmin <= 0.0)) {
+    if (isfinite(et) && et <= S[S_E] + (ARMIJO * step) * S[S_SLOPE] && !(guard && dmin <= 0.0)) {
         S[S_STATUS] = (double)ST_ACCEPTED;
         S[S_E] = et;
     } else {
@@ -764,7 +766,7 @@ __kernel void finish_pair(__global double *S, __global const int *PI, __global d
     const Plan pl = plan_of(PI, PD);
     const double sy = total(&pl, 0), ss = total(&pl, 1), yy = total(&pl, 2);
     const double ydy = total(&pl, 3);
-    if (sy > 1e-12 * SQRT(ss * yy)) {
+    if (sy > CURVATURE * SQRT(ss * yy)) {
         const int len = (int)S[S_LEN], spare = SLOT(len);
         S[S_RHO + spare] = 1.0 / sy;
         S[S_SY + spare] = sy;
