@@ -14,8 +14,9 @@ from .boundary import BoundaryMotion
 from .distance import NearestBoundary
 from .faces import FaceSet
 from .fpmath import power
+from .mean_ratio import group_quality
 from .params import EEGTParams
-from .quality import Stats, group_quality, stats_of
+from .quality import Stats, stats_of
 from .targets import Targets
 from .transform import edge_sum, group_transform_delta
 

@@ -28,10 +28,11 @@ from .csr import bincount_csr
 from .distance import NearestBoundary
 from .engine_numpy import DIST_FLOOR, NumpyEngine, edge_lengths
 from .faces import FaceSet
+from .mean_ratio import corner_constants
 from .opencl.build import NCACHE, program_size
 from .opencl.runtime import ENV_DEVICE, list_devices, runtime, select_device, unavailable_reason
 from .params import EEGTParams
-from .quality import Stats, corner_constants
+from .quality import Stats
 from .targets import Targets
 from .transform import stretch_radius
 

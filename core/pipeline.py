@@ -12,18 +12,21 @@ import numpy as np
 from .backends import make_engine
 from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .faces import FaceSet, as_faceset
+from .mean_ratio import group_quality
 from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
-from .optimize.reference import Factors
+from .optimize.mesh_tables import Factors
 from .optimize.submesh import Neighbourhood
 from .params import EEGTParams
-from .quality import Stats, _check_points, group_quality, mesh_stats
+from .points import check_points
+from .quality import Stats, mesh_stats
 from .reference_shapes import reference_targets
 from .reorder import REORDER_MIN_FACES, scattered, z_order
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import EdgeInfo, checked_edges, free_nodes
 
-__all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
+__all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "normalisation",
+           "untangle_and_smooth"]
 
 LOCAL_MIN_FACES = 20_000  # untangle="auto": 'eegt+local' from this many faces on, else 'global'
 LOCAL_RINGS = (4, 8, 16)  # rings around EEGT's leftover folds tried by 'eegt+local', in turn
@@ -119,7 +122,7 @@ def untangle_and_smooth(
     params = params if params is not None else EEGTParams()
     if not isinstance(params, EEGTParams):
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
-    p = _check_points(points)
+    p = check_points(points)
     fs = as_faceset(faces, p.shape[0])
     if params.target == "reference":
         if targets is not None:
@@ -133,7 +136,7 @@ def untangle_and_smooth(
     free = free_nodes(p.shape[0], fs, fixed, edges=edges)
     if params.boundary == "fixed" and not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
-    center, scale = _normalisation(p, fs)
+    center, scale = normalisation(p, fs)
     work = (p - center) / scale
     _check_orientation(work, fs)
     motion = None  # "fixed": the engines' own path (free_nodes above checked the pins)
@@ -209,7 +212,7 @@ def _failed(why: str, run: _Run, message: str) -> str:
     return f"{head}; the run: {message.removeprefix('failed: ')}"
 
 
-def _normalisation(
+def normalisation(
     p: np.ndarray, fs: FaceSet, centre_on: np.ndarray | None = None
 ) -> tuple[np.ndarray, float]:
     """(centre, scale) that map the used nodes into [-1, 1]^2: the bounding-box centre (of

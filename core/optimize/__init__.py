@@ -2,7 +2,7 @@
 
 Where things live (NumPy and OpenCL twins side by side):
 
-- mesh tables, corner triangles, reference sizes: `reference.py` (uploaded by the solvers).
+- mesh tables, corner triangles, reference sizes: `mesh_tables.py` (uploaded by the solvers).
 - foldover-free energy f, g, chi (Garanzha et al.): `energy.FoldoverEnergy`;
   OpenCL: `solver_parallel.cl` (`fold_*` kernels), `solver_opencl.cl` `fold_value_grad`.
 - lift energy (mean ratio + floor + barrier): `energy.LiftEnergy`;
@@ -14,7 +14,7 @@ Where things live (NumPy and OpenCL twins side by side):
   solve; `solver_opencl.cl`, whose `fold_value_grad` / `lift_value` / `lift_grad` are the
   energies written out).
 - step limit (the first det root along a search direction: guarded line searches skip the
-  trial steps past it, same iterates): `energy.FoldoverEnergy._step_limit`,
+  trial steps past it, same iterates): `energy.FoldoverEnergy.step_limit`,
   `state.skipped_trials`; OpenCL: `solver_parallel.cl` `limit_corner`, `finish_limit`.
 - active sub-mesh (rings around seed elements): `submesh.Neighbourhood` (node -> element
   incidence built once, each sub-mesh costs its own size), `submesh.active_submesh`.

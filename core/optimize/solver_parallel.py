@@ -459,7 +459,7 @@ class ParallelLbfgs:
         return self._rb
 
     def _limit(self, tb: _Tables) -> int:
-        """The step limit of the current direction (`FoldoverEnergy._step_limit`) at the point
+        """The step limit of the current direction (`FoldoverEnergy.step_limit`) at the point
         in Z (which must be v): moves the first trial step below it on the device; returns
         the halvings skipped."""
         self._go("direction_z", tb.n2 // 2)

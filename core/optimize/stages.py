@@ -13,8 +13,8 @@ import numpy as np
 from ..boundary import SlideView
 from .dispatch import Solver
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
+from .mesh_tables import Factors
 from .options import GlobalOptions
-from .reference import Factors
 from .slide import make_state
 from .state import State, stops
 from .submesh import Neighbourhood

@@ -421,7 +421,7 @@ def test_small_problems_go_to_the_small_solver_same_result(device):
 
 
 def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
-    """limit_corner/finish_limit against FoldoverEnergy._step_limit and skipped_trials on a
+    """limit_corner/finish_limit against FoldoverEnergy.step_limit and skipped_trials on a
     jittered mesh: the same limit bits, the same first step and skip count."""
     from core.optimize.state import skipped_trials
 
@@ -433,14 +433,14 @@ def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
     tb = solver._tables_for(en, st)
     rng = np.random.default_rng(5)
     v = st.pack(st.x, st.y)
-    layout, fixed = en._packed(st)
+    layout, fixed = en.packed(st)
     cl, queue = solver.cl, solver.queue
     for scale in (1e-4, 1e-2, 1.0):
         q = rng.normal(0.0, scale, v.size)
         z = np.concatenate([v, fixed])
         dz = np.zeros(z.size)
         dz[: v.size] = q
-        want = en._step_limit(z, dz, layout[0], 1.0)
+        want = en.step_limit(z, dz, layout[0], 1.0)
         s = np.zeros_like(solver._S_host)
         s[lp._S_GUARD], s[7] = 1.0, 1.0  # guarded, first step 1
         cl.enqueue_copy(queue, solver.S, s)

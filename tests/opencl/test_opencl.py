@@ -22,7 +22,7 @@ from core.engine_numpy import NumpyEngine
 from core.faces import FaceSet, as_faceset
 from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
-from core.planar import untangle_and_smooth_3d
+from core.pipeline_3d import untangle_and_smooth_3d
 from core.targets import prepare_targets
 
 eo = pytest.importorskip("core.engine_opencl")
