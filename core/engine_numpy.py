@@ -26,7 +26,7 @@ DIST_FLOOR = 1e-3  # d_j never below this fraction of the mean edge length
 _DIRECT_PAIRS = 1 << 14  # centroid/fixed-node pairs up to which distances skip the quadtree
 
 
-# -- the paper's terms (twins in opencl_kernels.cl under the same names) ----------------------
+# -- the paper's terms (twins in opencl/eegt_kernels.cl under the same names) ---------------
 def step_size(q: np.ndarray, a: float) -> np.ndarray:
     """lambda = a (1 - q) per element (paper eq. 17): a good element moves little."""
     return a * (1.0 - q)

@@ -252,93 +252,93 @@ class OpenCLEngine:
             fo += g.size
 
     def _setup_kernels(self, groups, params: EEGTParams, group_targets) -> None:
-        """Kernel objects with their arguments bound, per arity group; a group with targets
-        (a GroupTargets) runs the generic *_tgt kernels with its (6, n, F) target array."""
+        """Kernel objects with their arguments bound, per arity group (`_group_kernels`),
+        and the node kernels (stitch, revert)."""
+        self._group_calls: list[tuple] = []
+        co = ro = 0
+        for (g, fo), tg in zip(self._fo(groups), group_targets):
+            rows = self._plans[len(self._group_calls)].n_blocks
+            self._group_calls.append(self._group_kernels(g, fo, co, ro, tg, params))
+            ro += rows
+            co += g.n * g.size
+        n = np.int32(self.n_nodes)
+        self.k_stitch = self.cl.Kernel(self.prg, "stitch")
+        self.k_stitch.set_args(
+            n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old, None
+        )
+        self.k_revert = self.cl.Kernel(self.prg, "revert")
+        self.k_revert.set_args(n, self.flag, self.P, self.old, self.part, None, None, None)
+
+    def _ro_buffer(self, a: np.ndarray, dtype):
+        """A read-only device buffer holding `a` as `dtype`."""
         mf = self.cl.mem_flags
+        return self.cl.Buffer(self.rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                              hostbuf=np.ascontiguousarray(a, dtype=dtype))
+
+    def _group_kernels(self, g, fo: int, co: int, ro: int, tg, params: EEGTParams) -> tuple:
+        """One arity group's kernels with their arguments bound, as ((global size, kernel)
+        for quality, move, move with the distance refresh and mark, then the buffers they
+        hold): `fo`, `co`, `ro` its first face, corner and stats row. A group with targets
+        (a GroupTargets) runs the generic *_tgt kernels with its (6, n, F) target array."""
 
         def kernel(name: str):  # a fresh kernel object: its arguments are this run's
             return self.cl.Kernel(self.prg, name)
 
-        self._group_calls: list[tuple] = []
-        co = ro = 0
-        two_sqrt3 = np.float64(2.0 * np.sqrt(3.0))
-        area = np.int32(params.scaling == "area")
-        for (g, fo), tg in zip(self._fo(groups), group_targets):
-            suf = {3: "tri", 4: "quad"}.get(g.n, "ngon")
-            extra: tuple = ()
-            if tg is not None:
-                suf = {3: "tgt_tri", 4: "tgt_quad"}.get(g.n, "tgt")
-                fields = (tg.x, tg.y, tg.kx, tg.ky, tg.cos_a, tg.inv_sin)
-                extra = (self.cl.Buffer(
-                    self.rt.ctx,
-                    mf.READ_ONLY | mf.COPY_HOST_PTR,
-                    hostbuf=np.ascontiguousarray(np.stack(fields), dtype=np.float64),
-                ),)
-            cos_a, inv_sin = corner_constants(g.n)
-            nodes = self.cl.Buffer(
-                self.rt.ctx,
-                mf.READ_ONLY | mf.COPY_HOST_PTR,
-                hostbuf=np.ascontiguousarray(g.nodes, dtype=np.int32),
-            )
-            gargs = (
-                nodes,
-                np.int32(g.size),
-                np.int32(fo),
-                np.int32(co),
-                np.int32(g.n),
-                np.int32(stretch_radius(g.n)),
-                np.float64(cos_a),
-                np.float64(inv_sin),
-            )
-            plan = self._plans[len(self._group_calls)]
-            rows = plan.n_blocks
-            bounds = self.cl.Buffer(
-                self.rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=plan.bounds
-            )
-            kq = kernel(f"quality_{suf}")
-            kq.set_args(
-                *gargs, self.P, self.q, two_sqrt3, self.part, np.int32(ro), bounds, np.int32(rows),
-                *extra,
-            )
-            moves = []
-            for refresh in (0, 1):  # plain move, and move with the distance refresh fused
-                km = kernel(f"move_{suf}_d" if refresh else f"move_{suf}")
-                head = (
-                    *gargs,
-                    self.P,
-                    self.q,
-                    self.fdist,
-                    self.cmove,
-                    self.wf,
-                    np.float64(params.a),
-                    np.float64(params.eta),
-                    np.int32(fpmath.power_code(params.eta)),
-                    np.float64(params.inverted_weight),
-                    area,
-                    np.int32(refresh),
-                    self.tree,
-                    self.bxy,
-                    self.cxy,
-                )
-                self._lbar_arg = len(head) + _TREE_LBAR
-                km.set_args(*head, *self.tree_args, *extra)
-                moves.append(km)
-            kk = kernel("mark_ngon" if tg is not None else f"mark_{suf}")
-            kk.set_args(*gargs, self.q, self.flag)
-            gs = _roundup(g.size, _WG)
-            self._group_calls.append(
-                ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes, bounds,
-                 *extra)
-            )
-            ro += rows
-            co += g.n * g.size
-        n = np.int32(self.n_nodes)
-        self.k_stitch = kernel("stitch")
-        self.k_stitch.set_args(
-            n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old, None
+        suf = {3: "tri", 4: "quad"}.get(g.n, "ngon")
+        extra: tuple = ()
+        if tg is not None:
+            suf = {3: "tgt_tri", 4: "tgt_quad"}.get(g.n, "tgt")
+            fields = (tg.x, tg.y, tg.kx, tg.ky, tg.cos_a, tg.inv_sin)
+            extra = (self._ro_buffer(np.stack(fields), np.float64),)
+        cos_a, inv_sin = corner_constants(g.n)
+        nodes = self._ro_buffer(g.nodes, np.int32)
+        gargs = (
+            nodes,
+            np.int32(g.size),
+            np.int32(fo),
+            np.int32(co),
+            np.int32(g.n),
+            np.int32(stretch_radius(g.n)),
+            np.float64(cos_a),
+            np.float64(inv_sin),
         )
-        self.k_revert = kernel("revert")
-        self.k_revert.set_args(n, self.flag, self.P, self.old, self.part, None, None, None)
+        plan = self._plans[len(self._group_calls)]
+        rows = plan.n_blocks
+        mf = self.cl.mem_flags
+        bounds = self.cl.Buffer(self.rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=plan.bounds)
+        kq = kernel(f"quality_{suf}")
+        kq.set_args(
+            *gargs, self.P, self.q, np.float64(2.0 * np.sqrt(3.0)), self.part, np.int32(ro),
+            bounds, np.int32(rows), *extra,
+        )
+        moves = []
+        for refresh in (0, 1):  # plain move, and move with the distance refresh fused
+            km = kernel(f"move_{suf}_d" if refresh else f"move_{suf}")
+            head = (
+                *gargs,
+                self.P,
+                self.q,
+                self.fdist,
+                self.cmove,
+                self.wf,
+                np.float64(params.a),
+                np.float64(params.eta),
+                np.int32(fpmath.power_code(params.eta)),
+                np.float64(params.inverted_weight),
+                np.int32(params.scaling == "area"),
+                np.int32(refresh),
+                self.tree,
+                self.bxy,
+                self.cxy,
+            )
+            self._lbar_arg = len(head) + _TREE_LBAR
+            km.set_args(*head, *self.tree_args, *extra)
+            moves.append(km)
+        kk = kernel("mark_ngon" if tg is not None else f"mark_{suf}")
+        kk.set_args(*gargs, self.q, self.flag)
+        gs = _roundup(g.size, _WG)
+        return ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes,
+                bounds, *extra)
 
     def _setup_slide(self, ref: NumpyEngine) -> None:
         """Buffers and kernels of the sliding nodes (none: `self.slide` is None)."""

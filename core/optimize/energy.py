@@ -254,7 +254,7 @@ class FoldoverEnergy:
         """The smallest step t at which some energy corner's det, a quadratic in t along
         z + t dz, turns non-positive and stays so up to s0 (inf: none). The line search
         skips the trial steps above it: they would be rejected for a det <= 0 (see
-        `solver.skipped_trials`). solver_parallel.cl `limit_corner` is its twin, operation
+        `solver.skipped_trials`). opencl/lbfgs_parallel.cl `limit_corner` is its twin, operation
         for operation. Worked in cache-sized pieces: some forty passes over the corners."""
         m, bk = self.i0.size, self._bk
         c, f = bk.c.reshape(6, m), bk.ge.reshape(6, m)  # scratch until the next `evaluate`

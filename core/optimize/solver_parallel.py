@@ -503,24 +503,9 @@ class ParallelLbfgs:
             tb = self._tables_for(en, st)
         except TooLarge:  # the host solver, same result
             return lbfgs(en, st, v0, eps, **kw)
-        cl, queue = self.cl, self.queue
-        s = self._S_host
-        s[:] = 0.0
-        s[_S_EPS], s[_S_QC] = eps, getattr(en, "qc", 0.0)
-        s[_S_H0], s[_S_GUARD] = 0.1 * en.h_mean, float(bool(guard))
-        v0 = np.ascontiguousarray(v0, dtype=np.float64)
-        cl.enqueue_copy(queue, self.S, s)
-        cl.enqueue_copy(queue, tb.v, v0)
-        self._go("place", tb.n2 // 2)
-        self._energy(tb, "finish_init", grad=True)
-        if tb.lift:
-            self._gradient(tb)
-        self._go("gather_init", tb.n2 // 2)
-        cl.enqueue_copy(queue, self._rb, self.S)
-        e_hist = [float(self._rb[_ET])]
+        e_hist = [self._start(tb, en, v0, eps, guard)]
         it, pairs = 0, 0  # pairs: the most the device may hold
         trial = False  # the current point is the accepted trial in Z (not yet in v)
-        m = LBFGS_MEMORY
         # The foldover-free energy's gradient terms cost a third of a trial and serve only
         # the accepted one: computed with the first trial while first trials get accepted
         # (one pass), else in a pass of their own after the accepted trial. Bits unchanged.
@@ -528,27 +513,10 @@ class ParallelLbfgs:
         rejected = 0  # trial steps the last iteration rejected (or skipped)
         while it < max_it:
             it += 1
-            self._direction(tb, pairs)
-            grad = first_ok
-            skip = self._limit(tb) if guard and rejected else 0
-            if skip >= TRIALS:  # every trial step makes a det <= 0: all rejected
-                rb = self._rb
-                rb[_STATUS] = _REJECTED
-            else:
-                rb = self._trial(tb, grad)
-            if rb[_STATUS] == _NOT_DESCENT:  # restart from preconditioned descent
-                self._one("forget")
-                self._direction(tb, 0)
-                pairs, skip = 0, 0
-                rb = self._trial(tb, grad)
-                if rb[_STATUS] == _NOT_DESCENT:
-                    break
-            n_pairs = int(rb[_LEN])
-            trials = 1 + skip
-            while rb[_STATUS] == _REJECTED and trials < TRIALS:
-                grad = False
-                rb = self._trial(tb, grad)
-                trials += 1
+            found = self._search(tb, pairs, first_ok, bool(guard and rejected))
+            if found is None:  # no descent direction, not even from plain descent
+                break
+            rb, n_pairs, trials, grad = found
             rejected = trials - 1
             first_ok = not tb.lift and trials == 1
             if rb[_STATUS] != _ACCEPTED:
@@ -569,13 +537,66 @@ class ParallelLbfgs:
                 break
             if it < max_it:
                 self._accept(tb, grad)
-                pairs = min(n_pairs + 1, m)
+                pairs = min(n_pairs + 1, LBFGS_MEMORY)
                 trial = False
-        if trial:  # the free rows of Z
+        return self._solution(tb, en, st, trial), it
+
+    def _start(self, tb: _Tables, en: FoldoverEnergy, v0: np.ndarray, eps: float,
+               guard: bool) -> float:
+        """The solve's settings and v0 on the device, the energy and gradient there; the
+        energy."""
+        cl, queue = self.cl, self.queue
+        s = self._S_host
+        s[:] = 0.0
+        s[_S_EPS], s[_S_QC] = eps, getattr(en, "qc", 0.0)
+        s[_S_H0], s[_S_GUARD] = 0.1 * en.h_mean, float(bool(guard))
+        v0 = np.ascontiguousarray(v0, dtype=np.float64)
+        cl.enqueue_copy(queue, self.S, s)
+        cl.enqueue_copy(queue, tb.v, v0)
+        self._go("place", tb.n2 // 2)
+        self._energy(tb, "finish_init", grad=True)
+        if tb.lift:
+            self._gradient(tb)
+        self._go("gather_init", tb.n2 // 2)
+        cl.enqueue_copy(queue, self._rb, self.S)
+        return float(self._rb[_ET])
+
+    def _search(self, tb: _Tables, pairs: int, grad: bool, limit: bool
+                ) -> tuple[np.ndarray, int, int, bool] | None:
+        """One iteration's direction (over at most `pairs` pairs) and line search, the step
+        limit first when `limit`: (status block, pairs held, trials, whether the last trial
+        computed the gradient terms); None when neither the memory's direction nor plain
+        descent descends."""
+        self._direction(tb, pairs)
+        skip = self._limit(tb) if limit else 0
+        if skip >= TRIALS:  # every trial step makes a det <= 0: all rejected
+            rb = self._rb
+            rb[_STATUS] = _REJECTED
+        else:
+            rb = self._trial(tb, grad)
+        if rb[_STATUS] == _NOT_DESCENT:  # restart from preconditioned descent
+            self._one("forget")
+            self._direction(tb, 0)
+            skip = 0
+            rb = self._trial(tb, grad)
+            if rb[_STATUS] == _NOT_DESCENT:
+                return None
+        n_pairs = int(rb[_LEN])
+        trials = 1 + skip
+        while rb[_STATUS] == _REJECTED and trials < TRIALS:
+            grad = False
+            rb = self._trial(tb, grad)
+            trials += 1
+        return rb, n_pairs, trials, grad
+
+    def _solution(self, tb: _Tables, en: FoldoverEnergy, st: State, trial: bool) -> np.ndarray:
+        """The solve's last accepted point: the free rows of Z after an accepted trial that
+        was not moved into v, else v."""
+        if trial:
             xy = np.empty(2 * en.n_nodes, dtype=np.float64)
-            cl.enqueue_copy(queue, xy, tb.Z)
+            self.cl.enqueue_copy(self.queue, xy, tb.Z)
             zf = 2 * tb.zpos[st.fidx]
-            return np.concatenate([xy[zf], xy[zf + 1]]), it
+            return np.concatenate([xy[zf], xy[zf + 1]])
         v = np.empty(tb.n2, dtype=np.float64)
-        cl.enqueue_copy(queue, v, tb.v)
-        return v, it
+        self.cl.enqueue_copy(self.queue, v, tb.v)
+        return v
