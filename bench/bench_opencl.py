@@ -126,9 +126,9 @@ def main(argv=None) -> None:
     cls, why = backends._opencl_engine_class()
     if cls is None:
         raise SystemExit(f"no OpenCL backend: {why}")
-    from core import engine_opencl
+    from core.opencl.runtime import runtime
 
-    dev = engine_opencl._runtime().name
+    dev = runtime().name
     load = "/".join(f"{x:.2f}" for x in os.getloadavg())
     print(f"OpenCL device: {dev}; NumPy {np.__version__}; median of {repeats} runs")
     print(f"{time.strftime('%Y-%m-%d %H:%M')}; load average {load} on {os.cpu_count()} CPUs\n")

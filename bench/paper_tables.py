@@ -332,9 +332,10 @@ def opencl_device() -> str:
     """The OpenCL device "auto" uses here, or why there is none."""
     try:
         from core import engine_opencl
+        from core.opencl.runtime import runtime
 
         cls, why = engine_opencl.available()
-        return engine_opencl._runtime().name if cls is not None else f"none ({why})"
+        return runtime().name if cls is not None else f"none ({why})"
     except Exception as exc:  # no pyopencl at all
         return f"none ({exc})"
 

@@ -10,30 +10,24 @@ from __future__ import annotations
 import numpy as np
 
 from .boundary import BoundaryMotion
-from .choices import BACKEND, ids
+from .choices import (
+    BACKEND,
+    HYBRID,
+    NUMPY_ENGINE,
+    SMALL_ON_GPU,
+    ids,
+)
 from .engine_numpy import NumpyEngine
 from .faces import FaceSet
 from .params import EEGTParams
 from .targets import Targets
 
-__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU",
-           "global_stage_on_device", "make_engine", "warm_up"]
+__all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine",
+           "warm_up"]
 
 BACKENDS = ids(BACKEND)
 AUTO_ENGINE_MIN_FACES = 4000  # 'auto': the OpenCL engine from this many faces on
-HYBRID = "opencl (global stage) + numpy (EEGT steps, small mesh)"
-SMALL_ON_GPU = "numpy (auto: a small mesh; a GPU's set-up costs more than it saves)"
-OPENCL_ENGINE = "opencl"  # the OpenCL engine's name (``engine_opencl.OpenCLEngine.name``)
-# Engines whose global stage runs on the OpenCL device; the names are what a run reports.
-DEVICE_GLOBAL_STAGE = frozenset({OPENCL_ENGINE, HYBRID})
 _warned: set[str] = set()
-
-
-def global_stage_on_device(engine: str) -> bool:
-    """Whether a run on the engine ``make_engine`` named ``engine`` solves its global stage
-    on the OpenCL device (the OpenCL engine, or NumPy's EEGT steps beside the device's
-    global stage); the others solve it with NumPy."""
-    return engine in DEVICE_GLOBAL_STAGE
 
 
 def _opencl_engine_class():
@@ -47,9 +41,9 @@ def _opencl_engine_class():
 
 def _device_is_cpu() -> bool:
     """Whether the OpenCL device runs would use is a CPU (pocl and the like)."""
-    from .engine_opencl import _runtime
+    from .opencl.runtime import runtime
 
-    return _runtime().is_cpu
+    return runtime().is_cpu
 
 
 def warm_up(backend: str, max_face_size: int = 4) -> str | None:
@@ -66,9 +60,10 @@ def warm_up(backend: str, max_face_size: int = 4) -> str | None:
         return why
     try:
         from . import engine_opencl
+        from .opencl.runtime import runtime
         from .optimize.solver_parallel import device_solver
 
-        rt = engine_opencl._runtime()
+        rt = runtime()
         rt.program(engine_opencl.program_size(max_face_size))
         device_solver()
     except Exception as exc:  # the run meets the same failure and reports it
@@ -101,7 +96,7 @@ def make_engine(
                 return cls(points, faces, free, params, targets, motion), cls.name
             except RuntimeError as exc:  # device refused the kernels: fall back, say why
                 why = f"OpenCL backend failed ({exc}); using NumPy"
-        name = "numpy"
+        name = NUMPY_ENGINE
         if why and why not in _warned:
             _warned.add(why)
             import warnings
@@ -109,4 +104,4 @@ def make_engine(
             warnings.warn(why, RuntimeWarning, stacklevel=3)
         engine = NumpyEngine(points, faces, free, params, targets, motion)
         return engine, f"{name} ({why})" if why else name
-    return NumpyEngine(points, faces, free, params, targets, motion), "numpy"
+    return NumpyEngine(points, faces, free, params, targets, motion), NUMPY_ENGINE

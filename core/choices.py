@@ -11,8 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["BACKEND", "BOUNDARY", "PARAMETERS", "SCALING", "TARGET", "UNTANGLE", "UV_SCOPE",
-           "UV_TARGET", "Bound", "Choice", "Enumeration", "ids", "violation"]
+__all__ = ["BACKEND", "BOUNDARY", "DEVICE_GLOBAL_STAGE", "HYBRID", "NUMPY_ENGINE",
+           "OPENCL_ENGINE", "PARAMETERS", "SCALING", "SMALL_ON_GPU", "TARGET", "UNTANGLE",
+           "UV_SCOPE", "UV_TARGET", "Bound", "Choice", "Enumeration", "global_stage_on_device",
+           "ids", "violation"]
 
 
 @dataclass(frozen=True)
@@ -93,6 +95,20 @@ BACKEND: Enumeration = (
     Choice("auto", "Auto", "OpenCL where it is faster (small meshes: its global stage only), "
            "else NumPy"),
 )
+# The engines a run reports (``backends.make_engine``), and which of them solve the global
+# stage on the OpenCL device: a fixed set of names, never a prefix of a label.
+NUMPY_ENGINE = "numpy"
+OPENCL_ENGINE = "opencl"  # ``engine_opencl.OpenCLEngine.name``
+HYBRID = "opencl (global stage) + numpy (EEGT steps, small mesh)"
+SMALL_ON_GPU = "numpy (auto: a small mesh; a GPU's set-up costs more than it saves)"
+DEVICE_GLOBAL_STAGE = frozenset({OPENCL_ENGINE, HYBRID})
+
+
+def global_stage_on_device(engine: str) -> bool:
+    """Whether a run on the engine named ``engine`` solves its global stage on the OpenCL
+    device (the OpenCL engine, or NumPy's EEGT steps beside the device's global stage)."""
+    return engine in DEVICE_GLOBAL_STAGE
+
 
 # Which faces of a UV run move (``uv_untangle.untangle_uv``).
 UV_SCOPE: Enumeration = (

@@ -11,21 +11,23 @@ from __future__ import annotations
 import numpy as np
 
 from .boundary import BoundaryMotion
+from .choices import NUMPY_ENGINE
 from .distance import NearestBoundary
 from .faces import FaceSet
 from .fpmath import add_reduce, power
+from .mean_ratio import group_quality
 from .params import EEGTParams
-from .quality import Stats, group_quality, stats_of
+from .quality import Stats, stats_of
 from .targets import Targets
-from .transform import _edge_sum, group_transform_delta
+from .transform import edge_sum, group_transform_delta
 
-__all__ = ["NumpyEngine", "distance_weight", "quality_weight", "step_size", "stitch"]
+__all__ = ["DIST_FLOOR", "NumpyEngine", "distance_weight", "quality_weight", "step_size", "stitch"]
 
-_DIST_FLOOR = 1e-3  # d_j never below this fraction of the mean edge length
+DIST_FLOOR = 1e-3  # d_j never below this fraction of the mean edge length
 _DIRECT_PAIRS = 1 << 14  # centroid/fixed-node pairs up to which distances skip the quadtree
 
 
-# -- the paper's terms (twins in opencl_kernels.cl under the same names) ----------------------
+# -- the paper's terms (twins in opencl/eegt_kernels.cl under the same names) ---------------
 def step_size(q: np.ndarray, a: float) -> np.ndarray:
     """lambda = a (1 - q) per element (paper eq. 17): a good element moves little."""
     return a * (1.0 - q)
@@ -33,9 +35,9 @@ def step_size(q: np.ndarray, a: float) -> np.ndarray:
 
 def distance_weight(d: np.ndarray, lbar: float, c: float) -> np.ndarray:
     """The distance weight f(d) = (lbar / d)^c (paper eq. 20): elements near the fixed
-    boundary pull harder. d is clamped to _DIST_FLOOR lbar, so a centroid on a fixed node
+    boundary pull harder. d is clamped to DIST_FLOOR lbar, so a centroid on a fixed node
     weighs a finite amount."""
-    return power(lbar / np.maximum(d, _DIST_FLOOR * lbar), c)
+    return power(lbar / np.maximum(d, DIST_FLOOR * lbar), c)
 
 
 def quality_weight(q: np.ndarray, eta: float, inverted_weight: float) -> np.ndarray:
@@ -72,7 +74,7 @@ def stitch(
 def edge_lengths(x: np.ndarray, y: np.ndarray, groups) -> tuple[float, float]:
     """(lbar, smallest element mean edge length > 0) of the positions (x, y): lbar is the
     mean over all elements of their mean edge length (the span when that is not positive)."""
-    m = np.concatenate([_edge_sum(x[g.nodes], y[g.nodes]) / g.n for g in groups])
+    m = np.concatenate([edge_sum(x[g.nodes], y[g.nodes]) / g.n for g in groups])
     lbar = add_reduce(m) / m.size
     positive = m[m > 0]
     span = float(max(np.ptp(x), np.ptp(y))) or 1.0
@@ -118,7 +120,7 @@ _UNIFORM = object()  # distance weights without anchors: f = 1 for every element
 class NumpyEngine:
     """Holds the mesh state of one run; the pipeline drives it iteration by iteration."""
 
-    name = "numpy"
+    name = NUMPY_ENGINE
 
     def __init__(
         self,
@@ -141,6 +143,16 @@ class NumpyEngine:
         engine = NumpyEngine.__new__(NumpyEngine)
         engine._setup(points, self.faces, self.free, self.params, self._distance, self.targets,
                       self.motion, defer_distances=True)  # a restart may never be stepped
+        return engine
+
+    @classmethod
+    def initial_state(cls, points: np.ndarray, faces: FaceSet, free: np.ndarray,
+                      params: EEGTParams, targets: Targets | None = None,
+                      motion: BoundaryMotion | None = None) -> NumpyEngine:
+        """The state at `points` (lbar, quadtree, q) with the distance weights left to the
+        first step (`inv_d_pow` None): the OpenCL engine's initial state, made on the host."""
+        engine = cls.__new__(cls)
+        engine._setup(points, faces, free, params, None, targets, motion, defer_distances=True)
         return engine
 
     @property

@@ -20,22 +20,20 @@ falls back to NumPy.
 
 from __future__ import annotations
 
-import os
-import re
-import threading
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-from pathlib import Path
-
 import numpy as np
 
 from . import fpmath
 from .boundary import SLIDE_GAP, SLIDE_REACH, BoundaryMotion
+from .choices import OPENCL_ENGINE
 from .csr import bincount_csr
-from .engine_numpy import _DIST_FLOOR, NumpyEngine, edge_lengths
+from .distance import NearestBoundary
+from .engine_numpy import DIST_FLOOR, NumpyEngine, edge_lengths
 from .faces import FaceSet
+from .mean_ratio import corner_constants
+from .opencl.build import NCACHE, program_size
+from .opencl.runtime import ENV_DEVICE, list_devices, runtime, select_device, unavailable_reason
 from .params import EEGTParams
-from .quality import Stats, corner_constants
+from .quality import Stats
 from .targets import Targets
 from .transform import stretch_radius
 
@@ -43,245 +41,19 @@ __all__ = [
     "ENV_DEVICE",
     "OpenCLEngine",
     "available",
-    "cl_defines",
-    "fpmath_options",
-    "kernel_source",
     "list_devices",
-    "program_source",
+    "program_size",
     "select_device",
 ]
 
-ENV_DEVICE = "EEGT_OPENCL_DEVICE"
-KERNEL_FILE = Path(__file__).with_name("opencl_kernels.cl")
-COMMON_FILE = Path(__file__).with_name("cl_common.cl")  # in front of every program
-_NO_PLATFORM_HINT = (
-    "install an OpenCL driver (e.g. pocl-opencl-icd), or register one with an .icd file "
-    "in /etc/OpenCL/vendors or a folder named by OCL_ICD_VENDORS"
-)
 _WG = 64  # work-group size for face and node kernels
-_NCACHE = 8  # nearest boundary nodes cached per face for the distance refresh
-_NGON_MAXN = 16  # private-array size of the generic n-gon kernels (bigger faces: own build)
 _TREE_LBAR = 8  # where lbar sits in OpenCLEngine.tree_args (the distance floor follows it)
-
-_device_override: str | None = None
-_runtimes: dict[str, _Runtime] = {}
-# Runtimes, programs and solvers are made once per process; a warm-up thread
-# (backends.warm_up) may be making them while a run asks for them: the run waits.
-LOCK = threading.RLock()
-
-
-def _import_cl():
-    """pyopencl, imported on first use (ImportError / OSError when it is missing or broken)."""
-    import pyopencl as cl
-
-    return cl
-
-
-def program_source(path: Path) -> str:
-    """The OpenCL C source of a program: the shared header (cl_common.cl: fpmath, NumPy's
-    pairwise sums), then the file's own text, its lines numbered as in the file (a build
-    error names the file's line)."""
-    return (f'#line 1 "{COMMON_FILE.name}"\n{COMMON_FILE.read_text()}\n'
-            f'#line 1 "{path.name}"\n{path.read_text()}')
-
-
-def kernel_source() -> str:
-    """The OpenCL C source of the EEGT kernels."""
-    return program_source(KERNEL_FILE)
-
-
-def select_device(spec: str | None) -> None:
-    """Choose the device for later runs ("auto"/None: automatic; else as EEGT_OPENCL_DEVICE)."""
-    global _device_override
-    _device_override = spec or None
-
-
-def _has_fp64(dev) -> bool:
-    return "cl_khr_fp64" in dev.extensions.split() or bool(getattr(dev, "double_fp_config", 0))
-
-
-def _all_devices(cl) -> list[tuple[str, object, object]]:
-    """(id "p:d", platform, device) for every device of every platform."""
-    out = []
-    for pi, plat in enumerate(cl.get_platforms()):
-        try:
-            devs = plat.get_devices()
-        except cl.Error:  # a platform with no devices raises DEVICE_NOT_FOUND
-            continue
-        out.extend((f"{pi}:{di}", plat, d) for di, d in enumerate(devs))
-    return out
-
-
-def _label(cl, plat, dev) -> str:
-    kind = cl.device_type.to_string(dev.type).replace("ALL | ", "")
-    extra = "" if _has_fp64(dev) else ", no float64"
-    return f"{dev.name.strip()} ({plat.name.strip()}, {kind}{extra})"
-
-
-def list_devices() -> list[tuple[str, str]]:
-    """[(id, description)] of every OpenCL device, for a preferences menu ([] without OpenCL)."""
-    try:
-        cl = _import_cl()
-        return [(i, _label(cl, p, d)) for i, p, d in _all_devices(cl)]
-    except Exception:  # no pyopencl, no loader, no platform: nothing to list
-        return []
-
-
-def _pick_device(cl):
-    """((id, platform, device), None) or (None, reason). May raise when no platform exists."""
-    spec = (_device_override or os.environ.get(ENV_DEVICE, "")).strip()
-    devs = _all_devices(cl)
-    if not devs:
-        return None, f"no OpenCL device found ({_NO_PLATFORM_HINT}); using NumPy"
-    if spec and spec.lower() != "auto":
-        hits = [e for e in devs if e[0] == spec] or [
-            e for e in devs if spec.lower() in f"{e[2].name} {e[1].name}".lower()
-        ]
-        if not hits:
-            names = "; ".join(f"{i} {_label(cl, p, d)}" for i, p, d in devs)
-            return None, f"OpenCL device {spec!r} not found (devices: {names}); using NumPy"
-        entry = hits[0]
-        if not _has_fp64(entry[2]):
-            return None, (
-                f"OpenCL device {entry[2].name.strip()} has no float64 (cl_khr_fp64), "
-                "which the backend needs; using NumPy"
-            )
-        return entry, None
-    good = [e for e in devs if _has_fp64(e[2])]
-    if not good:
-        names = ", ".join(d.name.strip() for _, _, d in devs)
-        return None, f"no OpenCL device with float64 (cl_khr_fp64) among {names}; using NumPy"
-    gpu, cpu = cl.device_type.GPU, cl.device_type.CPU
-    good.sort(key=lambda e: (not e[2].type & gpu, not e[2].type & cpu))
-    return good[0], None
 
 
 def available():
     """(OpenCLEngine, None) when a float64 OpenCL device is usable, else (None, reason)."""
-    try:
-        cl = _import_cl()
-    except Exception as exc:  # ImportError, or OSError from a broken libOpenCL
-        return None, f"OpenCL backend unavailable (pyopencl: {exc}); using NumPy"
-    try:
-        _, why = _pick_device(cl)
-    except Exception as exc:  # clGetPlatformIDs fails when no ICD is registered at all
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        return None, f"no OpenCL platform ({first}; {_NO_PLATFORM_HINT}); using NumPy"
+    why = unavailable_reason()
     return (None, why) if why else (OpenCLEngine, None)
-
-
-@dataclass
-class _Runtime:
-    """Context, queue and built programs of one device, shared by every run in the process."""
-
-    cl: object
-    device: object
-    name: str
-    ctx: object
-    queue: object
-    programs: dict = field(default_factory=dict)
-
-    @property
-    def is_cpu(self) -> bool:
-        """A CPU device (pocl and the like), where single work-item kernels pay off."""
-        return bool(self.device.type & self.cl.device_type.CPU)
-
-    def build(self, key: str, source: str, options: list[str], what: str = "kernel"):
-        """`source` built for this device once per process and `key`; a failed build is
-        remembered too, so it is reported, not retried, on later runs (RuntimeError)."""
-        with LOCK:
-            prg = self.programs.get(key)
-            if prg is None:
-                try:
-                    prg = self.cl.Program(self.ctx, source).build(options=options)
-                except Exception as exc:
-                    prg = RuntimeError(f"{what} build failed on {self.name}: {_build_error(exc)}")
-                self.programs[key] = prg
-        if isinstance(prg, RuntimeError):
-            raise prg
-        return prg
-
-    def program(self, maxn: int):
-        """The EEGT kernels, built once per n-gon size class."""
-        options = [f"-DMAXN={maxn}", f"-DNCACHE={_NCACHE}", *fpmath_options()]
-        return self.build(f"eegt MAXN={maxn}", kernel_source(), options)
-
-
-def program_size(max_face_size: int) -> int:
-    """The MAXN the EEGT kernels are built with for faces of up to this many corners."""
-    n = int(max_face_size)
-    return _NGON_MAXN if n <= _NGON_MAXN else 1 << (n - 1).bit_length()
-
-
-def _build_error(exc: Exception) -> str:
-    """The compiler's first error line, without temporary file names (stable across runs)."""
-    text = str(exc)
-    for line in text.splitlines():
-        if "error" not in line:
-            continue
-        m = re.search(r":(\d+):(\d+):\s*(?:error:\s*)?(.*)", line)  # [error: ]FILE:L:C: what
-        return f"line {m[1]}:{m[2]}: {m[3].strip()}" if m else line.strip()
-    return " ".join(text.split())[:200]
-
-
-def _runtime() -> _Runtime:
-    """The cached runtime of the chosen device; RuntimeError when there is none."""
-    cl = _import_cl()
-    try:
-        entry, why = _pick_device(cl)
-    except Exception as exc:
-        raise RuntimeError(f"no OpenCL platform ({exc})") from exc
-    if entry is None:
-        raise RuntimeError(why)
-    dev_id, plat, dev = entry
-    key = f"{dev_id} {dev.name} {plat.name}"
-    with LOCK:
-        rt = _runtimes.get(key)
-        if rt is None:
-            ctx = cl.Context([dev])
-            rt = _Runtime(cl, dev, f"{dev.name.strip()} [{dev_id}]", ctx, cl.CommandQueue(ctx))
-            _runtimes[key] = rt
-    return rt
-
-
-def cl_defines(values: Mapping[str, float]) -> list[str]:
-    """Build options `-DNAME=value` that give the kernels the host's constants: integers in
-    decimal, floats as hex floats (the exact double, no decimal round trip)."""
-    out = []
-    for name, v in values.items():
-        if isinstance(v, (bool, int, np.integer)):
-            out.append(f"-D{name}={int(v)}")
-        elif np.isfinite(v):
-            out.append(f"-D{name}=({float(v).hex()})")
-        else:
-            raise ValueError(f"{name} = {v}: not a finite constant")
-    return out
-
-
-def fpmath_options() -> list[str]:
-    """Build options defining core.fpmath's constants, which every program is built with:
-    the log / exp constants (hex floats: the kernels compute with the exact doubles the
-    host's fpmath uses), power's fast-path codes and NumPy's summation cut points."""
-
-    def hexes(values) -> str:
-        return ",".join(float(v).hex() for v in values)
-
-    scalars = {
-        "FP_SQRT_HALF": fpmath._SQRT_HALF,
-        "FP_LN2_HI": fpmath._LN2_HI,
-        "FP_LN2_LO": fpmath._LN2_LO,
-        "FP_INV_LN2": fpmath._INV_LN2,
-        "FP_EXP_MAX": fpmath._EXP_MAX,
-        "FP_EXP_MIN": fpmath._EXP_MIN,
-        "PW_BLOCK": fpmath.PAIRWISE_BLOCK,
-        "CHUNK": fpmath.REDUCE_CHUNK,
-        **fpmath.POW_CODES,
-    }
-    return [
-        f"-DFP_LOG_C={hexes(fpmath.LOG_COEFFS)}",
-        f"-DFP_EXP_C={hexes(fpmath.EXP_COEFFS)}",
-        *cl_defines(scalars),
-    ]
 
 
 class _SumPlan:
@@ -343,7 +115,7 @@ def _roundup(n: int, m: int) -> int:
 class OpenCLEngine:
     """Holds one run's mesh state on an OpenCL device; same interface as NumpyEngine."""
 
-    name = "opencl"
+    name = OPENCL_ENGINE
 
     def __init__(
         self,
@@ -354,67 +126,81 @@ class OpenCLEngine:
         targets: Targets | None = None,
         motion: BoundaryMotion | None = None,
     ):
-        rt = _runtime()
-        cl = rt.cl
-        self.cl, self.rt, self.queue = cl, rt, rt.queue
+        rt = runtime()
+        self.cl, self.rt, self.queue = rt.cl, rt, rt.queue
         self.device_name = rt.name
         self.params = params
         self.faces = faces
         self.free, self.motion = free, motion
+        self.targets = targets
         self.iteration = 0
         self._stale = False  # the first step refreshes the distances first (`restarted`)
         # The reference engine builds the initial state: lbar, quadtree, q; the first step
         # computes the distance weights on the device (the host's bits, without a host query)
-        ref = NumpyEngine.__new__(NumpyEngine)
-        ref._setup(points, faces, free, params, None, targets, motion, defer_distances=True)
-        self.targets = targets
+        ref = NumpyEngine.initial_state(points, faces, free, params, targets, motion)
         self.lbar = ref.lbar
-        self.n_nodes = n = ref.n_nodes
+        self.n_nodes = ref.n_nodes
         groups = faces.groups
+        self.n_faces = sum(g.size for g in groups)
         self.prg = rt.program(program_size(max(g.n for g in groups)))
-        mf = cl.mem_flags
+        self._upload_state(ref)
+        self._upload_incidence(ref, groups)
+        self._upload_distance_tree(ref, params)
+        self._setup_stats(groups)
+        self._setup_kernels(groups, params, ref.group_targets)
+        self._setup_slide(ref)
+        self._stats = ref.stats()
 
-        def buf(a: np.ndarray):
-            return cl.Buffer(rt.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=a)
+    def _buf(self, a: np.ndarray):
+        """A read-write device buffer holding `a`."""
+        mf = self.cl.mem_flags
+        return self.cl.Buffer(self.rt.ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=a)
 
-        def empty(nbytes: int):
-            return cl.Buffer(rt.ctx, mf.READ_WRITE, max(int(nbytes), 8))
+    def _empty(self, nbytes: int):
+        """A read-write device buffer of `nbytes` (at least 8)."""
+        return self.cl.Buffer(self.rt.ctx, self.cl.mem_flags.READ_WRITE, max(int(nbytes), 8))
 
+    def _upload_state(self, ref: NumpyEngine) -> None:
+        """Positions (current, before the step, best), qualities, distance weights (when
+        known: else the first step computes them), face weights and corner moves."""
+        n, nf = self.n_nodes, self.n_faces
         pts = np.empty((n, 2), dtype=np.float64)
         pts[:, 0], pts[:, 1] = ref.x, ref.y
-        self.P = buf(pts)
-        self.old = empty(pts.nbytes)
-        self.best = empty(pts.nbytes)
-        cl.enqueue_copy(self.queue, self.best, self.P)
-        self.n_faces = nf = sum(g.size for g in groups)
-        self.q = buf(np.ascontiguousarray(np.concatenate(ref.q), dtype=np.float64))
+        self.P = self._buf(pts)
+        self.old = self._empty(pts.nbytes)
+        self.best = self._empty(pts.nbytes)
+        self.cl.enqueue_copy(self.queue, self.best, self.P)
+        self.q = self._buf(np.ascontiguousarray(np.concatenate(ref.q), dtype=np.float64))
         if ref.inv_d_pow is None:
-            self.fdist = empty(8 * nf)
+            self.fdist = self._empty(8 * nf)
             self._stale = True
         else:
-            self.fdist = buf(np.ascontiguousarray(np.concatenate(ref.inv_d_pow),
-                                                  dtype=np.float64))
-        self.wf = empty(8 * nf)
-        n_corners = int(ref.corner_nodes.size)
-        self.cmove = empty(16 * n_corners)
-        self.flag = buf(np.zeros(n, dtype=np.int32))
-        # CSR node -> incident corners of free nodes, in NumPy's bincount order
+            self.fdist = self._buf(np.ascontiguousarray(np.concatenate(ref.inv_d_pow),
+                                                        dtype=np.float64))
+        self.wf = self._empty(8 * nf)
+        self.cmove = self._empty(16 * int(ref.corner_nodes.size))
+        self.flag = self._buf(np.zeros(n, dtype=np.int32))
+
+    def _upload_incidence(self, ref: NumpyEngine, groups) -> None:
+        """CSR node -> incident corners of free nodes, in NumPy's bincount order (stitching
+        gathers them)."""
         corner_face = np.concatenate(
             [np.tile(np.arange(g.size, dtype=np.int64) + fo, g.n) for g, fo in self._fo(groups)]
         )
         kept = np.flatnonzero(ref.free[ref.corner_nodes])
-        row, order = bincount_csr(ref.corner_nodes[kept], n)
+        row, order = bincount_csr(ref.corner_nodes[kept], self.n_nodes)
         order = kept[order]
-        self.row = buf(row.astype(np.int32))
-        self.ccorner = buf(np.ascontiguousarray(order, dtype=np.int32))
-        self.cface = buf(np.ascontiguousarray(corner_face[order], dtype=np.int32))
-        # distance quadtree (boundary nodes never move): the reference's, flattened; without
-        # anchors (uniform weights) a one-node stand-in that the kernels never search
+        self.row = self._buf(row.astype(np.int32))
+        self.ccorner = self._buf(np.ascontiguousarray(order, dtype=np.int32))
+        self.cface = self._buf(np.ascontiguousarray(corner_face[order], dtype=np.int32))
+
+    def _upload_distance_tree(self, ref: NumpyEngine, params: EEGTParams) -> None:
+        """The distance quadtree (boundary nodes never move): the reference's, flattened;
+        without anchors (uniform weights) a one-node stand-in that the kernels never search.
+        `tree_args`: the move kernels' tree and distance arguments."""
         nb = ref.nearest
         self.uniform = nb is None
         if nb is None:
-            from .distance import NearestBoundary
-
             nb = NearestBoundary(np.zeros(1), np.zeros(1))
         lv_len = [c.size for c in nb.child]
         level_off = np.concatenate([[0], np.cumsum(lv_len)])
@@ -423,9 +209,10 @@ class OpenCLEngine:
         )
         if tree.size and tree.max() >= 2**31:
             raise RuntimeError("mesh too large for 32-bit indices on the device")
-        self.tree = buf(tree.astype(np.int32))
-        self.bxy = buf(np.column_stack([nb.bx, nb.by]))
-        self.cxy = buf(np.column_stack([nb.bx[nb.cand], nb.by[nb.cand]]))
+        self.tree = self._buf(tree.astype(np.int32))
+        self.bxy = self._buf(np.column_stack([nb.bx, nb.by]))
+        self.cxy = self._buf(np.column_stack([nb.bx[nb.cand], nb.by[nb.cand]]))
+        nf = self.n_faces
         self.tree_args = (
             np.float64(nb.origin[0]),
             np.float64(nb.origin[1]),
@@ -436,26 +223,24 @@ class OpenCLEngine:
             np.int32(len(lv_len)),
             np.int32(nb.bx.size),
             np.float64(self.lbar),
-            np.float64(_DIST_FLOOR * self.lbar),
+            np.float64(DIST_FLOOR * self.lbar),
             np.float64(params.c),
             np.int32(fpmath.power_code(params.c)),
             # per-face nearest-node cache: nodes, leaf level (-1: empty), leaf cell, q0 and gap
-            empty(4 * _NCACHE * nf),
-            buf(np.full((nf, 4), -1, dtype=np.int32)),
-            empty(16 * nf),
-            empty(32 * nf),
+            self._empty(4 * NCACHE * nf),
+            self._buf(np.full((nf, 4), -1, dtype=np.int32)),
+            self._empty(16 * nf),
+            self._empty(32 * nf),
         )
-        # stats: one (count, min, block sum, 0) row per quality work-item (a block of NumPy's
-        # pairwise q.sum() of its group), folded on the host in NumPy's order; row 0's last
-        # slot is the smoothing's "reverted" flag
+
+    def _setup_stats(self, groups) -> None:
+        """Stats: one (count, min, block sum, 0) row per quality work-item (a block of
+        NumPy's pairwise q.sum() of its group), folded on the host in NumPy's order; row 0's
+        last slot is the smoothing's "reverted" flag."""
         self._plans = [_SumPlan(g.size) for g in groups]
         self.n_rows = sum(plan.n_blocks for plan in self._plans)
-        self.part = empty(32 * self.n_rows)
+        self.part = self._empty(32 * self.n_rows)
         self._host_part = np.zeros((self.n_rows, 4), dtype=np.float64)
-        self._setup_kernels(groups, params, ref.group_targets)
-        self._setup_slide(ref)
-        self._stats = ref.stats()
-        del ref
 
     @staticmethod
     def _fo(groups):
@@ -466,93 +251,93 @@ class OpenCLEngine:
             fo += g.size
 
     def _setup_kernels(self, groups, params: EEGTParams, group_targets) -> None:
-        """Kernel objects with their arguments bound, per arity group; a group with targets
-        (a GroupTargets) runs the generic *_tgt kernels with its (6, n, F) target array."""
+        """Kernel objects with their arguments bound, per arity group (`_group_kernels`),
+        and the node kernels (stitch, revert)."""
+        self._group_calls: list[tuple] = []
+        co = ro = 0
+        for (g, fo), tg in zip(self._fo(groups), group_targets):
+            rows = self._plans[len(self._group_calls)].n_blocks
+            self._group_calls.append(self._group_kernels(g, fo, co, ro, tg, params))
+            ro += rows
+            co += g.n * g.size
+        n = np.int32(self.n_nodes)
+        self.k_stitch = self.cl.Kernel(self.prg, "stitch")
+        self.k_stitch.set_args(
+            n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old, None
+        )
+        self.k_revert = self.cl.Kernel(self.prg, "revert")
+        self.k_revert.set_args(n, self.flag, self.P, self.old, self.part, None, None, None)
+
+    def _ro_buffer(self, a: np.ndarray, dtype):
+        """A read-only device buffer holding `a` as `dtype`."""
         mf = self.cl.mem_flags
+        return self.cl.Buffer(self.rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR,
+                              hostbuf=np.ascontiguousarray(a, dtype=dtype))
+
+    def _group_kernels(self, g, fo: int, co: int, ro: int, tg, params: EEGTParams) -> tuple:
+        """One arity group's kernels with their arguments bound, as ((global size, kernel)
+        for quality, move, move with the distance refresh and mark, then the buffers they
+        hold): `fo`, `co`, `ro` its first face, corner and stats row. A group with targets
+        (a GroupTargets) runs the generic *_tgt kernels with its (6, n, F) target array."""
 
         def kernel(name: str):  # a fresh kernel object: its arguments are this run's
             return self.cl.Kernel(self.prg, name)
 
-        self._group_calls: list[tuple] = []
-        co = ro = 0
-        two_sqrt3 = np.float64(2.0 * np.sqrt(3.0))
-        area = np.int32(params.scaling == "area")
-        for (g, fo), tg in zip(self._fo(groups), group_targets):
-            suf = {3: "tri", 4: "quad"}.get(g.n, "ngon")
-            extra: tuple = ()
-            if tg is not None:
-                suf = {3: "tgt_tri", 4: "tgt_quad"}.get(g.n, "tgt")
-                fields = (tg.x, tg.y, tg.kx, tg.ky, tg.cos_a, tg.inv_sin)
-                extra = (self.cl.Buffer(
-                    self.rt.ctx,
-                    mf.READ_ONLY | mf.COPY_HOST_PTR,
-                    hostbuf=np.ascontiguousarray(np.stack(fields), dtype=np.float64),
-                ),)
-            cos_a, inv_sin = corner_constants(g.n)
-            nodes = self.cl.Buffer(
-                self.rt.ctx,
-                mf.READ_ONLY | mf.COPY_HOST_PTR,
-                hostbuf=np.ascontiguousarray(g.nodes, dtype=np.int32),
-            )
-            gargs = (
-                nodes,
-                np.int32(g.size),
-                np.int32(fo),
-                np.int32(co),
-                np.int32(g.n),
-                np.int32(stretch_radius(g.n)),
-                np.float64(cos_a),
-                np.float64(inv_sin),
-            )
-            plan = self._plans[len(self._group_calls)]
-            rows = plan.n_blocks
-            bounds = self.cl.Buffer(
-                self.rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=plan.bounds
-            )
-            kq = kernel(f"quality_{suf}")
-            kq.set_args(
-                *gargs, self.P, self.q, two_sqrt3, self.part, np.int32(ro), bounds, np.int32(rows),
-                *extra,
-            )
-            moves = []
-            for refresh in (0, 1):  # plain move, and move with the distance refresh fused
-                km = kernel(f"move_{suf}_d" if refresh else f"move_{suf}")
-                head = (
-                    *gargs,
-                    self.P,
-                    self.q,
-                    self.fdist,
-                    self.cmove,
-                    self.wf,
-                    np.float64(params.a),
-                    np.float64(params.eta),
-                    np.int32(fpmath.power_code(params.eta)),
-                    np.float64(params.inverted_weight),
-                    area,
-                    np.int32(refresh),
-                    self.tree,
-                    self.bxy,
-                    self.cxy,
-                )
-                self._lbar_arg = len(head) + _TREE_LBAR
-                km.set_args(*head, *self.tree_args, *extra)
-                moves.append(km)
-            kk = kernel("mark_ngon" if tg is not None else f"mark_{suf}")
-            kk.set_args(*gargs, self.q, self.flag)
-            gs = _roundup(g.size, _WG)
-            self._group_calls.append(
-                ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes, bounds,
-                 *extra)
-            )
-            ro += rows
-            co += g.n * g.size
-        n = np.int32(self.n_nodes)
-        self.k_stitch = kernel("stitch")
-        self.k_stitch.set_args(
-            n, self.row, self.ccorner, self.cface, self.cmove, self.wf, self.P, self.old, None
+        suf = {3: "tri", 4: "quad"}.get(g.n, "ngon")
+        extra: tuple = ()
+        if tg is not None:
+            suf = {3: "tgt_tri", 4: "tgt_quad"}.get(g.n, "tgt")
+            fields = (tg.x, tg.y, tg.kx, tg.ky, tg.cos_a, tg.inv_sin)
+            extra = (self._ro_buffer(np.stack(fields), np.float64),)
+        cos_a, inv_sin = corner_constants(g.n)
+        nodes = self._ro_buffer(g.nodes, np.int32)
+        gargs = (
+            nodes,
+            np.int32(g.size),
+            np.int32(fo),
+            np.int32(co),
+            np.int32(g.n),
+            np.int32(stretch_radius(g.n)),
+            np.float64(cos_a),
+            np.float64(inv_sin),
         )
-        self.k_revert = kernel("revert")
-        self.k_revert.set_args(n, self.flag, self.P, self.old, self.part, None, None, None)
+        plan = self._plans[len(self._group_calls)]
+        rows = plan.n_blocks
+        mf = self.cl.mem_flags
+        bounds = self.cl.Buffer(self.rt.ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=plan.bounds)
+        kq = kernel(f"quality_{suf}")
+        kq.set_args(
+            *gargs, self.P, self.q, np.float64(2.0 * np.sqrt(3.0)), self.part, np.int32(ro),
+            bounds, np.int32(rows), *extra,
+        )
+        moves = []
+        for refresh in (0, 1):  # plain move, and move with the distance refresh fused
+            km = kernel(f"move_{suf}_d" if refresh else f"move_{suf}")
+            head = (
+                *gargs,
+                self.P,
+                self.q,
+                self.fdist,
+                self.cmove,
+                self.wf,
+                np.float64(params.a),
+                np.float64(params.eta),
+                np.int32(fpmath.power_code(params.eta)),
+                np.float64(params.inverted_weight),
+                np.int32(params.scaling == "area"),
+                np.int32(refresh),
+                self.tree,
+                self.bxy,
+                self.cxy,
+            )
+            self._lbar_arg = len(head) + _TREE_LBAR
+            km.set_args(*head, *self.tree_args, *extra)
+            moves.append(km)
+        kk = kernel("mark_ngon" if tg is not None else f"mark_{suf}")
+        kk.set_args(*gargs, self.q, self.flag)
+        gs = _roundup(g.size, _WG)
+        return ((_roundup(rows, _WG), kq), (gs, moves[0]), (gs, moves[1]), (gs, kk), nodes,
+                bounds, *extra)
 
     def _setup_slide(self, ref: NumpyEngine) -> None:
         """Buffers and kernels of the sliding nodes (none: `self.slide` is None)."""
@@ -607,7 +392,7 @@ class OpenCLEngine:
         pts = np.empty((n, 2), dtype=np.float64)
         pts[:, 0], pts[:, 1] = points[:, 0], points[:, 1]
         engine.lbar, _ = edge_lengths(pts[:, 0], pts[:, 1], self.faces.groups)
-        lbar, floor = np.float64(engine.lbar), np.float64(_DIST_FLOOR * engine.lbar)
+        lbar, floor = np.float64(engine.lbar), np.float64(DIST_FLOOR * engine.lbar)
         args = list(self.tree_args)
         args[_TREE_LBAR], args[_TREE_LBAR + 1] = lbar, floor
         engine.tree_args = tuple(args)

@@ -16,6 +16,7 @@ from functools import lru_cache
 import numpy as np
 
 __all__ = [
+    "KERNEL_SCALARS",
     "PAIRWISE_BLOCK",
     "POW_CODES",
     "REDUCE_CHUNK",
@@ -41,6 +42,9 @@ LOG_COEFFS = tuple(1.0 / (2 * k + 1) for k in range(12))
 # exp(r) = sum_j r^j / j!, |r| <= ln(2) / 2
 EXP_COEFFS = tuple(1.0 / math.factorial(j) for j in range(14))
 _EXP_MAX, _EXP_MIN = 709.782712893384, -745.1332191019412
+# the scalars above under the kernels' names (build defines: core.opencl.build.fpmath_options)
+KERNEL_SCALARS = {"FP_SQRT_HALF": _SQRT_HALF, "FP_LN2_HI": _LN2_HI, "FP_LN2_LO": _LN2_LO,
+                  "FP_INV_LN2": _INV_LN2, "FP_EXP_MAX": _EXP_MAX, "FP_EXP_MIN": _EXP_MIN}
 # `power`'s exact fast paths (what NumPy's `x ** e` computes for these e), as codes for the
 # OpenCL kernels' np_pow; POW_GENERAL: exp(e log x)
 POW_CODES = {"POW_GENERAL": 0, "POW_SQUARE": 1, "POW_IDENTITY": 2, "POW_ONE": 3, "POW_SQRT": 4,

@@ -35,7 +35,8 @@ import numpy as np
 
 from .faces import FaceSet, as_faceset
 from .fpmath import add_reduce, atan2, regular_corner, tan_pi_over
-from .quality import _check_points, scaled_group_quality, unit_scaled
+from .mean_ratio import scaled_group_quality, unit_scaled
+from .points import check_points
 
 __all__ = [
     "ASPECT_MAX",
@@ -232,7 +233,7 @@ def _group_values(p: np.ndarray, fs: FaceSet, m: Measure) -> np.ndarray:
 def face_values(points, faces, measure: str = "mean_ratio") -> np.ndarray:
     """(F,) values of ``measure`` per face in the given face order."""
     m = get_measure(measure)
-    p = _check_points(points)
+    p = check_points(points)
     return _group_values(p, as_faceset(faces, p.shape[0]), m)
 
 
@@ -298,7 +299,7 @@ def summaries(points, faces, measures: Iterable[str] = MEASURE_NAMES
               ) -> dict[str, MeasureSummary]:
     """measure name -> MeasureSummary of a mesh, for each of ``measures``."""
     chosen = [get_measure(name) for name in measures]
-    p = _check_points(points)
+    p = check_points(points)
     fs = as_faceset(faces, p.shape[0])
     return {m.name: summarize(m.name, _group_values(p, fs, m), fs.counts) for m in chosen}
 

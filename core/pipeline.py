@@ -13,18 +13,21 @@ from .backends import make_engine
 from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .faces import FaceSet, as_faceset
 from .fpmath import add_reduce
+from .mean_ratio import group_quality
 from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
-from .optimize.reference import Factors
+from .optimize.mesh_tables import Factors
 from .optimize.submesh import Neighbourhood
 from .params import EEGTParams
-from .quality import Stats, _check_points, group_quality, mesh_stats
+from .points import check_points
+from .quality import Stats, mesh_stats
 from .reference_shapes import reference_targets
-from .reorder import REORDER_MIN_FACES, scattered, z_order
+from .reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import EdgeInfo, checked_edges, free_nodes
 
-__all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "untangle_and_smooth"]
+__all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "normalisation",
+           "untangle_and_smooth"]
 
 LOCAL_MIN_FACES = 20_000  # untangle="auto": 'eegt+local' from this many faces on, else 'global'
 LOCAL_RINGS = (4, 8, 16)  # rings around EEGT's leftover folds tried by 'eegt+local', in turn
@@ -120,7 +123,55 @@ def untangle_and_smooth(
     params = params if params is not None else EEGTParams()
     if not isinstance(params, EEGTParams):
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
-    p = _check_points(points)
+    mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges)
+    run, order = _start(mesh, params, backend, progress)
+    try:
+        status, message = run.execute()
+    except _CancelRun:
+        status, message = "cancelled", "cancelled: mesh left unchanged"
+    tg = mesh.targets
+    if tg is not None and tg.n_fallback:
+        message += f"; {target_fallback_note(tg.n_fallback)}"
+    out, before, after, status, message = _never_worse(mesh, run, order, status, message)
+    return EEGTResult(
+        out,
+        status,
+        before,
+        after,
+        run.n_untangle,
+        run.n_smooth,
+        time.perf_counter() - t0,
+        run.backend_name,
+        message,
+        mesh.free,
+        run.n_global,
+        int(mesh.frozen.sum()),
+        0 if tg is None else tg.n_fallback,
+    )
+
+
+@dataclass
+class _Mesh:
+    """A run's checked input: the caller's points `p` and faces, the targets, which nodes
+    move (and how, `motion`), the normalisation (centre, scale) with the normalised points
+    `work`, and the frozen faces."""
+
+    p: np.ndarray
+    fs: FaceSet
+    targets: Targets | None
+    free: np.ndarray
+    center: np.ndarray
+    scale: float
+    work: np.ndarray
+    motion: BoundaryMotion | None
+    frozen: np.ndarray
+
+
+def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points,
+             edges: EdgeInfo | None) -> _Mesh:
+    """Check the input (one-line ValueErrors), prepare the targets, the boundary's motion and
+    the normalised points."""
+    p = check_points(points)
     fs = as_faceset(faces, p.shape[0])
     if params.target == "reference":
         if targets is not None:
@@ -134,7 +185,7 @@ def untangle_and_smooth(
     free = free_nodes(p.shape[0], fs, fixed, edges=edges)
     if params.boundary == "fixed" and not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
-    center, scale = _normalisation(p, fs)
+    center, scale = normalisation(p, fs)
     work = (p - center) / scale
     _check_orientation(work, fs)
     motion = None  # "fixed": the engines' own path (free_nodes above checked the pins)
@@ -146,57 +197,55 @@ def untangle_and_smooth(
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
     frozen = frozen_faces(_as_given(p, fs, center, scale), fs, free)
-    order = None  # large meshes run renumbered in Z order (core.reorder): memory locality
-    if fs.n_faces >= REORDER_MIN_FACES and tg is None and motion is None and \
-            scattered(fs, p.shape[0]):
-        order, run_fs = z_order(work, fs)
-        work = work[order.nodes]  # the run's numbering from here on (one copy, not two)
+    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen)
+
+
+def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | None
+           ) -> tuple[_Run, Renumbering | None]:
+    """The run over the normalised points; large meshes run renumbered in Z order
+    (core.reorder: memory locality), returned with the renumbering (None: as given)."""
+    fs, free, frozen = mesh.fs, mesh.free, mesh.frozen
+    if fs.n_faces >= REORDER_MIN_FACES and mesh.targets is None and mesh.motion is None and \
+            scattered(fs, mesh.p.shape[0]):
+        order, run_fs = z_order(mesh.work, fs)
+        work = mesh.work[order.nodes]  # the run's numbering from here on (one copy, not two)
         run = _Run(work, run_fs, free[order.nodes], params, backend, progress,
                    frozen[order.faces], frozen_ids=np.flatnonzero(frozen))
-    else:
-        run = _Run(work, fs, free, params, backend, progress, frozen, tg, motion)
-    try:
-        status, message = run.execute()
-    except _CancelRun:
-        status, message = "cancelled", "cancelled: mesh left unchanged"
-    if tg is not None and tg.n_fallback:
-        message += f"; {target_fallback_note(tg.n_fallback)}"
+        return run, order
+    run = _Run(mesh.work, fs, free, params, backend, progress, frozen, mesh.targets,
+               mesh.motion)
+    return run, None
+
+
+def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
+                 message: str) -> tuple[np.ndarray, Stats, Stats, str, str]:
+    """(points, before, after, status, message): the best iterate in the caller's units,
+    only where it moved, and only when it is no worse than the input judged in the caller's
+    coordinates (else the input, status and message saying so)."""
+    p, fs, center, scale, tg = mesh.p, mesh.fs, mesh.center, mesh.scale, mesh.targets
     before = _stats_as_given(p, fs, center, scale, tg)
     out, after = p.copy(), before
-    if status != "cancelled":
-        best = run.best_pts if run.best_pts is not None else run.engine.best_points()
-        changed = np.any(best != work, axis=1) & run.free  # fixed rows stay the input's
-        if order is not None:
-            best, changed = order.back(best), order.back(changed)
-        out[changed] = best[changed] * scale + center
-        after = _stats_as_given(out, fs, center, scale, tg) if changed.any() else before
-        if not (after == before or after.better_than(before)):  # judged in the caller's units
-            out, after = p.copy(), before
-            status = "failed" if before.n_inverted else "valid"
-            note = "the result was not better than the input in its own coordinates: input returned"
-            if status == "failed":
-                message = _failed(f"{note} with {before.n_inverted} inverted faces", run, message)
-            else:
-                message += f"; {note}"
-        if status != "failed" and after.n_inverted:  # never claim more than the result
-            message = _failed(f"{after.n_inverted} faces are inverted in the caller's "
-                              "coordinates", run, message)
-            status = "failed"
-    return EEGTResult(
-        out,
-        status,
-        before,
-        after,
-        run.n_untangle,
-        run.n_smooth,
-        time.perf_counter() - t0,
-        run.backend_name,
-        message,
-        free,
-        run.n_global,
-        int(frozen.sum()),
-        0 if tg is None else tg.n_fallback,
-    )
+    if status == "cancelled":
+        return out, before, after, status, message
+    best = run.best_pts if run.best_pts is not None else run.engine.best_points()
+    changed = np.any(best != run.p, axis=1) & run.free  # fixed rows stay the input's
+    if order is not None:
+        best, changed = order.back(best), order.back(changed)
+    out[changed] = best[changed] * scale + center
+    after = _stats_as_given(out, fs, center, scale, tg) if changed.any() else before
+    if not (after == before or after.better_than(before)):  # judged in the caller's units
+        out, after = p.copy(), before
+        status = "failed" if before.n_inverted else "valid"
+        note = "the result was not better than the input in its own coordinates: input returned"
+        if status == "failed":
+            message = _failed(f"{note} with {before.n_inverted} inverted faces", run, message)
+        else:
+            message += f"; {note}"
+    if status != "failed" and after.n_inverted:  # never claim more than the result
+        message = _failed(f"{after.n_inverted} faces are inverted in the caller's "
+                          "coordinates", run, message)
+        status = "failed"
+    return out, before, after, status, message
 
 
 def _failed(why: str, run: _Run, message: str) -> str:
@@ -210,7 +259,7 @@ def _failed(why: str, run: _Run, message: str) -> str:
     return f"{head}; the run: {message.removeprefix('failed: ')}"
 
 
-def _normalisation(
+def normalisation(
     p: np.ndarray, fs: FaceSet, centre_on: np.ndarray | None = None
 ) -> tuple[np.ndarray, float]:
     """(centre, scale) that map the used nodes into [-1, 1]^2: the bounding-box centre (of
@@ -542,7 +591,7 @@ class _Run:
     def _solver(self):
         """The global stage's device solver, or None for the host's (always with sliding
         nodes: their parameters are variables the device solvers do not have)."""
-        return None if self.slide is not None else solver_for(self.backend_name)
+        return solver_for(self.backend_name, sliding=self.slide is not None)
 
     def _adopt(self, pts: np.ndarray, start: np.ndarray) -> Stats:
         """Continue the EEGT engine from `pts` (fixed rows reset to the input's bits); the

@@ -20,7 +20,7 @@ import numpy as np
 
 from .faces import FaceSet, as_faceset
 from .fpmath import add_reduce
-from .quality import _check_points
+from .points import check_points
 from .topology import EdgeInfo, checked_edges, free_nodes
 
 __all__ = ["PlaneFrame", "open_edges"]
@@ -91,7 +91,7 @@ class PlaneFrame:
         ``edges``: the faces' EdgeInfo when the caller has it (from a Blender mesh's edge
         table: ``EdgeInfo.from_table``); None: computed here.
         """
-        p = _check_points(points3d, 3)
+        p = check_points(points3d, 3)
         fs = as_faceset(faces, p.shape[0])
         edges = checked_edges(edges, fs, p.shape[0])
         used = fs.used_nodes(p.shape[0]) if used is None else np.asarray(used, dtype=bool)

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-__all__ = ["group_transform_delta", "stretch_radius", "transform_polygon"]
+__all__ = ["edge_sum", "group_transform_delta", "stretch_radius", "transform_polygon"]
 
 
 def stretch_radius(n: int) -> int:
@@ -68,7 +68,7 @@ def _target_stretch(X: np.ndarray, Y: np.ndarray, target) -> tuple[np.ndarray, n
     return NX, NY
 
 
-def _edge_sum(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+def edge_sum(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     """Sum of the edge lengths of every face (n times the mean edge length)."""
     n = X.shape[0]
     total = np.zeros(X.shape[1])
@@ -99,7 +99,7 @@ def group_transform_delta(
     SY = Y + NY
     # the shrink: s = size before / size after
     if scaling == "edge":
-        before, after = _edge_sum(X, Y), _edge_sum(SX, SY)
+        before, after = edge_sum(X, Y), edge_sum(SX, SY)
     elif scaling == "area":
         before, after = np.sqrt(_abs_area(X, Y)), np.sqrt(_abs_area(SX, SY))
     else:

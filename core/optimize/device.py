@@ -4,18 +4,17 @@ from __future__ import annotations
 
 import warnings
 
-from ..backends import global_stage_on_device
-from .options import Solver
+from .dispatch import Solver, uses_device
 
 __all__ = ["solver_for"]
 
 
-def solver_for(backend_name: str) -> Solver | None:
-    """The device solver when the run's engine is OpenCL (`solver_parallel.device_solver`:
-    many work-items, and on a CPU device the single-work-item kernel for small problems);
-    None = NumPy. Kernels that do not build warn once and leave NumPy, which gives the same
+def solver_for(backend_name: str, sliding: bool = False) -> Solver | None:
+    """The device solver when the run's global stage may use one (`dispatch.uses_device`:
+    an OpenCL engine, no sliding nodes), made by `solver_parallel.device_solver`; None =
+    NumPy. Kernels that do not build warn once and leave NumPy, which gives the same
     result."""
-    if not global_stage_on_device(backend_name):
+    if not uses_device(backend_name, sliding):
         return None
     from .solver_parallel import device_solver
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from .. import fpmath
 from ..csr import bincount_csr, ragged_arange
-from .reference import (
+from .mesh_tables import (
     Factors,
     corner_factor_values,
     corner_triangles,
@@ -43,11 +43,16 @@ from .reference import (
 )
 from .state import LIMIT_MARGIN, TICK_CORNERS, TICK_EVERY, State
 
-__all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar"]
+__all__ = ["FoldoverEnergy", "LiftEnergy", "chi_array", "chi_scalar", "energy_defines"]
 
 THETA = 1.0 / 16.0  # weight of the area term g against the shape term f
 LIFT_PENALTY = 1000.0  # weight of the one-sided quadratic floor penalty
 LIFT_BARRIER = 0.01  # weight of sum 1/q_corner (keeps every corner away from det = 0)
+
+
+def energy_defines() -> dict[str, float]:
+    """The energies' constants under their kernel names (build defines of both solvers)."""
+    return {"THETA": THETA, "PENALTY": LIFT_PENALTY, "BARRIER": LIFT_BARRIER}
 
 
 def chi_array(d: np.ndarray, eps: float, root: np.ndarray) -> np.ndarray:
@@ -60,12 +65,12 @@ def chi_scalar(d: float, eps: float) -> float:
     return 0.5 * (d + root) if d >= 0.0 else 0.5 * eps * eps / (root - d)
 
 
-LIMIT_PIECE = 16384  # corners per piece of `_step_limit` (its arrays stay in cache)
+LIMIT_PIECE = 16384  # corners per piece of `step_limit` (its arrays stay in cache)
 
 
 def _corner_limit(c: np.ndarray, f: np.ndarray, w00: np.ndarray, w01: np.ndarray,
                   w11: np.ndarray, s0: float) -> float:
-    """`FoldoverEnergy._step_limit` of some corners: c, f the (6, m) corner coordinates
+    """`FoldoverEnergy.step_limit` of some corners: c, f the (6, m) corner coordinates
     (x1, y1, x2, y2, x0, y0) of the point and of the direction."""
     e1x, e1y, e2x, e2y = c[0] - c[4], c[1] - c[5], c[2] - c[4], c[3] - c[5]
     f1x, f1y, f2x, f2y = f[0] - f[4], f[1] - f[5], f[2] - f[4], f[3] - f[5]
@@ -95,8 +100,9 @@ def _corner_limit(c: np.ndarray, f: np.ndarray, w00: np.ndarray, w01: np.ndarray
 class _Blocks:
     """Preallocated per-corner arrays of one energy, with views of their blocks made once.
 
-    `_eval` fills them and `_grad` reads what the last `_eval` left, so one evaluation is in
-    flight at a time (as in `lbfgs`: the gradient right after the accepted trial point).
+    `evaluate` fills them and `gradient` reads what the last `evaluate` left, so one
+    evaluation is in flight at a time (as in `lbfgs`: the gradient right after the accepted
+    trial point).
     Scratch that is dead by then shares memory: squares of J with dF/dJ, edges with dF/dE.
     Constants are full-length arrays: NumPy multiplies two arrays faster than an array and a
     Python float, with the same result.
@@ -135,8 +141,8 @@ class FoldoverEnergy:
 
     The hot path works on one flat coordinate vector z and a layout (gather index, scatter
     index, length of z): the whole-mesh measures use z = [x, y]; `lbfgs` uses z = [v, fixed
-    coordinates], so it never unpacks or packs. `_eval` gives F and min det J (all a line
-    search needs), `_grad` the gradient of the point `_eval` saw last. Per-corner quantities
+    coordinates], so it never unpacks or packs. `evaluate` gives F and min det J (all a line
+    search needs), `gradient` the gradient of the point `evaluate` saw last. Per-corner quantities
     live in `_Blocks` (one NumPy call per block of M, no temporaries); every value is the same
     float operation on the same operands as the per-entry formula beside it.
     """
@@ -213,7 +219,7 @@ class FoldoverEnergy:
         self._bk = _Blocks(i0.size, self.w00, self.w01, self.w11)
 
     # -- flat layouts ----------------------------------------------------------------------
-    def _layout(self, pos: np.ndarray) -> tuple[np.ndarray, int]:
+    def flat_layout(self, pos: np.ndarray) -> tuple[np.ndarray, int]:
         """(index, length) for a flat z holding coordinate c of node i at pos[c, i].
 
         z[index] = [x1, y1, x2, y2, x0, y0] (blocks of M; corner nodes i1, i2, i0), and the
@@ -225,10 +231,10 @@ class FoldoverEnergy:
 
     def _full_layout(self) -> tuple[np.ndarray, int]:
         if self._full is None:
-            self._full = self._layout(np.arange(2 * self.n_nodes).reshape(2, self.n_nodes))
+            self._full = self.flat_layout(np.arange(2 * self.n_nodes).reshape(2, self.n_nodes))
         return self._full
 
-    def _packed(self, st: State) -> tuple[tuple[np.ndarray, int], np.ndarray]:
+    def packed(self, st: State) -> tuple[tuple[np.ndarray, int], np.ndarray]:
         """Layout of z = [v, x_fixed, y_fixed] for `st`, and the fixed part of z (cached)."""
         if self._pack is None or self._pack[0] is not st:
             fixed = np.ones(self.n_nodes, dtype=bool)
@@ -240,18 +246,18 @@ class FoldoverEnergy:
             pos[1, st.fidx] = np.arange(nf, 2 * nf)
             pos[0, fix] = np.arange(2 * nf, 2 * nf + nx)
             pos[1, fix] = np.arange(2 * nf + nx, 2 * nf + 2 * nx)
-            self._pack = (st, self._layout(pos), np.concatenate([st.x[fix], st.y[fix]]))
+            self._pack = (st, self.flat_layout(pos), np.concatenate([st.x[fix], st.y[fix]]))
         return self._pack[1], self._pack[2]
 
     # -- corner Jacobians ------------------------------------------------------------------
-    def _step_limit(self, z: np.ndarray, dz: np.ndarray, index: np.ndarray, s0: float) -> float:
+    def step_limit(self, z: np.ndarray, dz: np.ndarray, index: np.ndarray, s0: float) -> float:
         """The smallest step t at which some energy corner's det, a quadratic in t along
         z + t dz, turns non-positive and stays so up to s0 (inf: none). The line search
         skips the trial steps above it: they would be rejected for a det <= 0 (see
-        `solver.skipped_trials`). solver_parallel.cl `limit_corner` is its twin, operation
+        `solver.skipped_trials`). opencl/lbfgs_parallel.cl `limit_corner` is its twin, operation
         for operation. Worked in cache-sized pieces: some forty passes over the corners."""
         m, bk = self.i0.size, self._bk
-        c, f = bk.c.reshape(6, m), bk.ge.reshape(6, m)  # scratch until the next `_eval`
+        c, f = bk.c.reshape(6, m), bk.ge.reshape(6, m)  # scratch until the next `evaluate`
         z.take(index, None, bk.c, "clip")  # = z[index]
         dz.take(index, None, bk.ge, "clip")
         out = np.inf
@@ -317,8 +323,8 @@ class FoldoverEnergy:
             u = fpmath.power(0.5 * u, self.power)
         return fpmath.add_reduce(self.weight * u)
 
-    def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
-        """(F_eps, min det J, whether `_grad` may follow) at the flat coordinates z."""
+    def evaluate(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
+        """(F_eps, min det J, whether `gradient` may follow) at the flat coordinates z."""
         bk = self._bk
         self._jac(z, layout[0])
         d, dd, root, chi, num, inv_chi = bk.d, bk.dd, bk.root, bk.chi, bk.num, bk.inv_chi
@@ -342,8 +348,8 @@ class FoldoverEnergy:
             energy = fpmath.add_reduce(np.multiply(num, inv_chi, bk.tmp))
         return energy, dmin, True
 
-    def _grad(self, layout) -> np.ndarray:
-        """dF/dz at the point `_eval` saw last."""
+    def gradient(self, layout) -> np.ndarray:
+        """dF/dz at the point `evaluate` saw last."""
         bk = self._bk
         # dF/dJ = a J + b cof(J); dchi/dD = chi / root
         a = np.multiply(bk.two_one_theta, bk.inv_chi, bk.a)  # 2 (1 - theta) inv_chi
@@ -386,7 +392,7 @@ class LiftEnergy(FoldoverEnergy):
         self.n_corners = np.bincount(self.eid, minlength=self.n_elem).astype(np.float64)
         self._neg_inv_nc = -1.0 / self.n_corners[self.eid]  # dq_e / du_k = this / u_k^2
         self._barrier_w = LIFT_BARRIER * self.weight
-        self._gap = np.empty(0)  # the last `_eval`'s (qc - q_e)_+ / qc
+        self._gap = np.empty(0)  # the last `evaluate`'s (qc - q_e)_+ / qc
         ne = self.n_elem  # per-element constants (array operands: faster than floats)
         self._zero_e, self._pen_e, self._m1_e = (np.full(ne, c) for c in (0.0, LIFT_PENALTY, -1.0))
         self._qc_e = np.empty(ne)  # filled with qc, then with 2 PENALTY / qc
@@ -432,9 +438,9 @@ class LiftEnergy(FoldoverEnergy):
 
     def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
         """F (inf where a corner det is not positive), without the gradient."""
-        return self._eval(np.concatenate([x, y]), self._full_layout(), eps)[0]
+        return self.evaluate(np.concatenate([x, y]), self._full_layout(), eps)[0]
 
-    def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
+    def evaluate(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
         bk = self._bk
         self._jac(z, layout[0])
         d, u = bk.d, bk.u
@@ -453,7 +459,7 @@ class LiftEnergy(FoldoverEnergy):
         self._gap = gap
         return energy, dmin, True
 
-    def _grad(self, layout) -> np.ndarray:
+    def gradient(self, layout) -> np.ndarray:
         bk = self._bk
         d, u, tmp = bk.d, bk.u, bk.tmp
         k = self._qc_e

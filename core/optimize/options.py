@@ -2,16 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
+from .dispatch import Solver, solver_to_run
 
-__all__ = ["GlobalOptions", "Solver"]
-
-# An L-BFGS run: solver(energy, state, v0, eps, *, max_it, guard, rel_tol, tick) -> (v, its);
-# `solver.lbfgs` (NumPy) and the OpenCL twins in `solver_opencl` / `solver_parallel`.
-Solver = Callable[..., tuple[np.ndarray, int]]
+__all__ = ["GlobalOptions"]
 
 
 @dataclass(frozen=True)
@@ -42,8 +37,6 @@ class GlobalOptions:
         if not self.polish_power > 0.0:
             raise ValueError("polish_power must be > 0")
 
-    def run(self) -> Solver:
-        """The L-BFGS to call."""
-        from .solver import lbfgs
-
-        return self.solver if self.solver is not None else lbfgs
+    def run(self, sliding: bool = False) -> Solver:
+        """The L-BFGS to call (`dispatch.solver_to_run`)."""
+        return solver_to_run(self.solver, sliding)

@@ -80,7 +80,7 @@ class SlideState(State):
 
 class SlideProblem:
     """An energy seen through `SlideState`'s variables, with the interface `solver.lbfgs`
-    uses (`_packed`, `_eval`, `_grad`, `precond`, `h_mean`, `tick_every`)."""
+    uses (`packed`, `evaluate`, `gradient`, `precond`, `h_mean`, `tick_every`)."""
 
     def __init__(self, en, st: SlideState):
         self.en, self.st = en, st
@@ -98,14 +98,14 @@ class SlideProblem:
         base = 2 * (nf + ns)
         pos[0, fix] = base + np.arange(fix.size)
         pos[1, fix] = base + fix.size + np.arange(fix.size)
-        self.inner = en._layout(pos)
+        self.inner = en.flat_layout(pos)
         self.z_in = np.concatenate([np.zeros(base), st.x[fix], st.y[fix]])
         self._dir = (np.zeros(ns), np.zeros(ns))
 
-    def _packed(self, st: SlideState):
+    def packed(self, st: SlideState):
         return (self.inner, self.st.size), np.zeros(0)
 
-    def _eval(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
+    def evaluate(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
         st, s = self.st, self.st.slide
         n2, ns = 2 * st.nf, st.ns
         tau = st.tau_of(z)
@@ -117,12 +117,12 @@ class SlideProblem:
         zi[:n2] = z[:n2]
         zi[n2 : n2 + ns], zi[n2 + ns : n2 + 2 * ns] = s.point(st.var_slots, tau)
         self._dir = s.direction(st.var_slots, tau)
-        return self.en._eval(zi, self.inner, eps)
+        return self.en.evaluate(zi, self.inner, eps)
 
-    def _grad(self, layout) -> np.ndarray:
+    def gradient(self, layout) -> np.ndarray:
         st = self.st
         n2, ns = 2 * st.nf, st.ns
-        g = self.en._grad(self.inner)
+        g = self.en.gradient(self.inner)
         out = np.empty(n2 + ns)
         out[:n2] = g[:n2]
         dx, dy = self._dir

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..fpmath import add_reduce, add_reduce_rows
-from .state import LBFGS_MEMORY, TRIALS, State, skipped_trials, stops
+from .state import ARMIJO, CURVATURE, LBFGS_MEMORY, TRIALS, State, skipped_trials, stops
 
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
@@ -38,7 +38,7 @@ def lbfgs(
     Returns the last accepted point and the number of iterations done.
 
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
-    comments: the energy sees z = [v, fixed coordinates] (`FoldoverEnergy._packed`), whose first
+    comments: the energy sees z = [v, fixed coordinates] (`FoldoverEnergy.packed`), whose first
     2 nf gradient entries are the packed gradient, and only accepted points get a gradient;
     a dot product dot(a, b) is `fpmath.add_reduce(a * b)`, NumPy's pairwise sum in one order
     under every NumPy, never BLAS's `a @ b`, whose result depends on its thread count (one
@@ -46,104 +46,152 @@ def lbfgs(
     as alone); a scalar factor is filled into an array first (a cheaper NumPy operand than a
     float or a 0-d array).
     """
-    layout, fixed = en._packed(st)
-    evaluate, gradient = en._eval, en._grad
-    mul, red, amax = np.multiply, add_reduce, np.maximum.reduce
-    n2 = st.size
-    z = np.concatenate([v0, fixed])  # the energy's input: trial points go into z[:n2]
-    zv = z[:n2]
-    tmp = np.empty(n2)  # scratch: a product before its sum, a scaled vector
-    c0 = np.empty(n2)  # scratch: a scalar factor, filled in (faster operand than a float)
-    prods = np.empty((4, n2))  # s y, s s, y y, y (dpre y) of a new pair
-    # the step limit (guarded runs; not with sliding nodes, whose positions are not linear
-    # in the variables) and the direction in z's layout (fixed part 0)
-    limit = getattr(en, "_step_limit", None) if guard else None
-    dz = np.zeros(z.size) if limit is not None else None
-    sy_, ss_, yy_, ydy_ = prods
-    v = v0
-    e, _, ok = evaluate(z, layout, eps)
-    g = gradient(layout)[:n2] if ok else np.zeros(n2)
-    dpre = st.preconditioner(en.precond)
-    # memory: (s, y, rho = 1 / s.y, s.y, y.(dpre y)) per pair, oldest first
-    mem: list[tuple[np.ndarray, np.ndarray, float, float, float]] = []
-    e_hist = [e]
-    h0 = 0.1 * en.h_mean  # first step: the fastest node moves a tenth of a typical edge
+    run = _Run(en, st, v0, eps, guard)
     it = 0
-    rejected = 0  # trial steps the last iteration rejected (or skipped)
     while it < max_it:
         it += 1
-        q = -g
-        alphas = []
-        for s, yv, rho, _, _ in reversed(mem):
-            al = rho * red(mul(s, q, tmp))  # rho dot(s, q)
-            alphas.append(al)
-            c0.fill(al)
-            q -= mul(yv, c0, tmp)  # q -= al yv
-        if mem:
-            c0.fill(mem[-1][3] / mem[-1][4])
-            q *= mul(dpre, c0, tmp)  # q *= dpre (dot(s, y) / dot(y, dpre y)) of the last pair
-            for (s, yv, rho, _, _), al in zip(mem, reversed(alphas), strict=True):
-                c0.fill(al - rho * red(mul(yv, q, tmp)))
-                q += mul(s, c0, tmp)  # q += (al - rho dot(yv, q)) s
-            step = 1.0
-        else:
-            q *= dpre
-            qmax = float(amax(np.abs(q, out=tmp)))
-            step = h0 / qmax if qmax > 0.0 else 0.0
-        slope = float(red(mul(g, q, tmp)))
-        if not slope < 0.0:  # not a descent direction: restart from preconditioned descent
-            mem = []
-            q = -dpre * g
-            slope = float(red(mul(g, q, tmp)))
-            qmax = float(amax(np.abs(q, out=tmp)))
-            step = h0 / qmax if qmax > 0.0 else 0.0
-            if not slope < 0.0:
-                break
-        accepted = False
-        skip = 0
-        if limit is not None and rejected:  # steps that make a det <= 0 are rejected: skip
-            # them (the limit costs about two trials: worth it after an iteration with some)
-            zv[:] = v
-            dz[:n2] = q
-            step, skip = skipped_trials(step, limit(z, dz, layout[0], step))
-        rejected = skip
-        for _ in range(TRIALS - skip):
-            c0.fill(step)
-            np.add(v, mul(q, c0, tmp), zv)  # vt = v + step q
-            et, dmin_t, ok = evaluate(z, layout, eps)
-            if (
-                math.isfinite(et)
-                and et <= e + 1e-4 * step * slope
-                and not (guard and dmin_t <= 0.0)
-            ):
-                accepted = True
-                break
-            step *= 0.5
-            rejected += 1
-        if not accepted:
-            if mem:  # drop the memory and retry once from plain descent
-                mem = []
+        found = run.direction()
+        if found is None:  # no descent direction, not even the preconditioned gradient
+            break
+        if not run.line_search(*found):
+            if run.mem:  # drop the memory and retry once from plain descent
+                run.mem = []
                 continue
             break
-        gt = gradient(layout)[:n2]
-        vt = zv.copy()
-        s = vt - v
-        yv = gt - g
-        mul(s, yv, sy_)
-        mul(s, s, ss_)
-        mul(yv, yv, yy_)
-        mul(yv, mul(dpre, yv, tmp), ydy_)
-        sy, ss, yy, ydy = add_reduce_rows(prods)  # dot(s, y), dot(s, s), ...
-        if sy > 1e-12 * math.sqrt(ss * yy):
-            mem.append((s, yv, 1.0 / sy, sy, ydy))
-            if len(mem) > LBFGS_MEMORY:
-                del mem[0]
-        v, e, g = vt, et, gt
-        if not guard and dmin_t > 0.0:  # just became valid: hand over to the guarded polish
+        valid = run.accept()
+        if not guard and valid:  # just became valid: hand over to the guarded polish
             break
-        e_hist.append(e)
-        if len(e_hist) > 5 and e_hist[-6] - e <= rel_tol * abs(e_hist[-6]):
+        if run.stalled(rel_tol):
             break
         if tick is not None and it % en.tick_every == 0 and stops(tick(it)):
             break
-    return v, it
+    return run.v, it
+
+
+class _Run:
+    """One L-BFGS solve's state: the point v (energy e, gradient g), the memory of pairs and
+    the scratch buffers; `lbfgs` drives it step by step."""
+
+    def __init__(self, en: FoldoverEnergy, st: State, v0: np.ndarray, eps: float, guard: bool):
+        layout, fixed = en.packed(st)
+        self.layout, self.eps, self.guard = layout, eps, guard
+        self.evaluate, self.gradient = en.evaluate, en.gradient
+        self.n2 = n2 = st.size
+        self.z = np.concatenate([v0, fixed])  # the energy's input: trial points go in z[:n2]
+        self.zv = self.z[:n2]
+        self.tmp = np.empty(n2)  # scratch: a product before its sum, a scaled vector
+        self.c0 = np.empty(n2)  # scratch: a scalar factor, filled in (faster than a float)
+        self.prods = np.empty((4, n2))  # s y, s s, y y, y (dpre y) of a new pair
+        # the step limit (guarded runs; not with sliding nodes, whose positions are not
+        # linear in the variables) and the direction in z's layout (fixed part 0)
+        self.limit = getattr(en, "step_limit", None) if guard else None
+        self.dz = np.zeros(self.z.size) if self.limit is not None else None
+        self.v = v0
+        self.e, _, ok = self.evaluate(self.z, layout, eps)
+        self.g = self.gradient(layout)[:n2] if ok else np.zeros(n2)
+        self.dpre = st.preconditioner(en.precond)
+        # memory: (s, y, rho = 1 / s.y, s.y, y.(dpre y)) per pair, oldest first
+        self.mem: list[tuple[np.ndarray, np.ndarray, float, float, float]] = []
+        self.e_hist = [self.e]
+        self.h0 = 0.1 * en.h_mean  # first step: the fastest node moves a tenth of an edge
+        self.rejected = 0  # trial steps the last iteration rejected (or skipped)
+        self.et = self.dmin_t = 0.0  # the accepted trial's energy and smallest det
+
+    def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        """dot(a, b) as fpmath.add_reduce's pairwise sum (never BLAS)."""
+        return add_reduce(np.multiply(a, b, self.tmp))
+
+    def _two_loop(self) -> tuple[np.ndarray, float]:
+        """-H g by the two-loop recursion (H: the memory's inverse Hessian, dpre scaled by
+        the last pair), and the first trial step (1, or h0 / max |q| without memory)."""
+        mul, tmp, c0 = np.multiply, self.tmp, self.c0
+        q = -self.g
+        alphas = []
+        for s, yv, rho, _, _ in reversed(self.mem):
+            al = rho * self._dot(s, q)  # rho dot(s, q)
+            alphas.append(al)
+            c0.fill(al)
+            q -= mul(yv, c0, tmp)  # q -= al yv
+        if not self.mem:
+            q *= self.dpre
+            return q, self._first_step(q)
+        c0.fill(self.mem[-1][3] / self.mem[-1][4])
+        q *= mul(self.dpre, c0, tmp)  # q *= dpre (dot(s, y) / dot(y, dpre y)) of the last pair
+        for (s, yv, rho, _, _), al in zip(self.mem, reversed(alphas), strict=True):
+            c0.fill(al - rho * self._dot(yv, q))
+            q += mul(s, c0, tmp)  # q += (al - rho dot(yv, q)) s
+        return q, 1.0
+
+    def _first_step(self, q: np.ndarray) -> float:
+        """h0 / max |q|: the fastest node moves h0 (0 for q = 0)."""
+        qmax = float(np.maximum.reduce(np.abs(q, out=self.tmp)))
+        return self.h0 / qmax if qmax > 0.0 else 0.0
+
+    def direction(self) -> tuple[np.ndarray, float, float] | None:
+        """(q, first step, slope g.q) of a descent direction; when the memory's is none,
+        the memory goes and the preconditioned gradient is tried; None: neither descends."""
+        q, step = self._two_loop()
+        slope = float(self._dot(self.g, q))
+        if not slope < 0.0:  # not a descent direction: restart from preconditioned descent
+            self.mem = []
+            q = -self.dpre * self.g
+            slope = float(self._dot(self.g, q))
+            step = self._first_step(q)
+            if not slope < 0.0:
+                return None
+        return q, step, slope
+
+    def line_search(self, q: np.ndarray, step: float, slope: float) -> bool:
+        """Armijo backtracking from `step` along q (trial points rejected when an energy is
+        not finite or, guarded, when a det is <= 0; the step limit skips trials it knows
+        to fail); the accepted trial stays in z[:n2]."""
+        skip = 0
+        zv, tmp, c0 = self.zv, self.tmp, self.c0
+        if self.limit is not None and self.rejected:  # steps that make a det <= 0 are
+            # rejected: skip them (the limit costs about two trials: worth it after an
+            # iteration with some)
+            zv[:] = self.v
+            self.dz[: self.n2] = q
+            step, skip = skipped_trials(step, self.limit(self.z, self.dz, self.layout[0], step))
+        self.rejected = skip
+        for _ in range(TRIALS - skip):
+            c0.fill(step)
+            np.add(self.v, np.multiply(q, c0, tmp), zv)  # vt = v + step q
+            et, dmin_t, _ = self.evaluate(self.z, self.layout, self.eps)
+            if (
+                math.isfinite(et)
+                and et <= self.e + ARMIJO * step * slope
+                and not (self.guard and dmin_t <= 0.0)
+            ):
+                self.et, self.dmin_t = et, dmin_t
+                return True
+            step *= 0.5
+            self.rejected += 1
+        return False
+
+    def accept(self) -> bool:
+        """Move to the accepted trial: its gradient, the new pair (kept when its curvature
+        s.y is positive enough), the memory; whether every det is now positive."""
+        mul = np.multiply
+        gt = self.gradient(self.layout)[: self.n2]
+        vt = self.zv.copy()
+        s = vt - self.v
+        yv = gt - self.g
+        sy_, ss_, yy_, ydy_ = self.prods
+        mul(s, yv, sy_)
+        mul(s, s, ss_)
+        mul(yv, yv, yy_)
+        mul(yv, mul(self.dpre, yv, self.tmp), ydy_)
+        sy, ss, yy, ydy = add_reduce_rows(self.prods)  # dot(s, y), dot(s, s), ...
+        if sy > CURVATURE * math.sqrt(ss * yy):
+            self.mem.append((s, yv, 1.0 / sy, sy, ydy))
+            if len(self.mem) > LBFGS_MEMORY:
+                del self.mem[0]
+        self.v, self.e, self.g = vt, self.et, gt
+        return self.dmin_t > 0.0
+
+    def stalled(self, rel_tol: float) -> bool:
+        """Whether the last 5 iterations lowered the energy by less than rel_tol (relative)."""
+        e, hist = self.e, self.e_hist
+        hist.append(e)
+        return len(hist) > 5 and hist[-6] - e <= rel_tol * abs(hist[-6])

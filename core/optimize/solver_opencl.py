@@ -2,7 +2,7 @@
 
 `OpenCLLbfgs` is a drop-in for `solver.lbfgs` (same arguments, same result to the
 last bit): the energy tables are uploaded once per energy object, the whole solve runs in
-one single-work-item kernel (solver_opencl.cl), and only the solution comes back. The
+one single-work-item kernel (core/opencl/lbfgs_single.cl), and only the solution comes back. The
 kernel pauses every `en.tick_every` iterations when the caller passes a progress tick, so
 progress and cancelling work as on the host. Meant for CPU devices (`device_solver` gives
 none elsewhere), where one compiled loop beats NumPy's per-call overhead at every mesh size;
@@ -12,20 +12,20 @@ a GPU would run it on one thread.
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
 from ..csr import bincount_csr
-from ..engine_opencl import LOCK, _runtime, cl_defines, fpmath_options, program_source
-from .energy import LIFT_BARRIER, LIFT_PENALTY, THETA, FoldoverEnergy, LiftEnergy
+from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
+from ..opencl.runtime import LOCK, runtime
+from .dispatch import TooLarge, on_host, single_kernel_corners
+from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
-from .state import LBFGS_MEMORY, TRIALS, State, stops
+from .state import LBFGS_MEMORY, State, line_search_defines, stops
 
-__all__ = ["KERNEL_FILE", "OpenCLLbfgs", "build_options", "device_solver", "energy_defines",
-           "kernel_source"]
+__all__ = ["KERNEL_FILE", "OpenCLLbfgs", "build_options", "device_solver", "kernel_source"]
 
-KERNEL_FILE = Path(__file__).with_name("solver_opencl.cl")
+KERNEL_FILE = kernel_file("lbfgs_single.cl")
 # T (int32): the kernel's counters, problem sizes and settings, a slot each (T_* defines)
 _T = {name: k for k, name in enumerate((
     "T_IT", "T_LEN", "T_START", "T_NHIST", "T_FRESH", "T_STATUS", "T_NN", "T_NF", "T_NC",
@@ -40,11 +40,6 @@ _S = {"S_EPS": 0, "S_QC": 1, "S_H0": 2, "S_REL_TOL": 3, "S_E": 4, "S_EHIST": 5,
 _solvers: dict[str, OpenCLLbfgs] = {}
 
 
-def energy_defines() -> dict[str, float]:
-    """The energies' constants (core.optimize.energy) under their kernel names."""
-    return {"THETA": THETA, "PENALTY": LIFT_PENALTY, "BARRIER": LIFT_BARRIER}
-
-
 def kernel_source() -> str:
     """The OpenCL C source of the single-work-item L-BFGS kernel (with the shared header)."""
     return program_source(KERNEL_FILE)
@@ -54,16 +49,17 @@ def build_options() -> list[str]:
     """The kernel's defines: core.fpmath's (NumPy's summation cut points), the energies'
     constants, the line search's and the layout of its state buffers."""
     return [*fpmath_options(), *cl_defines({
-        "M": LBFGS_MEMORY, "TRIALS": TRIALS, "E_WINDOW": _E_WINDOW, **energy_defines(),
+        "M": LBFGS_MEMORY, **line_search_defines(), "E_WINDOW": _E_WINDOW, **energy_defines(),
         **_T, **_ST, **_S})]
 
 
 def device_solver() -> OpenCLLbfgs | None:
     """The solver of the chosen OpenCL device, made once per process and device (a kernel
     object costs ~0.5 ms); None on a non-CPU device (one work-item would run on one GPU
-    thread); RuntimeError when there is no device or the kernel does not build."""
-    rt = _runtime()
-    if not rt.is_cpu:
+    thread: `dispatch.single_kernel_corners`); RuntimeError when there is no device or the
+    kernel does not build."""
+    rt = runtime()
+    if not single_kernel_corners(rt.is_cpu):
         return None
     with LOCK:
         solver = _solvers.get(rt.name)
@@ -93,7 +89,7 @@ class _Tables:
             dbls.append(en.n_corners)
         flat = np.concatenate([np.asarray(a, dtype=np.int64) for a in ints])
         if flat.size and flat.max() >= 2**31:
-            raise ValueError("mesh too large for the device solver's 32-bit indices")
+            raise TooLarge("mesh too large for the device solver's 32-bit indices")
         self.ints = solver._buffer(flat.astype(np.int32))
         self.dbls = solver._buffer(np.concatenate([np.asarray(a, np.float64) for a in dbls]))
         n2 = 2 * st.nf
@@ -108,7 +104,7 @@ class OpenCLLbfgs:
     """`_lbfgs` for `untangle_global` / `lift_min_quality`, run by an OpenCL kernel."""
 
     def __init__(self) -> None:
-        rt = _runtime()
+        rt = runtime()
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
         prg = rt.build(
@@ -148,11 +144,11 @@ class OpenCLLbfgs:
         tick: Callable[[int], bool] | None = None,
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
-        if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernel: the host's
+        if on_host(en, st):  # not in the kernel: the host's
             return lbfgs(en, st, v0, eps, **kw)
         try:
             tb = self._tables_for(en, st)
-        except ValueError:  # indices beyond 32 bits: the host solver, same result
+        except TooLarge:  # the host solver, same result
             return lbfgs(en, st, v0, eps, **kw)
         cl, queue = self.cl, self.queue
         state = np.zeros(tb.state_len, dtype=np.float64)

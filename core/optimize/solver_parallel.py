@@ -5,7 +5,7 @@ the last bit) that scales with the mesh and suits GPUs: energy terms and corner 
 run one work-item per corner (along a locality-preserving sweep), the gradient is a
 per-node gather in np.bincount's order, vector updates are elementwise, and every dot
 product and energy sum is NumPy's pairwise summation split into fixed leaves and chunks
-(solver_parallel.cl), so neither the work-group size nor the number of lanes per leaf
+(core/opencl/lbfgs_parallel.cl), so neither the work-group size nor the number of lanes per leaf
 changes a bit. The solver's scalars stay on the device; the host enqueues an iteration's
 kernels and reads back one 64-byte status block per line-search trial (one per iteration
 when the first step is accepted). Tables are uploaded once per energy and kernel arguments
@@ -16,31 +16,27 @@ kernels and the measurements.
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
 from ..csr import bincount_csr, point_morton
-from ..engine_opencl import LOCK, _runtime, cl_defines, fpmath_options, program_source
 from ..fpmath import PAIRWISE_BLOCK, REDUCE_CHUNK
-from .energy import FoldoverEnergy, LiftEnergy
+from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
+from ..opencl.runtime import LOCK, runtime
+from .dispatch import SMALL_CORNERS, Solver, TooLarge, route, single_kernel_corners
+from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
-from .solver_opencl import energy_defines
-from .state import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, stops
+from .state import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, line_search_defines, stops
 
-__all__ = ["KERNEL_FILE", "ParallelLbfgs", "build_options", "device_solver", "kernel_source",
-           "reduction_plan"]
+__all__ = ["KERNEL_FILE", "SMALL_CORNERS", "ParallelLbfgs", "build_options", "device_solver",
+           "kernel_source", "reduction_plan"]
 
-KERNEL_FILE = Path(__file__).with_name("solver_parallel.cl")
+KERNEL_FILE = kernel_file("lbfgs_parallel.cl")
 CHUNK = REDUCE_CHUNK  # fpmath.add_reduce's chunk
 BLOCK = PAIRWISE_BLOCK  # NumPy's pairwise base block
 WG_CHUNK = 64  # work-group size of chunk_sums with lanes > 1 (a work-item per leaf)
 LOCAL_SIZE = 64  # work-group size (any value gives the same bits; 64 was fastest on pocl)
 INDEX_LIMIT = 2**31  # the kernels' indices are 32-bit: larger tables use the host solver
-# Below this many energy corners the single-work-item kernel beats the parallel kernels on
-# the pocl CPU device (~35 launches and a read per iteration, ~0.15 ms; crossover measured
-# at 10-20k corners by bench/lbfgs_parallel_bench.py)
-SMALL_CORNERS = 20_000
 # S, the solver's scalars on the device (doubles; counts as exact small integers), one slot
 # each (S_* defines). S[0:8] is the status block the host reads back after each trial:
 # STATUS (a ST_* code), ET and DMIN (the trial's energy and smallest corner det), LEN (pairs
@@ -73,12 +69,12 @@ def device_solver(
     """The parallel solver of the chosen OpenCL device, made once per process, device and
     settings; RuntimeError when there is no device or the kernels do not build.
 
-    On a CPU device, problems with fewer than `small_corners` energy corners (None:
-    SMALL_CORNERS) go to the single-work-item kernel (solver_opencl.py), faster there;
-    elsewhere every problem runs in parallel. Either way the result is the host's."""
-    rt = _runtime()
+    Problems with fewer than `small_corners` energy corners (None: the device's share,
+    `dispatch.single_kernel_corners`) go to the single-work-item kernel (solver_opencl.py).
+    Either way the result is the host's."""
+    rt = runtime()
     if small_corners is None:
-        small_corners = SMALL_CORNERS if rt.is_cpu else 0
+        small_corners = single_kernel_corners(rt.is_cpu)
     key = (rt.name, lanes, local_size, small_corners)
     with LOCK:
         solver = _solvers.get(key)
@@ -108,8 +104,9 @@ def build_options(lanes: int) -> list[str]:
     """The kernels' defines for `lanes` work-items per leaf: core.fpmath's (NumPy's
     summation cut points), the energies' constants, the line search's and the layout of S."""
     return [*fpmath_options(), *cl_defines({
-        "M": LBFGS_MEMORY, "LANES": lanes, "PPL": _partials_per_leaf(lanes), "TRIALS": TRIALS,
-        "LIMIT_MARGIN": LIMIT_MARGIN, "WG_CHUNK": WG_CHUNK, **energy_defines(), **_S, **_ST})]
+        "M": LBFGS_MEMORY, "LANES": lanes, "PPL": _partials_per_leaf(lanes),
+        **line_search_defines(), "LIMIT_MARGIN": LIMIT_MARGIN, "WG_CHUNK": WG_CHUNK,
+        **energy_defines(), **_S, **_ST})]
 
 
 def reduction_plan(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -242,7 +239,7 @@ class _Tables:
         sizes = [6 * nc, (LBFGS_MEMORY + 1) * n2, 2 * nn]  # the largest offsets used
         top = max([int(a.max()) for a in ints if a.size] + sizes)
         if top >= INDEX_LIMIT:
-            raise ValueError("mesh too large for the parallel solver's 32-bit indices")
+            raise TooLarge("mesh too large for the parallel solver's 32-bit indices")
         buf, empty = solver._buffer, solver._empty
         self.CI, self.SL, self.rows, self.zfree = (buf(a) for a in ints[:4])
         if lift:
@@ -326,11 +323,11 @@ class ParallelLbfgs:
         lanes: int | None = None,
         local_size: int | None = LOCAL_SIZE,
         *,
-        small: Callable[..., tuple[np.ndarray, int]] | None = None,
+        small: Solver | None = None,
         small_corners: int = 0,
     ):
         self.small, self.small_corners = small, int(small_corners) if small else 0
-        rt = _runtime()
+        rt = runtime()
         self.cl, self.ctx, self.queue = rt.cl, rt.ctx, rt.queue
         self.device_name = rt.name
         self.lanes = int(lanes or (1 if rt.is_cpu else 8))
@@ -462,7 +459,7 @@ class ParallelLbfgs:
         return self._rb
 
     def _limit(self, tb: _Tables) -> int:
-        """The step limit of the current direction (`FoldoverEnergy._step_limit`) at the point
+        """The step limit of the current direction (`FoldoverEnergy.step_limit`) at the point
         in Z (which must be v): moves the first trial step below it on the device; returns
         the halvings skipped."""
         self._go("direction_z", tb.n2 // 2)
@@ -498,34 +495,17 @@ class ParallelLbfgs:
         tick: Callable[[int], bool] | None = None,
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
-        if en.power != 1.0 or en.i0.size == 0 or st.nf == 0:  # not in the kernels: the host's
-            self._last = None  # a problem solved elsewhere: the last one's tables are done
-            return lbfgs(en, st, v0, eps, **kw)
-        if en.i0.size < self.small_corners:
-            self._last = None  # (the lift's rounds after its whole-mesh run, for instance)
-            return self.small(en, st, v0, eps, **kw)
+        where = route(en, st, self.small_corners)
+        if where != "parallel":  # solved elsewhere: the last problem's tables are done (the
+            self._last = None  # lift's rounds after its whole-mesh run, for instance)
+            return (lbfgs if where == "host" else self.small)(en, st, v0, eps, **kw)
         try:
             tb = self._tables_for(en, st)
-        except ValueError:  # indices beyond 32 bits: the host solver, same result
+        except TooLarge:  # the host solver, same result
             return lbfgs(en, st, v0, eps, **kw)
-        cl, queue = self.cl, self.queue
-        s = self._S_host
-        s[:] = 0.0
-        s[_S_EPS], s[_S_QC] = eps, getattr(en, "qc", 0.0)
-        s[_S_H0], s[_S_GUARD] = 0.1 * en.h_mean, float(bool(guard))
-        v0 = np.ascontiguousarray(v0, dtype=np.float64)
-        cl.enqueue_copy(queue, self.S, s)
-        cl.enqueue_copy(queue, tb.v, v0)
-        self._go("place", tb.n2 // 2)
-        self._energy(tb, "finish_init", grad=True)
-        if tb.lift:
-            self._gradient(tb)
-        self._go("gather_init", tb.n2 // 2)
-        cl.enqueue_copy(queue, self._rb, self.S)
-        e_hist = [float(self._rb[_ET])]
+        e_hist = [self._start(tb, en, v0, eps, guard)]
         it, pairs = 0, 0  # pairs: the most the device may hold
         trial = False  # the current point is the accepted trial in Z (not yet in v)
-        m = LBFGS_MEMORY
         # The foldover-free energy's gradient terms cost a third of a trial and serve only
         # the accepted one: computed with the first trial while first trials get accepted
         # (one pass), else in a pass of their own after the accepted trial. Bits unchanged.
@@ -533,27 +513,10 @@ class ParallelLbfgs:
         rejected = 0  # trial steps the last iteration rejected (or skipped)
         while it < max_it:
             it += 1
-            self._direction(tb, pairs)
-            grad = first_ok
-            skip = self._limit(tb) if guard and rejected else 0
-            if skip >= TRIALS:  # every trial step makes a det <= 0: all rejected
-                rb = self._rb
-                rb[_STATUS] = _REJECTED
-            else:
-                rb = self._trial(tb, grad)
-            if rb[_STATUS] == _NOT_DESCENT:  # restart from preconditioned descent
-                self._one("forget")
-                self._direction(tb, 0)
-                pairs, skip = 0, 0
-                rb = self._trial(tb, grad)
-                if rb[_STATUS] == _NOT_DESCENT:
-                    break
-            n_pairs = int(rb[_LEN])
-            trials = 1 + skip
-            while rb[_STATUS] == _REJECTED and trials < TRIALS:
-                grad = False
-                rb = self._trial(tb, grad)
-                trials += 1
+            found = self._search(tb, pairs, first_ok, bool(guard and rejected))
+            if found is None:  # no descent direction, not even from plain descent
+                break
+            rb, n_pairs, trials, grad = found
             rejected = trials - 1
             first_ok = not tb.lift and trials == 1
             if rb[_STATUS] != _ACCEPTED:
@@ -574,13 +537,66 @@ class ParallelLbfgs:
                 break
             if it < max_it:
                 self._accept(tb, grad)
-                pairs = min(n_pairs + 1, m)
+                pairs = min(n_pairs + 1, LBFGS_MEMORY)
                 trial = False
-        if trial:  # the free rows of Z
+        return self._solution(tb, en, st, trial), it
+
+    def _start(self, tb: _Tables, en: FoldoverEnergy, v0: np.ndarray, eps: float,
+               guard: bool) -> float:
+        """The solve's settings and v0 on the device, the energy and gradient there; the
+        energy."""
+        cl, queue = self.cl, self.queue
+        s = self._S_host
+        s[:] = 0.0
+        s[_S_EPS], s[_S_QC] = eps, getattr(en, "qc", 0.0)
+        s[_S_H0], s[_S_GUARD] = 0.1 * en.h_mean, float(bool(guard))
+        v0 = np.ascontiguousarray(v0, dtype=np.float64)
+        cl.enqueue_copy(queue, self.S, s)
+        cl.enqueue_copy(queue, tb.v, v0)
+        self._go("place", tb.n2 // 2)
+        self._energy(tb, "finish_init", grad=True)
+        if tb.lift:
+            self._gradient(tb)
+        self._go("gather_init", tb.n2 // 2)
+        cl.enqueue_copy(queue, self._rb, self.S)
+        return float(self._rb[_ET])
+
+    def _search(self, tb: _Tables, pairs: int, grad: bool, limit: bool
+                ) -> tuple[np.ndarray, int, int, bool] | None:
+        """One iteration's direction (over at most `pairs` pairs) and line search, the step
+        limit first when `limit`: (status block, pairs held, trials, whether the last trial
+        computed the gradient terms); None when neither the memory's direction nor plain
+        descent descends."""
+        self._direction(tb, pairs)
+        skip = self._limit(tb) if limit else 0
+        if skip >= TRIALS:  # every trial step makes a det <= 0: all rejected
+            rb = self._rb
+            rb[_STATUS] = _REJECTED
+        else:
+            rb = self._trial(tb, grad)
+        if rb[_STATUS] == _NOT_DESCENT:  # restart from preconditioned descent
+            self._one("forget")
+            self._direction(tb, 0)
+            skip = 0
+            rb = self._trial(tb, grad)
+            if rb[_STATUS] == _NOT_DESCENT:
+                return None
+        n_pairs = int(rb[_LEN])
+        trials = 1 + skip
+        while rb[_STATUS] == _REJECTED and trials < TRIALS:
+            grad = False
+            rb = self._trial(tb, grad)
+            trials += 1
+        return rb, n_pairs, trials, grad
+
+    def _solution(self, tb: _Tables, en: FoldoverEnergy, st: State, trial: bool) -> np.ndarray:
+        """The solve's last accepted point: the free rows of Z after an accepted trial that
+        was not moved into v, else v."""
+        if trial:
             xy = np.empty(2 * en.n_nodes, dtype=np.float64)
-            cl.enqueue_copy(queue, xy, tb.Z)
+            self.cl.enqueue_copy(self.queue, xy, tb.Z)
             zf = 2 * tb.zpos[st.fidx]
-            return np.concatenate([xy[zf], xy[zf + 1]]), it
+            return np.concatenate([xy[zf], xy[zf + 1]])
         v = np.empty(tb.n2, dtype=np.float64)
-        cl.enqueue_copy(queue, v, tb.v)
-        return v, it
+        self.cl.enqueue_copy(self.queue, v, tb.v)
+        return v

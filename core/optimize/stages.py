@@ -6,17 +6,19 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..boundary import SlideView
 from ..fpmath import add_reduce
+from .dispatch import Solver
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
-from .options import GlobalOptions, Solver
-from .reference import Factors
+from .mesh_tables import Factors
+from .options import GlobalOptions
 from .slide import make_state
-from .solver import State, lbfgs, stops
+from .state import State, stops
 from .submesh import Neighbourhood
 
 __all__ = ["lift_min_quality", "untangle_global"]
@@ -130,9 +132,8 @@ def untangle_global(
     if not np.all(np.isfinite(P)):
         raise ValueError("points contain NaN or inf")
     opt = options if options is not None else GlobalOptions()
-    max_iter, polish_iter = opt.max_iter, opt.polish_iter
     en = FoldoverEnergy(P, groups, free, factors)
-    run_lbfgs = opt.run() if slide is None else lbfgs
+    run_lbfgs = opt.run(sliding=slide is not None)
     st, later = _untangle_state(P, free, slide, en)
     n_inv = en.n_inverted(st.x, st.y)
     info: dict[str, Any] = {
@@ -149,87 +150,138 @@ def untangle_global(
     if en.i0.size == 0 or st.size == 0:
         info["seconds"] = time.perf_counter() - t_start
         return P, info
-
-    v = st.pack(st.x, st.y)
-    dmin = info["min_det"]
-    eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else EPS_MIN
-    best_v, best_inv = v, n_inv
-    valid = dmin > 0.0  # every corner that can move is positive (others are constant)
-    total = 0
-    polish_used = 0
-    status = ""
-    eps_hist: list[float] = []
-    rounds = 0
-    cancel = False
-    while total < max_iter:
-        rounds += 1
-        eps_hist.append(eps)
-        guard = valid  # valid: polish the quality, never invert a corner again
-        en.power = float(opt.polish_power) if guard else 1.0
-        e_start = en.value(*st.unpack(v), eps)
-        if guard:  # eps is at its floor: one long L-BFGS run, no memory restarts
-            cap = min(max_iter - total, polish_iter - polish_used)
-            if cap <= 0:
-                break
-        else:
-            cap = min(max_iter - total, INNER_ITER)
-        tick = None
-        if progress is not None:  # long runs report (and cancel) from inside
-
-            def tick(it: int, done: int = total, n_now: int = best_inv) -> bool:
-                nonlocal cancel
-                cancel = cancel or stops(progress(done + it, max_iter, n_now))
-                return not cancel
-
-        v, its = run_lbfgs(st.view(en), st, v, eps, max_it=cap, guard=guard, tick=tick)
-        total += its
-        if guard:
-            polish_used += its
-        x, y = st.unpack(v)
-        e_end = en.value(x, y, eps)
-        dmin = float(np.min(en.dets(x, y)))
-        valid = dmin > 0.0
-        n_inv = en.n_inverted(x, y)
-        if n_inv <= best_inv:
-            best_v, best_inv = v, n_inv
-        if later and valid:  # valid now: the sliding nodes join (best_v is this iterate)
-            st, later = make_state(np.column_stack([x, y]), free, slide), False
-            v = best_v = st.pack(x, y)
-        if cancel or (progress is not None and stops(progress(total, max_iter, n_inv))):
-            status = "cancelled"
-            break
-        decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
-        if guard and (decrease < STOP_REL_DECREASE or its == 0):
-            break
-        if valid and polish_iter <= 0:
-            break
-        if opt.time_limit is not None and time.perf_counter() - t_start > opt.time_limit:
-            break
-        sigma = max(decrease, SIGMA_MIN)
-        mu = (1.0 - sigma) * chi_scalar(dmin, eps)
-        eps = max(2.0 * float(np.sqrt(mu * (mu - dmin))) if dmin < mu else EPS_MIN, EPS_MIN)
-        if valid:  # the guard now keeps dets > 0: use the exact barrier (see the docs)
-            eps = EPS_MIN
-
-    x, y = st.unpack(best_v)
+    run = _Continuation(en, st, later, free, slide, opt, progress, run_lbfgs, n_inv,
+                        info["min_det"])
+    run.solve(t_start)
+    x, y = run.st.unpack(run.best_v)
     out = P.copy()
-    out[st.written, 0] = x[st.written]
-    out[st.written, 1] = y[st.written]
+    out[run.st.written, 0] = x[run.st.written]
+    out[run.st.written, 1] = y[run.st.written]
     n_out = en.n_inverted(x, y)
-    if not status:
-        status = "untangled" if n_out == 0 else "failed"
     secs = time.perf_counter() - t_start
     info.update(
-        iterations=total,
-        rounds=rounds,
+        iterations=run.total,
+        rounds=run.rounds,
         n_inverted_out=n_out,
         min_det=float(np.min(en.dets(x, y))),
-        eps_history=eps_hist,
+        eps_history=run.eps_hist,
         seconds=secs,
-        seconds_per_iter=secs / max(total, 1),
-        status=status,
+        seconds_per_iter=secs / max(run.total, 1),
+        status=run.status or ("untangled" if n_out == 0 else "failed"),
     )
     return out, info
+
+
+class _Continuation:
+    """`untangle_global`'s rounds: L-BFGS on F_eps with eps lowered between rounds (the
+    paper's continuation) while the mesh is tangled, then guarded polish rounds at the eps
+    floor; keeps the iterate with the fewest inverted elements (`best_v`)."""
+
+    def __init__(self, en: FoldoverEnergy, st: State, later: bool, free: np.ndarray,
+                 slide: SlideView | None, opt: GlobalOptions,
+                 progress: Callable[[int, int, int], Any] | None, run_lbfgs: Solver,
+                 n_inv: int, dmin: float):
+        self.en, self.st, self.later, self.free, self.slide = en, st, later, free, slide
+        self.opt, self.progress, self.run_lbfgs = opt, progress, run_lbfgs
+        self.v = st.pack(st.x, st.y)
+        self.eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else EPS_MIN
+        self.best_v, self.best_inv = self.v, n_inv
+        self.valid = dmin > 0.0  # every corner that can move is positive (others constant)
+        self.total = 0
+        self.polish_used = 0
+        self.status = ""
+        self.eps_hist: list[float] = []
+        self.rounds = 0
+        self.cancel = False
+
+    def solve(self, t_start: float) -> None:
+        """Rounds until the budget, a stop rule or a cancel ends them."""
+        opt, en = self.opt, self.en
+        while self.total < opt.max_iter:
+            self.rounds += 1
+            self.eps_hist.append(self.eps)
+            guard = self.valid  # valid: polish the quality, never invert a corner again
+            en.power = float(opt.polish_power) if guard else 1.0
+            e_start = en.value(*self.st.unpack(self.v), self.eps)
+            cap = self._cap(guard)
+            if cap <= 0:
+                break
+            its = self._round(cap, guard)
+            e_end, dmin, n_inv = self._take_iterate(its, guard)
+            if self.cancel or (self.progress is not None and
+                               stops(self.progress(self.total, opt.max_iter, n_inv))):
+                self.status = "cancelled"
+                break
+            decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
+            if self._done(guard, decrease, its, t_start):
+                break
+            self.eps = self._next_eps(decrease, dmin)
+
+    def _cap(self, guard: bool) -> int:
+        """The round's L-BFGS iterations: while tangled INNER_ITER per eps; once valid, one
+        long run, no memory restarts (the rest of the polish budget)."""
+        left = self.opt.max_iter - self.total
+        if guard:
+            return min(left, self.opt.polish_iter - self.polish_used)
+        return min(left, INNER_ITER)
+
+    def _tick(self) -> Callable[[int], bool] | None:
+        """The progress tick of a round (long runs report, and cancel, from inside)."""
+        if self.progress is None:
+            return None
+        progress, max_iter = self.progress, self.opt.max_iter
+        done, n_now = self.total, self.best_inv
+
+        def tick(it: int) -> bool:
+            self.cancel = self.cancel or stops(progress(done + it, max_iter, n_now))
+            return not self.cancel
+
+        return tick
+
+    def _round(self, cap: int, guard: bool) -> int:
+        """One L-BFGS run from v; the iterations it took."""
+        st = self.st
+        self.v, its = self.run_lbfgs(st.view(self.en), st, self.v, self.eps, max_it=cap,
+                                     guard=guard, tick=self._tick())
+        self.total += its
+        if guard:
+            self.polish_used += its
+        return its
+
+    def _take_iterate(self, its: int, guard: bool) -> tuple[float, float, int]:
+        """The round's end point: (F_eps there, min det, inverted elements); the best so
+        far, and the sliding nodes join once the mesh is valid."""
+        en, st = self.en, self.st
+        x, y = st.unpack(self.v)
+        e_end = en.value(x, y, self.eps)
+        dmin = float(np.min(en.dets(x, y)))
+        self.valid = dmin > 0.0
+        n_inv = en.n_inverted(x, y)
+        if n_inv <= self.best_inv:
+            self.best_v, self.best_inv = self.v, n_inv
+        if self.later and self.valid:  # valid now: the sliding nodes join (best_v is this)
+            self.st, self.later = make_state(np.column_stack([x, y]), self.free, self.slide), False
+            self.v = self.best_v = self.st.pack(x, y)
+        return e_end, dmin, n_inv
+
+    def _done(self, guard: bool, decrease: float, its: int, t_start: float) -> bool:
+        """Stop: a polish round that barely lowered F, a valid mesh without a polish
+        budget, or the time limit."""
+        opt = self.opt
+        if guard and (decrease < STOP_REL_DECREASE or its == 0):
+            return True
+        if self.valid and opt.polish_iter <= 0:
+            return True
+        return opt.time_limit is not None and time.perf_counter() - t_start > opt.time_limit
+
+    def _next_eps(self, decrease: float, dmin: float) -> float:
+        """The paper's eps update from the round's relative decrease and min det; the eps
+        floor once valid (the guard keeps dets > 0: the exact barrier, see the docs)."""
+        if self.valid:
+            return EPS_MIN
+        sigma = max(decrease, SIGMA_MIN)
+        mu = (1.0 - sigma) * chi_scalar(dmin, self.eps)
+        return max(2.0 * float(np.sqrt(mu * (mu - dmin))) if dmin < mu else EPS_MIN, EPS_MIN)
 
 
 def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: GlobalOptions,
@@ -295,10 +347,9 @@ def lift_min_quality(
     t_start = time.perf_counter()
     P, free = _checked_input(points, free)
     opt = options if options is not None else GlobalOptions()
-    rounds = opt.lift_rounds
     en = LiftEnergy(P, groups, free, factors)
     st = make_state(P, free, slide)
-    run_lbfgs = opt.run() if type(st) is State else lbfgs
+    run_lbfgs = opt.run(sliding=type(st) is not State)
     info: dict[str, Any] = {"iterations": 0, "rounds": 0, "status": "unchanged"}
     q = en.element_quality(st.x, st.y) if en.n_elem else np.zeros(0)
     m0 = float(q.min()) if q.size else 0.0
@@ -308,82 +359,137 @@ def lift_min_quality(
         info["seconds"] = time.perf_counter() - t_start
         return P, info
 
-    best_v, best_m, best_a = None, m0, a0
-    v = st.pack(st.x, st.y)
-    cur_m, cur_a = m0, a0
-    peak = a0  # the best q_avg seen: q_avg may fall at most LIFT_AVG_DROP below it
-    total = 0
-    trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run, kept or not
-    info["trail"] = trail
-    cancel = False
-    near = neighbourhood  # node -> element incidence, for the rounds (built on first use)
-    for r in range(rounds + 1):
-        en.qc = m0 if r == 0 else min(cur_m * LIFT_GROW, cur_m + LIFT_GAP * (cur_a - cur_m))
-        tick = None
-        if progress is not None:
-
-            def tick(
-                it: int, done: int = total, r: int = r, m: float = cur_m, a: float = cur_a
-            ) -> bool:
-                nonlocal cancel
-                cancel = cancel or stops(progress(done + it, r, m, a))
-                return not cancel
-
-        if r == 0:  # the whole mesh: maximise q_avg at the input's floor
-            vt, its = _runs(run_lbfgs, en, st, v, opt, tick)
-            xt, yt = st.unpack(vt)
-        else:  # only near the elements under the new floor: the rest is at its optimum
-            x, y = st.unpack(v)
-            if near is None:
-                near = Neighbourhood(groups, free, factors)
-            (sub, nodes, sfree, sub_f), elems = near.submesh(q < LIFT_ACTIVE * en.qc,
-                                                               LIFT_RINGS)
-            if not sfree.any():
-                break
-            sp = np.stack([x[nodes], y[nodes]], axis=1)
-            sen = LiftEnergy(sp, sub, sfree, sub_f)
-            sen.qc = en.qc
-            sst = make_state(sp, sfree, None if slide is None else
-                             slide.sub(nodes, np.column_stack([x, y])))
-            sv, its = run_lbfgs(
-                sst.view(sen), sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER,
-                guard=True, rel_tol=opt.lift_rel_tol, tick=tick,
-            )
-            sx, sy = sst.unpack(sv)
-            xt, yt = x.copy(), y.copy()
-            xt[nodes], yt[nodes] = sx, sy
-            vt = st.pack(xt, yt)
-        total += its
-        if r == 0:
-            qt = en.element_quality(xt, yt)
-        else:  # only the sub-mesh's elements changed
-            qt = q.copy()
-            qt[elems] = en.element_quality_of(elems, xt, yt)
-        qm, qa = float(qt.min()), add_reduce(qt) / qt.size
-        trail.append((qm, qa))
-        if cancel or (progress is not None and stops(progress(total, r, cur_m, cur_a))):
-            info.update(iterations=total, status="cancelled", seconds=time.perf_counter() - t_start)
-            return P, info
-        if r == 0:  # the first run maximises q_avg at the input's floor: the start of the climb
-            v, q, cur_m, cur_a = vt, qt, qm, qa
-            peak = max(peak, qa)
-        else:
-            floor = (1.0 - LIFT_AVG_DROP) * peak
-            if cur_m >= LIFT_POOR * cur_a:
-                floor = max(floor, a0)
-            if qa < floor or qm <= cur_m or (qa < cur_a and qm - cur_m < LIFT_RATE * (cur_a - qa)):
-                break
-            v, q, cur_m, cur_a = vt, qt, qm, qa
-            peak = max(peak, qa)
-            info["rounds"] = r
-        if (cur_a >= a0 or info["rounds"]) and cur_m > best_m:
-            best_v, best_m, best_a = v, cur_m, cur_a
-
-    info.update(iterations=total, seconds=time.perf_counter() - t_start)
-    if best_v is None:
+    lift = _Lift(en, st, _LiftMesh(groups, free, factors, slide), neighbourhood, opt,
+                 progress, run_lbfgs, q, info)
+    if not lift.climb():
+        info.update(iterations=lift.total, status="cancelled",
+                    seconds=time.perf_counter() - t_start)
         return P, info
-    x, y = st.unpack(best_v)
+    info.update(iterations=lift.total, seconds=time.perf_counter() - t_start)
+    if lift.best_v is None:
+        return P, info
+    x, y = st.unpack(lift.best_v)
     P[st.written, 0] = x[st.written]
     P[st.written, 1] = y[st.written]
-    info.update(q_min_out=best_m, q_avg_out=best_a, status="lifted")
+    info.update(q_min_out=lift.best_m, q_avg_out=lift.best_a, status="lifted")
     return P, info
+
+
+@dataclass(frozen=True)
+class _LiftMesh:
+    """The mesh a lift works on, as `lift_min_quality` was handed it (its rounds cut
+    sub-meshes from it)."""
+
+    groups: Mapping[int, np.ndarray]
+    free: np.ndarray
+    factors: Factors | None
+    slide: SlideView | None
+
+
+class _Lift:
+    """`lift_min_quality`'s climb: the whole-mesh run at the input's floor, then rounds
+    with a rising floor over sub-meshes, each kept or ending the climb (`_keeps`)."""
+
+    def __init__(self, en: LiftEnergy, st: State, mesh: _LiftMesh,
+                 neighbourhood: Neighbourhood | None, opt: GlobalOptions,
+                 progress: Callable[[int, int, float, float], Any] | None,
+                 run_lbfgs: Solver, q: np.ndarray, info: dict[str, Any]):
+        self.en, self.st, self.mesh, self.opt = en, st, mesh, opt
+        self.progress, self.run_lbfgs, self.info = progress, run_lbfgs, info
+        self.near = neighbourhood  # node -> element incidence (built on first use)
+        self.m0, self.a0 = info["q_min_in"], info["q_avg_in"]
+        self.best_v, self.best_m, self.best_a = None, self.m0, self.a0
+        self.v = st.pack(st.x, st.y)
+        self.q, self.cur_m, self.cur_a = q, self.m0, self.a0
+        self.peak = self.a0  # the best q_avg seen: q_avg may fall at most LIFT_AVG_DROP below
+        self.total = 0
+        self.trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run
+        info["trail"] = self.trail
+        self.cancel = False
+
+    def climb(self) -> bool:
+        """Every round the options allow, until one is not kept; False: cancelled."""
+        en, st, progress = self.en, self.st, self.progress
+        for r in range(self.opt.lift_rounds + 1):
+            en.qc = self._floor(r)
+            tick = self._tick(r)
+            if r == 0:  # the whole mesh: maximise q_avg at the input's floor
+                vt, its = _runs(self.run_lbfgs, en, st, self.v, self.opt, tick)
+                qt = en.element_quality(*st.unpack(vt))
+            else:  # only near the elements under the new floor: the rest is at its optimum
+                found = self._local_round(tick)
+                if found is None:
+                    break
+                vt, its, qt = found
+            self.total += its
+            qm, qa = float(qt.min()), add_reduce(qt) / qt.size
+            self.trail.append((qm, qa))
+            if self.cancel or (progress is not None and
+                               stops(progress(self.total, r, self.cur_m, self.cur_a))):
+                return False
+            if r > 0 and not self._keeps(qm, qa):
+                break
+            # the first run maximises q_avg at the input's floor: the start of the climb
+            self.v, self.q, self.cur_m, self.cur_a = vt, qt, qm, qa
+            self.peak = max(self.peak, qa)
+            if r > 0:
+                self.info["rounds"] = r
+            if (self.cur_a >= self.a0 or self.info["rounds"]) and self.cur_m > self.best_m:
+                self.best_v, self.best_m, self.best_a = self.v, self.cur_m, self.cur_a
+        return True
+
+    def _floor(self, r: int) -> float:
+        """Round r's floor qc: the input's q_min, then rising with the kept iterate's."""
+        if r == 0:
+            return self.m0
+        m, a = self.cur_m, self.cur_a
+        return min(m * LIFT_GROW, m + LIFT_GAP * (a - m))
+
+    def _tick(self, r: int) -> Callable[[int], bool] | None:
+        """Round r's progress tick, with the kept iterate's qualities."""
+        if self.progress is None:
+            return None
+        progress, done, m, a = self.progress, self.total, self.cur_m, self.cur_a
+
+        def tick(it: int) -> bool:
+            self.cancel = self.cancel or stops(progress(done + it, r, m, a))
+            return not self.cancel
+
+        return tick
+
+    def _local_round(self, tick) -> tuple[np.ndarray, int, np.ndarray] | None:
+        """One L-BFGS run over the free nodes near the elements under the floor: (point,
+        iterations, element qualities), or None when no such node is free."""
+        en, st, mesh = self.en, self.st, self.mesh
+        x, y = st.unpack(self.v)
+        if self.near is None:
+            self.near = Neighbourhood(mesh.groups, mesh.free, mesh.factors)
+        (sub, nodes, sfree, sub_f), elems = self.near.submesh(self.q < LIFT_ACTIVE * en.qc,
+                                                                LIFT_RINGS)
+        if not sfree.any():
+            return None
+        sp = np.stack([x[nodes], y[nodes]], axis=1)
+        sen = LiftEnergy(sp, sub, sfree, sub_f)
+        sen.qc = en.qc
+        sst = make_state(sp, sfree, None if mesh.slide is None else
+                         mesh.slide.sub(nodes, np.column_stack([x, y])))
+        sv, its = self.run_lbfgs(
+            sst.view(sen), sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER,
+            guard=True, rel_tol=self.opt.lift_rel_tol, tick=tick,
+        )
+        sx, sy = sst.unpack(sv)
+        xt, yt = x.copy(), y.copy()
+        xt[nodes], yt[nodes] = sx, sy
+        qt = self.q.copy()  # only the sub-mesh's elements changed
+        qt[elems] = en.element_quality_of(elems, xt, yt)
+        return st.pack(xt, yt), its, qt
+
+    def _keeps(self, qm: float, qa: float) -> bool:
+        """Whether a round's (q_min, q_avg) is kept: q_min rises, q_avg stays above its
+        floor, and q_avg it costs buys LIFT_RATE times as much q_min."""
+        cur_m, cur_a = self.cur_m, self.cur_a
+        floor = (1.0 - LIFT_AVG_DROP) * self.peak
+        if cur_m >= LIFT_POOR * cur_a:
+            floor = max(floor, self.a0)
+        return not (qa < floor or qm <= cur_m
+                    or (qa < cur_a and qm - cur_m < LIFT_RATE * (cur_a - qa)))

@@ -10,12 +10,15 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "ARMIJO",
+    "CURVATURE",
     "LBFGS_MEMORY",
     "LIMIT_MARGIN",
     "TICK_CORNERS",
     "TICK_EVERY",
     "TRIALS",
     "State",
+    "line_search_defines",
     "skipped_trials",
     "stops",
 ]
@@ -27,6 +30,14 @@ TICK_CORNERS = 500_000  # ... and every TICK_CORNERS / corners iterations (big m
 
 LIMIT_MARGIN = 1e-6  # trial steps within this (relative) of a det root are evaluated
 TRIALS = 40  # line-search halvings
+ARMIJO = 1e-4  # sufficient decrease: accept a trial step when e_t <= e + ARMIJO step slope
+CURVATURE = 1e-12  # keep a pair (s, y) only when s.y > CURVATURE |s| |y|
+
+
+def line_search_defines() -> dict[str, float]:
+    """The line search's and the memory update's constants under their kernel names (build
+    defines of both device solvers)."""
+    return {"TRIALS": TRIALS, "ARMIJO": ARMIJO, "CURVATURE": CURVATURE}
 
 
 def skipped_trials(step: float, limit: float) -> tuple[float, int]:

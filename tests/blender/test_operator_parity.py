@@ -36,7 +36,7 @@ from meshdata import load
 
 from bench import uv_assets
 from core import EEGTParams, PlaneFrame, faces_from_csr, untangle_and_smooth
-from core.planar import untangle_and_smooth_3d
+from core.pipeline_3d import untangle_and_smooth_3d
 from core.targets import face_shapes_2d
 from core.uv_layout import weld_uv
 from core.uv_untangle import untangle_uv

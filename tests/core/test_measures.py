@@ -8,6 +8,7 @@ import pytest
 from meshdata import load2d
 
 from core import MEASURE_NAMES, quality, summaries, summarize
+from core.mean_ratio import group_quality
 from core.measures import (
     ASPECT_MAX,
     MEASURES,
@@ -16,7 +17,6 @@ from core.measures import (
     goodness,
     regular_width,
 )
-from core.quality import group_quality
 
 S3 = math.sqrt(3.0)
 ATAN34 = math.degrees(math.atan2(3.0, 4.0))  # 36.87 deg, twice atan(1/3)

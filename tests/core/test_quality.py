@@ -8,7 +8,7 @@ import pytest
 
 from core import mesh_stats, quality, summaries
 from core.faces import as_faceset
-from core.quality import group_quality
+from core.mean_ratio import group_quality
 
 
 def tri_closed_form(p: np.ndarray) -> float:

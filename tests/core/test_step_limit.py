@@ -66,13 +66,13 @@ def test_every_skipped_step_has_a_non_positive_det(seed):
 
 def count_evals(monkeypatch, cls):
     calls = []
-    original = cls._eval
+    original = cls.evaluate
 
     def counted(self, *a, **k):
         calls.append(1)
         return original(self, *a, **k)
 
-    monkeypatch.setattr(cls, "_eval", counted)
+    monkeypatch.setattr(cls, "evaluate", counted)
     return calls
 
 
@@ -90,7 +90,7 @@ def test_lift_same_bits_with_and_without_the_limit_and_fewer_evaluations(name, m
     calls = count_evals(monkeypatch, LiftEnergy)
     v_with, it_with = lbfgs(en, st, v0, EPS_MIN, max_it=150, guard=True)
     n_with = len(calls)
-    monkeypatch.setattr(FoldoverEnergy, "_step_limit", lambda *a: np.inf)
+    monkeypatch.setattr(FoldoverEnergy, "step_limit", lambda *a: np.inf)
     calls.clear()
     v_without, it_without = lbfgs(en, st, v0, EPS_MIN, max_it=150, guard=True)
     assert it_with == it_without
@@ -106,7 +106,7 @@ def test_lift_stage_result_unchanged_without_the_limit(monkeypatch):
     groups, free = fs.by_arity(), free_nodes(len(p), fs)
     opts = GlobalOptions(lift_rounds=6)
     with_limit, info = lift_min_quality(p, groups, free, opts)
-    monkeypatch.setattr(energy_mod.FoldoverEnergy, "_step_limit", lambda *a: np.inf)
+    monkeypatch.setattr(energy_mod.FoldoverEnergy, "step_limit", lambda *a: np.inf)
     without, info2 = lift_min_quality(p, groups, free, opts)
     assert np.array_equal(with_limit, without)
     assert info["iterations"] == info2["iterations"]

@@ -18,7 +18,7 @@ from core import (
     untangle_and_smooth_3d,
 )
 from core.faces import as_faceset
-from core.quality import group_quality
+from core.mean_ratio import group_quality
 from core.targets import (
     FLAT_TOL,
     THIN_TOL,

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from core.quality import group_quality
+from core.mean_ratio import group_quality
 from core.transform import _stretch, stretch_radius, transform_polygon
 
 

@@ -17,6 +17,7 @@ from core.params import EEGTParams
 from core.pipeline import untangle_and_smooth
 
 eo = pytest.importorskip("core.engine_opencl")
+ort = pytest.importorskip("core.opencl.runtime")
 
 
 @pytest.fixture(scope="module")
@@ -24,9 +25,9 @@ def cpu_device() -> str:
     cls, why = eo.available()
     if cls is None:
         pytest.skip(f"no usable OpenCL device: {why}")
-    if not eo._runtime().is_cpu:
+    if not ort.runtime().is_cpu:
         pytest.skip("bit-identity is promised on CPU devices")
-    return eo._runtime().name
+    return ort.runtime().name
 
 
 def step_exact(p, f, fixed, params, n_untangle: int, n_smooth: int) -> int:

@@ -22,6 +22,7 @@ from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 
 eo = pytest.importorskip("core.engine_opencl")
+ort = pytest.importorskip("core.opencl.runtime")
 lo = pytest.importorskip("core.optimize.solver_opencl")
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
@@ -241,7 +242,7 @@ def test_on_a_gpu_every_global_solve_runs_on_the_parallel_kernels(solver, monkey
     the parallel kernels solve every problem, and an 'opencl' run still gives NumPy's bits."""
     from core.optimize import solver_parallel
 
-    monkeypatch.setattr(eo._Runtime, "is_cpu", property(lambda self: False))
+    monkeypatch.setattr(ort.Runtime, "is_cpu", property(lambda self: False))
     assert lo.device_solver() is None
     gpu = solver_parallel.device_solver()
     assert gpu.small is None and gpu.small_corners == 0

@@ -23,6 +23,7 @@ from core.optimize.state import State
 from core.pipeline import free_nodes
 
 eo = pytest.importorskip("core.engine_opencl")
+ort = pytest.importorskip("core.opencl.runtime")
 lp = pytest.importorskip("core.optimize.solver_parallel")
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
@@ -189,7 +190,7 @@ def test_device_sums_are_numpys_pairwise_sums_bit_for_bit(device, lanes):
     """Leaves, chunk trees and the chunks in order: np.add.reduce's bits for lengths around
     every boundary of NumPy's scheme (8, 128, 8192), on values spanning 30 decades where any
     other order of additions gives other bits; the minimum with NumPy's NaN rule."""
-    rt = eo._runtime()
+    rt = ort.runtime()
     src = lp.kernel_source() + PROBE
     prg = rt.cl.Program(rt.ctx, src).build(options=lp.build_options(lanes))
     rng = np.random.default_rng(lanes)
@@ -413,14 +414,14 @@ def test_small_problems_go_to_the_small_solver_same_result(device):
     # the lift's sub-meshes are small: the single-work-item kernel solves them
     lb = lift_min_quality(a[0], groups, free, GlobalOptions(lift_rounds=4, solver=s))
     assert np.array_equal(la[0], lb[0]) and calls and max(calls) < n_corners
-    if eo._runtime().is_cpu:
+    if ort.runtime().is_cpu:
         factory = lp.device_solver()
         assert factory.small_corners == lp.SMALL_CORNERS
         assert type(factory.small).__name__ == "OpenCLLbfgs"
 
 
 def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
-    """limit_corner/finish_limit against FoldoverEnergy._step_limit and skipped_trials on a
+    """limit_corner/finish_limit against FoldoverEnergy.step_limit and skipped_trials on a
     jittered mesh: the same limit bits, the same first step and skip count."""
     from core.optimize.state import skipped_trials
 
@@ -432,14 +433,14 @@ def test_step_limit_kernel_is_the_host_limit_and_skips_like_it(solver):
     tb = solver._tables_for(en, st)
     rng = np.random.default_rng(5)
     v = st.pack(st.x, st.y)
-    layout, fixed = en._packed(st)
+    layout, fixed = en.packed(st)
     cl, queue = solver.cl, solver.queue
     for scale in (1e-4, 1e-2, 1.0):
         q = rng.normal(0.0, scale, v.size)
         z = np.concatenate([v, fixed])
         dz = np.zeros(z.size)
         dz[: v.size] = q
-        want = en._step_limit(z, dz, layout[0], 1.0)
+        want = en.step_limit(z, dz, layout[0], 1.0)
         s = np.zeros_like(solver._S_host)
         s[lp._S_GUARD], s[7] = 1.0, 1.0  # guarded, first step 1
         cl.enqueue_copy(queue, solver.S, s)

@@ -22,10 +22,12 @@ from core.engine_numpy import NumpyEngine
 from core.faces import FaceSet, as_faceset
 from core.params import EEGTParams
 from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
-from core.planar import untangle_and_smooth_3d
+from core.pipeline_3d import untangle_and_smooth_3d
 from core.targets import prepare_targets
 
 eo = pytest.importorskip("core.engine_opencl")
+ort = pytest.importorskip("core.opencl.runtime")
+ocb = pytest.importorskip("core.opencl.build")
 
 PLANAR = ["quad_hole", "tri_two_holes", "naca_deform", "mixed_quad_tri", "polygon_voronoi"]
 PLANAR += ["two_holes_twist"]
@@ -38,13 +40,13 @@ def device() -> str:
     cls, why = eo.available()
     if cls is None:
         pytest.skip(f"no usable OpenCL device: {why}")
-    return eo._runtime().name
+    return ort.runtime().name
 
 
 @pytest.fixture(scope="module")
 def cpu_device(device) -> str:
     """A CPU device, where the OpenCL engine promises NumPy's bits (a GPU: round-off)."""
-    if not eo._runtime().is_cpu:
+    if not ort.runtime().is_cpu:
         pytest.skip(f"bit-identity is promised on CPU devices; {device} is not one")
     return device
 
@@ -489,15 +491,15 @@ def test_kernel_power_matches_fpmath_bits(device):
     overflow and special inputs included."""
     from core import fpmath
 
-    cl, rt = eo._import_cl(), eo._runtime()
-    src = eo.kernel_source() + """
+    cl, rt = ort.import_cl(), ort.runtime()
+    src = ocb.eegt_source() + """
     __kernel void probe(__global const double *x, const double e, __global double *out) {
         const int i = get_global_id(0);
         out[3 * i] = np_pow(x[i], e, 0);
         out[3 * i + 1] = fp_log(x[i]);
         out[3 * i + 2] = fp_exp(x[i]);
     }"""
-    options = ["-DMAXN=16", "-DCH=32", "-DNCACHE=8", *eo.fpmath_options()]
+    options = ["-DMAXN=16", "-DCH=32", "-DNCACHE=8", *ocb.fpmath_options()]
     prg = cl.Program(rt.ctx, src).build(options=options)
     rng = np.random.default_rng(5)
     special = [0.0, 5e-324, 1e-310, 2.2250738585072014e-308, 1.0, 0.5, np.inf, -1.0, np.nan]
@@ -632,7 +634,7 @@ def fake_cl(platforms=None, error: Exception | None = None):
 def test_fallback_when_no_platform(monkeypatch):
     p, f, ref = numpy_result("mixed_quad_tri")
     err = RuntimeError("clGetPlatformIDs failed: PLATFORM_NOT_FOUND_KHR")
-    monkeypatch.setattr(eo, "_import_cl", lambda: fake_cl(error=err))
+    monkeypatch.setattr(ort, "import_cl", lambda: fake_cl(error=err))
     cls, why = eo.available()
     assert cls is None and "no OpenCL platform" in why and "OCL_ICD_VENDORS" in why
     assert eo.list_devices() == []
@@ -641,10 +643,10 @@ def test_fallback_when_no_platform(monkeypatch):
 
 def test_fallback_when_no_device_or_no_float64(monkeypatch):
     p, f, ref = numpy_result("mixed_quad_tri")
-    monkeypatch.setattr(eo, "_import_cl", lambda: fake_cl([_Plat("Empty", [])]))
+    monkeypatch.setattr(ort, "import_cl", lambda: fake_cl([_Plat("Empty", [])]))
     assert "no OpenCL device" in eo.available()[1]
     plats = [_Plat("Tiny", [_Dev("Half GPU", 4, fp64=False)])]
-    monkeypatch.setattr(eo, "_import_cl", lambda: fake_cl(plats))
+    monkeypatch.setattr(ort, "import_cl", lambda: fake_cl(plats))
     cls, why = eo.available()
     assert cls is None and "cl_khr_fp64" in why and "Half GPU" in why
     assert eo.list_devices() == [("0:0", "Half GPU (Tiny, GPU, no float64)")]
@@ -664,34 +666,34 @@ def test_auto_prefers_gpu_then_cpu_and_user_choice(monkeypatch):
     plats = [_Plat("P0", [cpu]), _Plat("P1", [_Dev("Old GPU", 4, fp64=False), gpu])]
     cl = fake_cl(plats)
     monkeypatch.delenv(eo.ENV_DEVICE, raising=False)
-    assert eo._pick_device(cl)[0][2] is gpu
+    assert ort.pick_device(cl)[0][2] is gpu
     monkeypatch.setenv(eo.ENV_DEVICE, "0:0")
-    assert eo._pick_device(cl)[0][2] is cpu
+    assert ort.pick_device(cl)[0][2] is cpu
     monkeypatch.setenv(eo.ENV_DEVICE, "big gpu")
-    assert eo._pick_device(cl)[0][2] is gpu
+    assert ort.pick_device(cl)[0][2] is gpu
     monkeypatch.setenv(eo.ENV_DEVICE, "old")
-    entry, why = eo._pick_device(cl)
+    entry, why = ort.pick_device(cl)
     assert entry is None and "cl_khr_fp64" in why
-    monkeypatch.setattr(eo, "_device_override", None)
+    monkeypatch.setattr(ort, "_device_override", None)
     eo.select_device("some cpu")  # the preferences' choice wins over the environment
     try:
-        assert eo._pick_device(cl)[0][2] is cpu
+        assert ort.pick_device(cl)[0][2] is cpu
     finally:
         eo.select_device(None)
 
 
 def test_fallback_when_kernel_build_fails(device, monkeypatch):
     p, f, ref = numpy_result("mixed_quad_tri")
-    monkeypatch.setattr(eo, "_runtimes", {})  # a fresh process: nothing built yet
-    monkeypatch.setattr(eo, "kernel_source", lambda: "__kernel void broken( { syntax error")
+    monkeypatch.setattr(ort, "runtimes", {})  # a fresh process: nothing built yet
+    monkeypatch.setattr(ort, "eegt_source", lambda: "__kernel void broken( { syntax error")
     assert_fallback_once(p, f, ref, "opencl", "kernel build failed")
 
 
 def test_kernels_built_once_per_device(device, monkeypatch):
     """Two engines with other parameters in a fresh process: one runtime, one build of the
     EEGT program, and the engines name the device of that runtime."""
-    monkeypatch.setattr(eo, "_runtimes", {})
-    rt = eo._runtime()
+    monkeypatch.setattr(ort, "runtimes", {})
+    rt = ort.runtime()
     builds = []
     program = rt.cl.Program
 
@@ -705,7 +707,7 @@ def test_kernels_built_once_per_device(device, monkeypatch):
     e1, _ = backends.make_engine("opencl", p, f, free, EEGTParams())
     e2, _ = backends.make_engine("opencl", p, f, free, EEGTParams(eta=1.0, scaling="area"))
     assert len(builds) == 1
-    assert list(eo._runtimes.values()) == [rt]
+    assert list(ort.runtimes.values()) == [rt]
     assert e1.prg is e2.prg and e1.rt is e2.rt is rt
     assert e1.device_name == e2.device_name == rt.name
 
@@ -717,11 +719,11 @@ def test_warm_up_builds_what_a_run_uses_and_the_run_reuses_it(device, monkeypatc
 
     p, f = load2d("tri_two_holes")
     ref = untangle_and_smooth(p, f, backend="auto")
-    monkeypatch.setattr(eo, "_runtimes", {})
+    monkeypatch.setattr(ort, "runtimes", {})
     monkeypatch.setattr(sp, "_solvers", {})
-    assert backends.warm_up("numpy") is None and eo._runtimes == {}
+    assert backends.warm_up("numpy") is None and ort.runtimes == {}
     assert backends.warm_up("auto") is None
-    (rt,) = eo._runtimes.values()
+    (rt,) = ort.runtimes.values()
     built = dict(rt.programs)
     # EEGT and parallel L-BFGS kernels, and on a CPU device the single-work-item one
     assert len(built) == (3 if rt.is_cpu else 2) and len(sp._solvers) == 1
@@ -739,13 +741,13 @@ def test_warm_up_in_a_thread_while_a_run_starts_gives_the_same_run(device, monke
 
     p, f = load2d("quad_hole")
     ref = untangle_and_smooth(p, f, backend="opencl")
-    monkeypatch.setattr(eo, "_runtimes", {})
+    monkeypatch.setattr(ort, "runtimes", {})
     monkeypatch.setattr(sp, "_solvers", {})
     thread = threading.Thread(target=backends.warm_up, args=("opencl",))
     thread.start()
     res = untangle_and_smooth(p, f, backend="opencl")
     thread.join()
-    assert len(eo._runtimes) == 1 and len(sp._solvers) == 1
+    assert len(ort.runtimes) == 1 and len(sp._solvers) == 1
     assert res.points.tobytes() == ref.points.tobytes()
 
 

@@ -39,15 +39,17 @@
 //              L-BFGS memory update)
 
 // Host-side defines (solver_parallel.build_options(); a missing one stops the build):
-//   M, TRIALS, LIMIT_MARGIN  LBFGS_MEMORY and the line search's (core/optimize/state.py)
+//   M, TRIALS, ARMIJO, CURVATURE, LIMIT_MARGIN  LBFGS_MEMORY, the line search's and the
+//               memory update's (core/optimize/state.py)
 //   LANES, PPL  work-items per leaf of PW_BLOCK terms (1, 2, 4 or 8) and partials per leaf
 //               and sum (the sum, or 8 lane partials + 8 tails)
 //   WG_CHUNK  chunk_sums' work-group size (LANES > 1)
 //   THETA, PENALTY, BARRIER  energy.py's THETA, LIFT_PENALTY, LIFT_BARRIER
 //   S_*, ST_*  the slots of the scalars in S and the status codes (solver_parallel._S, _ST)
-//   PW_BLOCK, CHUNK, ...  core.fpmath's (cl_common.cl, which the loader puts in front of this
+//   PW_BLOCK, CHUNK, ...  core.fpmath's (common.cl, which the loader puts in front of this
 //                         file: fp64, FP_CONTRACT off, NumPy's pairwise sums)
-#if !defined(M) || !defined(TRIALS) || !defined(LIMIT_MARGIN) || !defined(LANES) || \
+#if !defined(M) || !defined(TRIALS) || !defined(ARMIJO) || !defined(CURVATURE) || \
+    !defined(LIMIT_MARGIN) || !defined(LANES) || \
     !defined(PPL) || !defined(WG_CHUNK) || !defined(THETA) || !defined(PENALTY) || \
     !defined(BARRIER) || !defined(S_LEN_ALL) || !defined(ST_NOT_DESCENT) || \
     !defined(PW_BLOCK) || !defined(CHUNK)
@@ -165,7 +167,7 @@ static double leaf_sum(__global const double *P, const int leaf, const int m)
 #endif
 }
 
-// NumPy's pairwise sum of one chunk of m terms whose leaves start at `first` (cl_common.cl)
+// NumPy's pairwise sum of one chunk of m terms whose leaves start at `first` (common.cl)
 static double chunk_sum(__global const double *P, const int first, const int m)
 {
     double r;
@@ -444,7 +446,7 @@ __kernel void trial_point(__global const double *S, __global double *Z,
     const double num = (1.0 - THETA) * tf + THETA * (dd + 1.0);              \
     const double inv_chi = wk[3] / chi;
 
-// _Energy._eval (power 1): partials of the terms num / chi w and the minimum det
+// _Energy.evaluate (power 1): partials of the terms num / chi w and the minimum det
 // Leaf partials of the corner terms (in the sum's order) and the minimum det: TD holds a
 // record of rec doubles per corner, (term, det, ...)
 __kernel void corner_sum(__global const int *PI, __global double *PD,
@@ -480,7 +482,7 @@ static inline void put(__global double *GS, const int s, const double x, const d
     put(GS, SL[3 * k + 1], ge2x, ge2y);                                      \
     put(GS, SL[3 * k + 2], -(ge1x + ge2x), -(ge1y + ge2y));
 
-// _Energy._eval (power 1), corner k of the sweep: its term num / chi w and det into TD at
+// _Energy.evaluate (power 1), corner k of the sweep: its term num / chi w and det into TD at
 // its place in the sum (CI.w); with_grad: _grad's dF/dE into GS too (one pass when the
 // trial is accepted; the host asks for it when the first trial usually is)
 __kernel void fold_corner(__global const double *S, __global const double *Z,
@@ -501,7 +503,7 @@ __kernel void fold_corner(__global const double *S, __global const double *Z,
     }
 }
 
-// _Energy._grad at the last trial point (accepted after a trial without the gradient)
+// _Energy.gradient at the last trial point (accepted after a trial without the gradient)
 __kernel void fold_grad(__global const double *S, __global const double *Z,
                         __global const int *CI, __global const double *W,
                         __global const int *SL, __global double *GS, const int nc)
@@ -516,7 +518,7 @@ __kernel void fold_grad(__global const double *S, __global const double *Z,
     CORNER_GRAD(a, b)
 }
 
-// _LiftEnergy._eval, corner k of the sweep: (its term weight u, det, 1 / u = q_corner) into
+// _LiftEnergy.evaluate, corner k of the sweep: (its term weight u, det, 1 / u = q_corner) into
 // TD at its place in the sum (CI.w)
 __kernel void lift_corner(__global const double *S, __global const double *Z,
                           __global const int *CI, __global const double *W,
@@ -530,7 +532,7 @@ __kernel void lift_corner(__global const double *S, __global const double *Z,
     vstore3((double3)(wk[3] * u, d, 1.0 / u), ci.w, TD);
 }
 
-// _LiftEnergy._eval, elements: q_e (its corners' q_corner in index order / corners), the
+// _LiftEnergy.evaluate, elements: q_e (its corners' q_corner in index order / corners), the
 // floor term's partials, and dF/dq_e dq_e/du_k u_k^2 = (-1 - k gap) (-1 / n_e) into DQ at
 // each of its corners' places in the sweep. EI = [eptr (ne + 1) | corners by element (sum
 // order) | the same corners' places in the sweep]; EN = [corner count | -1 / corner count].
@@ -558,7 +560,7 @@ __kernel void lift_element(__global const double *S, __global const int *PI,
         t[0] = (PENALTY * gap) * gap - qe;)
 }
 
-// _LiftEnergy._grad, corner k of the sweep (DQ from lift_element)
+// _LiftEnergy.gradient, corner k of the sweep (DQ from lift_element)
 __kernel void lift_grad(__global const double *Z, __global const int *CI,
                         __global const double *W, __global const int *SL, __global double *GS,
                         const int nc, __global const double *DQ)
@@ -608,7 +610,7 @@ __kernel void finish_trial(__global double *S, __global const int *PIc,
     }
     const double step = S[S_STEP];
     const int guard = S[S_GUARD] != 0.0;
-    if (isfinite(et) && et <= S[S_E] + (1e-4 * step) * S[S_SLOPE] && !(guard && dmin <= 0.0)) {
+    if (isfinite(et) && et <= S[S_E] + (ARMIJO * step) * S[S_SLOPE] && !(guard && dmin <= 0.0)) {
         S[S_STATUS] = (double)ST_ACCEPTED;
         S[S_E] = et;
     } else {
@@ -630,7 +632,7 @@ __kernel void direction_z(__global const double *q, __global const int *zf,
     DZ[2 * zf[f] + 1] = q[nf + f];
 }
 
-// FoldoverEnergy._step_limit, operation for operation: corner k of the sweep, at the point in
+// FoldoverEnergy.step_limit, operation for operation: corner k of the sweep, at the point in
 // Z (the current point v: the accepted trial, or v placed again) along DZ; its det is
 // cc + bb t + aa t^2. LIM[k] = the step t1 past which the det is <= 0 up to the first trial
 // step s0 (INFINITY: none).
@@ -764,7 +766,7 @@ __kernel void finish_pair(__global double *S, __global const int *PI, __global d
     const Plan pl = plan_of(PI, PD);
     const double sy = total(&pl, 0), ss = total(&pl, 1), yy = total(&pl, 2);
     const double ydy = total(&pl, 3);
-    if (sy > 1e-12 * SQRT(ss * yy)) {
+    if (sy > CURVATURE * SQRT(ss * yy)) {
         const int len = (int)S[S_LEN], spare = SLOT(len);
         S[S_RHO + spare] = 1.0 / sy;
         S[S_SY + spare] = sy;

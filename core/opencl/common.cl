@@ -1,9 +1,9 @@
 // What every OpenCL program of the core shares, put in front of each program's own source
-// by the Python loader (core.engine_opencl.program_source): float64 with FP contraction off,
+// by the Python loader (core.opencl.build.program_source): float64 with FP contraction off,
 // inline IEEE operations, core.fpmath's log / exp / power operation for operation, and
 // NumPy's pairwise summation. With these a kernel gives NumPy's bits on a CPU device.
 //
-// Host-side defines (core.engine_opencl.fpmath_options(), given to every build; a missing
+// Host-side defines (core.opencl.build.fpmath_options(), given to every build; a missing
 // one stops the build):
 //   FP_LOG_C, FP_EXP_C  core.fpmath's polynomial coefficients, lowest order first
 //   FP_SQRT_HALF, FP_LN2_HI, FP_LN2_LO, FP_INV_LN2, FP_EXP_MAX, FP_EXP_MIN  its constants
@@ -20,7 +20,7 @@
     !defined(FP_EXP_MAX) || !defined(FP_EXP_MIN) || !defined(POW_GENERAL) || \
     !defined(POW_SQUARE) || !defined(POW_IDENTITY) || !defined(POW_ONE) || \
     !defined(POW_SQRT) || !defined(POW_RECIPROCAL) || !defined(PW_BLOCK) || !defined(CHUNK)
-#error "build with core.engine_opencl.fpmath_options()"
+#error "build with core.opencl.build.fpmath_options()"
 #endif
 
 // Inline IEEE operations (correctly rounded, like NumPy's): pocl otherwise calls its
@@ -110,7 +110,7 @@ static inline double np_pow(const double x, const double e, const int mode)
 // down to a multiple of 8) and the halves' sums added, left + right; a leaf of at most
 // PW_BLOCK values is summed as PAIRWISE_LEAF says. The programs' sums (the EEGT kernels'
 // corner sums, the L-BFGS kernels' dot products and energies) are these macros over their
-// own terms; solver_parallel.cl splits the leaves over work-items the same way (LEAF_SUMS).
+// own terms; lbfgs_parallel.cl splits the leaves over work-items the same way (LEAF_SUMS).
 
 #define PW_SPLIT(n) ((n) / 2 - ((n) / 2) % 8)
 #define PW_STACK 32  // the walk's depth: any int n (a chunk needs 8)

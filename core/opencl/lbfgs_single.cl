@@ -17,12 +17,14 @@
 // -1/n [ne].
 //
 // Host-side defines (solver_opencl.build_options(); a missing one stops the build): M
-// (LBFGS_MEMORY), TRIALS (line-search halvings), THETA, PENALTY, BARRIER (energy.py's THETA,
+// (LBFGS_MEMORY), TRIALS, ARMIJO, CURVATURE (line-search halvings, sufficient decrease, the
+// memory update's curvature test: core/optimize/state.py), THETA, PENALTY, BARRIER (energy.py's THETA,
 // LIFT_PENALTY, LIFT_BARRIER), E_WINDOW (the stop test's energy window), the slots of T and S
-// (T_*, S_*) and the status codes (ST_*), and core.fpmath's (cl_common.cl, which the loader
+// (T_*, S_*) and the status codes (ST_*), and core.fpmath's (common.cl, which the loader
 // puts in front of this file: fp64, FP_CONTRACT off, NumPy's pairwise sums).
 
-#if !defined(M) || !defined(TRIALS) || !defined(THETA) || !defined(PENALTY) || \
+#if !defined(M) || !defined(TRIALS) || !defined(ARMIJO) || !defined(CURVATURE) || \
+    !defined(THETA) || !defined(PENALTY) || \
     !defined(BARRIER) || !defined(E_WINDOW) || !defined(T_TICK) || !defined(S_V) || \
     !defined(ST_TICK) || !defined(PW_BLOCK) || !defined(CHUNK)
 #error "build with core.optimize.solver_opencl.build_options()"
@@ -50,7 +52,7 @@ static double np_leaf(__global const double *a, __global const double *b,
     return r;
 }
 
-// np.add.reduce: the chunks in order from 0.0, each by pairwise_sum (cl_common.cl)
+// np.add.reduce: the chunks in order from 0.0, each by pairwise_sum (common.cl)
 static double np_sum(__global const double *a, __global const double *b,
                      __global const double *c, const int kind, const long n)
 {
@@ -385,7 +387,7 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
             for (int i = 0; i < n2; ++i)
                 vt[i] = v[i] + step * q[i];
             et = evaluate(&P, vt, gt, &dmin_t, 1);
-            if (isfinite(et) && et <= e + (1e-4 * step) * slope && !(guard && dmin_t <= 0.0)) {
+            if (isfinite(et) && et <= e + (ARMIJO * step) * slope && !(guard && dmin_t <= 0.0)) {
                 accepted = 1;
                 if (P.mode)
                     lift_grad(&P, gt);
@@ -406,7 +408,7 @@ __kernel void lbfgs_run(__global const int *I, __global const double *D, __globa
             yb[i] = gt[i] - g[i];
         }
         const double sy = DOT(sb, yb, n2);
-        if (sy > 1e-12 * SQRT(DOT(sb, sb, n2) * DOT(yb, yb, n2))) {
+        if (sy > CURVATURE * SQRT(DOT(sb, sb, n2) * DOT(yb, yb, n2))) {
             const int slot = (len < M) ? (start + len) % M : start;  // full: drop the oldest
             for (int i = 0; i < n2; ++i) {
                 hs[slot * n2 + i] = sb[i];

@@ -6,9 +6,9 @@ import numpy as np
 
 from .faces import as_faceset
 from .params import EEGTParams
-from .pipeline import EEGTResult, Progress, _normalisation, untangle_and_smooth
+from .pipeline import EEGTResult, Progress, normalisation, untangle_and_smooth
 from .plane import PlaneFrame
-from .quality import _check_points
+from .points import check_points
 from .reference_shapes import reference_to_2d
 from .topology import EdgeInfo, free_nodes
 
@@ -41,13 +41,13 @@ def untangle_and_smooth_3d(
     a planar reference anywhere in space (taken in its own plane, faces counterclockwise;
     refused when not planar within ``tol``), or (N, 2).
     """
-    original = _check_points(points3d, 3)
+    original = check_points(points3d, 3)
     fs = as_faceset(faces, original.shape[0])
     # centred on the fixed nodes, which define the plane: a plane z = 0 stays exactly z = 0
     edges = EdgeInfo(fs, original.shape[0])  # one analysis for the rim, the plane and the run
     rim = fs.used_nodes(original.shape[0]) & ~free_nodes(original.shape[0], fs, fixed,
                                                          edges=edges)
-    center, scale = _normalisation(original, fs, centre_on=rim)
+    center, scale = normalisation(original, fs, centre_on=rim)
     work = (original - center) / scale
     frame = PlaneFrame.fit(work, faces, tol=tol, project=project, fixed=fixed, edges=edges)
     flat = frame.to_2d(work)

@@ -1,13 +1,13 @@
 // EEGT iteration kernels (float64). Every formula is written in the same operation order as
 // the NumPy reference (core/quality.py, core/transform.py, core/engine_numpy.py) and FP
 // contraction is off, so results match NumPy to the last bit (no math library calls: powers
-// are core.fpmath's algorithm, sums are added in NumPy's order; both are in cl_common.cl,
+// are core.fpmath's algorithm, sums are added in NumPy's order; both are in common.cl,
 // which the loader puts in front of this file). Faces come in arity groups laid out like
 // NumPy's (n, F) arrays: corner k of face j of a group is nodes[k * F + j].
-// Host-side defines (core/engine_opencl.py; a missing one stops the build):
+// Host-side defines (core.opencl.build.eegt_options; a missing one stops the build):
 //   MAXN    largest arity of a generic n-gon group (private array size)
 //   NCACHE  nearest boundary nodes cached per face (the distance refresh)
-//   FP_*, POW_*, PW_BLOCK, CHUNK  core.fpmath's constants (fpmath_options(); cl_common.cl)
+//   FP_*, POW_*, PW_BLOCK, CHUNK  core.fpmath's constants (fpmath_options(); common.cl)
 // Parameters are kernel arguments (one build per device serves every parameter set); the
 // pow codes (core.fpmath.POW_CODES) say how core.fpmath.power evaluates x ** c and x ** eta:
 // NumPy's exact fast paths for e in {2, 1, 0, 0.5, -1}, else exp(e log x).
@@ -21,7 +21,7 @@
 // out with scalars, quads and n-gons by the generic functions).
 
 #ifndef MAXN
-#error "build with MAXN (core.engine_opencl: _Runtime.program)"
+#error "build with MAXN (core.opencl.build.eegt_options)"
 #endif
 
 static inline void load_face(const int n, __global const int *nodes, const int F, const int j,
@@ -50,7 +50,7 @@ static inline double np_block_sum(const double *V, const int n)
     return r;
 }
 
-// NumPy's pairwise_sum of V[0..n) (cl_common.cl: PAIRWISE_TREE)
+// NumPy's pairwise_sum of V[0..n) (common.cl: PAIRWISE_TREE)
 static inline double np_pairwise(const double *V, const int n)
 {
 #if MAXN > PW_BLOCK
@@ -77,7 +77,7 @@ static inline double mean_axis0(const int n, const double *V, const int F)
     return sum_axis0(n, V, F) / (double)n;
 }
 
-// a loop `total += V[k]` from zeros (transform.py: _edge_sum): sequential for any F
+// a loop `total += V[k]` from zeros (transform.py: edge_sum): sequential for any F
 static inline double sum_of(const int n, const double *V)
 {
     double s = V[0];
@@ -160,7 +160,7 @@ static inline double target_ratio(const int n, const double *X, const double *Y,
 static inline double step_size(const double q, const double a) { return a * (1.0 - q); }
 
 // The distance weight f(d) = (lbar / d)^c (eq. 20; engine_numpy.distance_weight), d clamped
-// to dfloor = _DIST_FLOOR lbar (the host's); pow_c = core.fpmath.power_code(c)
+// to dfloor = DIST_FLOOR lbar (the host's); pow_c = core.fpmath.power_code(c)
 static inline double distance_weight(const double d, const double lbar, const double dfloor,
                                      const double c, const int pow_c)
 {
@@ -276,7 +276,7 @@ static inline void transform_moves(const int n, const int R, const double *X, co
 // is the value the full search would return, bit for bit.
 
 #ifndef NCACHE
-#error "build with NCACHE (core.engine_opencl: _Runtime.program)"
+#error "build with NCACHE (core.opencl.build.eegt_options)"
 #endif
 #define GAP_MARGIN 1e-9
 
@@ -425,7 +425,7 @@ static inline double nearest_d(const double qx, const double qy,
 // Quality: work-item g computes q of the faces [bounds[g], bounds[g + 1]) of its group, one
 // of the blocks (<= PW_BLOCK faces) into which NumPy's pairwise q.sum() splits the group (the
 // host's _SumPlan), and writes (count q == 0, min q, the block's sum, 0) to part[ro + g]:
-// the sum as pairwise_sum's base case adds it (cl_common.cl: PAIRWISE_LEAF, streamed here:
+// the sum as pairwise_sum's base case adds it (common.cl: PAIRWISE_LEAF, streamed here:
 // 8 interleaved partial sums over the first m - m % 8 faces once m >= 8, a fixed tree of
 // them, then the rest in order), so the host can finish q.sum() in NumPy's order. The
 // partial sums rotate through r0..r7 (face t adds to r0, then r0 moves to r7), which keeps
