@@ -16,10 +16,12 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-MESH_EXTENSIONS = (".blend", ".obj", ".ply", ".stl")
-FORMATS = ("obj", "ply", "stl", "blend")
+from .solver_formats import SOLVER_EXTENSIONS, SOLVER_FORMATS
+
+MESH_EXTENSIONS = (".blend", ".obj", ".ply", ".stl", *SOLVER_EXTENSIONS)
+FORMATS = ("obj", "ply", "stl", "blend", *SOLVER_FORMATS)
 _MAGIC = re.compile(r"[*?[]")
-_TYPES = ".blend/.obj/.ply/.stl"
+_TYPES = "/".join(MESH_EXTENSIONS)
 # The single-file command's temporary names: ".NAME.eegt-tmp-PID.EXT" (a .blend is first
 # written by Blender to that name plus "@").
 _TEMPORARY = re.compile(r"^\..+\.eegt-tmp-(\d+)(\.[A-Za-z0-9]+)?@?$")

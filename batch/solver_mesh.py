@@ -23,6 +23,7 @@ import contextlib
 import copy
 import hashlib
 import io
+import itertools
 import re
 from dataclasses import dataclass
 from typing import Any
@@ -176,7 +177,7 @@ class SolverMesh:
             return out
         tags = self._tag_arrays()
         if name in self.mesh.field_data and tags:
-            tag, dim = (list(np.asarray(self.mesh.field_data[name]).ravel()) + [-1, -1])[:2]
+            tag, dim = [*np.asarray(self.mesh.field_data[name]).ravel().tolist(), -1, -1][:2]
             return [(t == tag) & (dim < 0 or cell_dim(b.type) == dim)
                     for b, t in zip(blocks, tags)]
         if re.fullmatch(r"-?\d+", name.strip()) and tags:
@@ -315,7 +316,7 @@ def write_mesh(mesh: Any, path: str, options: dict[str, Any] | None = None) -> N
         raise SolverMeshError(f"'{path}' is not a solver mesh path")
     writer = getattr(meshio, SOLVER_FORMATS[fmt][1]).write
     if fmt == "su2":
-        mesh = _pairs(mesh)
+        mesh = _su2_ready(mesh)
     try:
         with _quiet():
             writer(path, mesh, **(write_options_default(fmt) if options is None else options))
@@ -325,17 +326,30 @@ def write_mesh(mesh: Any, path: str, options: dict[str, Any] | None = None) -> N
         raise SolverMeshError(f"cannot write '{path}' as {fmt}: {_one_line(exc)}") from None
 
 
-def _pairs(mesh: Any) -> Any:
-    """A copy of `mesh` whose cell blocks also unpack as (type, data) pairs: meshio 5.3's
-    SU2 writer reads its boundary markers that way."""
+def _su2_ready(mesh: Any) -> Any:
+    """A copy of `mesh` as meshio 5.3's SU2 writer needs it: cell blocks that also unpack
+    as (type, data) pairs (its marker loop reads them so), and boundary blocks cut into
+    runs of one ``su2:tag`` each (it writes a block's markers in sorted tag order, the
+    runs keep the file's order)."""
     import meshio
 
     class PairBlock(meshio.CellBlock):
         def __iter__(self):
             return iter((self.type, self.data))
 
+    tags = mesh.cell_data.get("su2:tag")
+    blocks, data = [], {k: [] for k in mesh.cell_data}
+    for i, b in enumerate(mesh.cells):
+        cuts = [0, len(b.data)]
+        if tags is not None and cell_dim(b.type) < 2 and len(b.data):
+            t = np.asarray(tags[i]).reshape(-1)
+            cuts = [0, *(np.flatnonzero(t[1:] != t[:-1]) + 1).tolist(), len(b.data)]
+        for lo, hi in itertools.pairwise(cuts):
+            blocks.append(PairBlock(b.type, np.asarray(b.data)[lo:hi], b.tags))
+            for k in data:
+                data[k].append(np.asarray(mesh.cell_data[k][i])[lo:hi])
     out = copy.copy(mesh)
-    out.cells = [PairBlock(b.type, b.data, b.tags) for b in mesh.cells]
+    out.cells, out.cell_data = blocks, data
     return out
 
 

@@ -16,11 +16,12 @@ from . import (
     panel_uv,
     prefs,
     props,
+    solver_io,
     uv_props,
 )
 
 _modules = (props, prefs, ops_untangle, ops_quality, ops_pin, panel, cli,
-            uv_props, ops_uv, panel_uv)
+            uv_props, ops_uv, panel_uv, solver_io)
 
 
 def register() -> None:

@@ -49,15 +49,17 @@ from typing import Any
 import bpy
 
 from ..batch.inputs import replaces_input
+from ..batch.solver_formats import SOLVER_EXTENSIONS
 from ..core import EEGTParams
 from ..core.backends import warm_up
 from . import metrics, props, reference_input, report, runner, uv_runner
 from .ops_untangle import _printer
 from .reference_input import ReferenceSource, from_file
 from .result import store_last_run
+from .solver_io import command as solver_command
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_FAILED = 0, 1, 2, 3
-MESH_EXTENSIONS = (".obj", ".ply", ".stl")
+MESH_EXTENSIONS = (".obj", ".ply", ".stl", *SOLVER_EXTENSIONS)
 OUTPUT_EXTENSIONS = (".blend", *MESH_EXTENSIONS)
 # A compressed .blend is zstd frames closed by a seek table (a skippable frame whose last
 # four bytes are this magic), written last: a cut file lacks it.
@@ -154,6 +156,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-write-on-fail", action="store_true",
                    help="leave a mesh unchanged when it could not be untangled")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    solver_command.add_arguments(p)
     return p
 
 
@@ -214,6 +217,11 @@ def _check_paths(ns: argparse.Namespace) -> None:
         why = replaces_input(path, ns.output, ns.in_place)
         if why:
             raise UsageError(why)
+    try:
+        solver_command.check_paths(ns)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    if ns.output:
         _check_writable(ns.output, "output")
     if ns.report:
         _check_writable(ns.report, "report")
@@ -292,15 +300,27 @@ def _load(path: str) -> None:
                          ) from None
 
 
+def _load_solver(ns: argparse.Namespace, params: EEGTParams) -> tuple[EEGTParams, dict]:
+    """A solver mesh input as an object with its pins; the run's parameters."""
+    try:
+        return solver_command.load(ns, params)
+    except ValueError as exc:
+        raise UsageError(f"eegt: {exc}".replace("eegt: eegt: ", "eegt: ")) from None
+
+
 def _stage(path: str) -> str:
     """Export to a temporary file beside `path` and check it is whole; its name. On any
     failure it is removed and UsageError (exit 2) raised: `path` is never touched here."""
     ext = os.path.splitext(path)[1].lower()
     tmp = _tmp_path(path)
     try:
-        _export(tmp, ext)
-        problem = _incomplete(tmp, ext)
-    except RuntimeError as exc:
+        if solver_command.is_solver(path):
+            solver_command.export(tmp)
+            problem = solver_command.incomplete(tmp)
+        else:
+            _export(tmp, ext)
+            problem = _incomplete(tmp, ext)
+    except (RuntimeError, ValueError) as exc:
         problem = _first_line(exc, "write error")
     except OSError as exc:
         problem = _why(exc)
@@ -551,7 +571,11 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         backend, device = _backend(ns.backend, ns.device)
         rep["backend_requested"] = backend
         warming = _warm_device(backend, device)
-        _load(ns.input)
+        if solver_command.is_solver(ns.input):
+            params, rep["solver_mesh"] = _load_solver(ns, params)
+            rep["params"] = dataclasses.asdict(params)
+        else:
+            _load(ns.input)
         objs, skipped = _objects(ns.object, ns.input)
         rep["skipped"] = [{"object": name, "reason": "no faces"} for name in skipped]
         if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
@@ -582,6 +606,9 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             store_last_run(obj, res)
             results.append(res)
             measured.append(metrics.run_metrics(job, res, ns.metrics) if ns.metrics else None)
+            if ns.metrics and "solver_mesh" in rep:
+                rep["solver_mesh"]["metrics"] = solver_command.group_metrics(job, res,
+                                                                             ns.metrics)
             print("EEGT " + res.line(), flush=True)
         rep["objects"] = [r.as_dict() for r in results]
         if ns.metrics:
