@@ -254,7 +254,7 @@ def read(path: str, fmt: str | None = None) -> SolverMesh:
     except OSError as exc:
         raise SolverMeshError(f"cannot read '{path}': "
                               f"{(exc.strerror or str(exc)).lower()}") from None
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:  # meshio exits on some files it cannot parse
         raise SolverMeshError(f"cannot read '{path}' as {fmt}: {_one_line(exc)}") from None
     return _checked(path, fmt, mesh, options)
 
