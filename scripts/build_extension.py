@@ -32,7 +32,8 @@ PLATFORMS: dict[str, list[str]] = {
 }
 PYTHONS = ("3.11", "3.13")
 BINARY = ("pyopencl", "siphash24")  # per platform and Python
-PURE = ("pytools", "platformdirs", "typing_extensions")
+PURE = ("pytools", "platformdirs", "typing_extensions",
+        "meshio", "rich", "markdown_it_py", "mdurl", "pygments")  # meshio: solver meshes
 
 
 def blender_ext() -> str:
