@@ -4,7 +4,8 @@
 This module is the single-file command; many files in one command (folders, glob patterns,
 an output folder, worker processes, Dask) are ``batch.py``, which runs this command once per
 file. Its argument parser is ``parser.py``, the output file's staging and checks
-``output_files.py``, the exit codes ``usage.py``.
+``output_files.py``, the exit codes and file types ``usage.py``, the solver mesh input
+(docs/engineers.md) ``solver_run.py``.
 
 Exit codes: 0 every mesh valid at the end, 3 some mesh could not be untangled or was
 refused (the others are still processed and written), 2 bad arguments, unreadable input,
