@@ -16,10 +16,15 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-MESH_EXTENSIONS = (".blend", ".obj", ".ply", ".stl")
-FORMATS = ("obj", "ply", "stl", "blend")
+from .solver_formats import SOLVER_EXTENSIONS, SOLVER_FORMATS
+
+# Every file type the command reads and writes: Blender's own, then the solver meshes.
+MESH_EXTENSIONS = (".blend", ".obj", ".ply", ".stl", *SOLVER_EXTENSIONS)
+# The hint of an "unsupported ... type" message (the single-file command's too).
+USE_TYPES = "use " + ", ".join(MESH_EXTENSIONS[:-1]) + " or " + MESH_EXTENSIONS[-1]
+FORMATS = ("obj", "ply", "stl", "blend", *SOLVER_FORMATS)
 _MAGIC = re.compile(r"[*?[]")
-_TYPES = ".blend/.obj/.ply/.stl"
+_TYPES = "/".join(MESH_EXTENSIONS)
 # The single-file command's temporary names: ".NAME.eegt-tmp-PID.EXT" (a .blend is first
 # written by Blender to that name plus "@").
 _TEMPORARY = re.compile(r"^\..+\.eegt-tmp-(\d+)(\.[A-Za-z0-9]+)?@?$")
@@ -126,7 +131,7 @@ def _explicit(path: str) -> Source:
     if ext not in MESH_EXTENSIONS:
         return Source(path, os.path.basename(path),
                       f"eegt: unsupported input type '{ext or os.path.basename(path)}' "
-                      "(use .blend, .obj, .ply or .stl)")
+                      f"({USE_TYPES})")
     return Source(path, os.path.basename(path))
 
 

@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Everything that touches bpy, by role: ``mesh/`` (vertex-position runs and their
 operators), ``uv/`` (UV runs), ``command/`` (the ``eegt`` command line), ``ui/`` (settings,
-preferences, panel) and ``shared/`` (run result, modes).
+preferences, panel), ``solver_io/`` (solver meshes as Blender objects, File > Import /
+Export > Solver mesh) and ``shared/`` (run result, modes).
 
 Thin by design: the algorithm lives in ``core`` (NumPy only).
 """
@@ -10,11 +11,12 @@ from __future__ import annotations
 
 from .command import entry
 from .mesh import ops_pin, ops_quality, ops_untangle
+from .solver_io import ops as solver_ops
 from .ui import panel, prefs, props
 from .uv import ops_uv, panel_uv, uv_props
 
 _modules = (props, prefs, ops_untangle, ops_quality, ops_pin, panel, entry,
-            uv_props, ops_uv, panel_uv)
+            uv_props, ops_uv, panel_uv, solver_ops)
 
 
 def register() -> None:

@@ -2,12 +2,18 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Build the extension zips with Blender's own builder (shipped inside the ``bpy`` wheel).
 
-* ``dist/eegt_blender-<version>.zip``: the pure package (NumPy only, every platform).
+* ``dist/eegt_blender-<version>.zip``: the pure package (NumPy only, every platform), with
+  the pure-Python wheels every zip bundles: ``blender_manifest.toml``'s ``wheels`` (meshio
+  and rich, for solver meshes; docs/engineers.md).
 * ``--platforms``: per-platform zips that also bundle pyopencl and its dependencies for
-  CPython 3.11 (Blender 4.2-5.0) and 3.13 (Blender 5.1+), downloaded unmodified from the
-  package index into ``build/wheels/`` (git-ignored; never NumPy: Blender ships it).
+  CPython 3.11 (Blender 4.2-5.0) and 3.13 (Blender 5.1+).
+* ``--stage-wheels DIR``: only copy the manifest's wheels into DIR (a source folder that
+  Blender's own ``extension build`` is run on, as the e2e tests do).
 
-Every zip is checked with the builder's ``validate``.
+Wheels are downloaded unmodified from the package index into ``build/wheels/`` (git-ignored;
+never NumPy: Blender ships it) once: later builds take them from there, offline.
+Every zip is built from a copy of the package with its wheels and checked with the
+builder's ``validate``.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ from __future__ import annotations
 import argparse
 import glob
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -32,7 +39,13 @@ PLATFORMS: dict[str, list[str]] = {
 }
 PYTHONS = ("3.11", "3.13")
 BINARY = ("pyopencl", "siphash24")  # per platform and Python
-PURE = ("pytools", "platformdirs", "typing_extensions")
+PURE = ("pytools", "platformdirs", "typing_extensions")  # pyopencl's pure dependencies
+WHEEL_DIR = os.path.join(ROOT, "build", "wheels")
+# Copied into the package copy a zip is built from (everything else the manifest excludes).
+IGNORE = shutil.ignore_patterns(".git", ".venv", "__pycache__", "tests", "bench", "docs",
+                                "dist", "out", "build", "wheels", ".e2e-root", "scripts",
+                                ".*cache*", ".hypothesis")
+_WHEELS_ENTRY = re.compile(r"^wheels = \[.*?\]\n", re.MULTILINE | re.DOTALL)
 
 
 def blender_ext() -> str:
@@ -64,13 +77,60 @@ def manifest() -> dict:
         return tomllib.load(fh)
 
 
-def build_pure(out_dir: str) -> str:
-    """Build and validate the pure zip; returns its path."""
+def bundled_wheels(wheel_dir: str = WHEEL_DIR) -> list[str]:
+    """The manifest's wheels (every zip bundles them) as files in `wheel_dir`, each
+    downloaded there (the exact version its file name pins) unless already present. Exits
+    with one line when one is absent and cannot be downloaded (no network)."""
+    os.makedirs(wheel_dir, exist_ok=True)
+    paths = []
+    for entry in manifest().get("wheels", []):
+        name = os.path.basename(entry)
+        path = os.path.join(wheel_dir, name)
+        if not os.path.isfile(path):
+            dist, version = name.split("-")[:2]
+            cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps",
+                   "--only-binary=:all:", "-d", wheel_dir, f"{dist}=={version}"]
+            proc = subprocess.run(cmd, capture_output=True, text=True)
+            if not os.path.isfile(path):
+                last = (proc.stderr.strip().splitlines() or ["not found"])[-1]
+                sys.exit(f"build: the bundled wheel {name} is not in {wheel_dir} and could not "
+                         f"be downloaded ({last}): run scripts/build_extension.py once with "
+                         "network access, or put the file there")
+        paths.append(path)
+    return paths
+
+
+def stage_wheels(dest: str, wheels: list[str]) -> list[str]:
+    """Copy `wheels` into `dest`; their manifest entries (``./wheels/NAME``)."""
+    os.makedirs(dest, exist_ok=True)
+    for w in wheels:
+        shutil.copy2(w, dest)
+    return ["./wheels/" + os.path.basename(w) for w in wheels]
+
+
+def _package_copy(tmp: str, wheels: list[str], extra: str = "") -> str:
+    """A copy of the package in `tmp` with `wheels` in its wheels/ folder, the manifest's
+    ``wheels`` listing them and `extra` (TOML) added; its path."""
+    src = os.path.join(tmp, manifest()["id"])
+    shutil.copytree(ROOT, src, ignore=IGNORE)
+    rel = stage_wheels(os.path.join(src, "wheels"), wheels)
+    text = open(os.path.join(ROOT, "blender_manifest.toml"), encoding="utf-8").read()
+    text = _WHEELS_ENTRY.sub("", text)
+    head, sep, tail = text.partition("\n[permissions]")
+    with open(os.path.join(src, "blender_manifest.toml"), "w", encoding="utf-8") as fh:
+        fh.write(head + extra + f"\nwheels = {_toml_list(rel)}\n" + sep + tail)
+    return src
+
+
+def build_pure(out_dir: str, wheel_dir: str = WHEEL_DIR) -> str:
+    """Build and validate the pure zip (with the manifest's wheels); returns its path."""
     m = manifest()
     path = os.path.join(out_dir, f"{m['id']}-{m['version']}.zip")
     if os.path.exists(path):
         os.remove(path)
-    run_ext("build", "--source-dir", ROOT, "--output-filepath", path)
+    wheels = bundled_wheels(wheel_dir)
+    with tempfile.TemporaryDirectory() as tmp:
+        run_ext("build", "--source-dir", _package_copy(tmp, wheels), "--output-filepath", path)
     run_ext("validate", path)
     return path
 
@@ -104,25 +164,14 @@ def _toml_list(values: list[str]) -> str:
 
 def build_platforms(out_dir: str, wheel_dir: str) -> list[str]:
     """Per-platform zips bundling the wheels; returns their paths."""
-    wheels = [w for w in download_wheels(wheel_dir) if "numpy" not in os.path.basename(w)]
+    bundled = bundled_wheels(wheel_dir)
+    names = {os.path.basename(w) for w in bundled}
+    wheels = bundled + [w for w in download_wheels(wheel_dir)
+                        if "numpy" not in os.path.basename(w)
+                        and os.path.basename(w) not in names]
     m = manifest()
     with tempfile.TemporaryDirectory() as tmp:
-        src = os.path.join(tmp, m["id"])
-        ignore = shutil.ignore_patterns(".git", ".venv", "__pycache__", "tests", "bench", "docs",
-                                        "dist", "out", "build", "wheels", ".e2e-root",
-                                        "scripts", ".*cache*", ".hypothesis")
-        shutil.copytree(ROOT, src, ignore=ignore)
-        os.makedirs(os.path.join(src, "wheels"))
-        rel = []
-        for w in wheels:
-            shutil.copy2(w, os.path.join(src, "wheels"))
-            rel.append("./wheels/" + os.path.basename(w))
-        text = open(os.path.join(ROOT, "blender_manifest.toml"), encoding="utf-8").read()
-        head, sep, tail = text.partition("\n[permissions]")
-        extra = (f"\nplatforms = {_toml_list(list(PLATFORMS))}\n"
-                 f"\nwheels = {_toml_list(rel)}\n")
-        with open(os.path.join(src, "blender_manifest.toml"), "w", encoding="utf-8") as fh:
-            fh.write(head + extra + sep + tail)
+        src = _package_copy(tmp, wheels, f"\nplatforms = {_toml_list(list(PLATFORMS))}\n")
         before = set(glob.glob(os.path.join(out_dir, "*.zip")))
         run_ext("build", "--source-dir", src, "--output-dir", out_dir, "--split-platforms")
         made = sorted(set(glob.glob(os.path.join(out_dir, "*.zip"))) - before
@@ -137,10 +186,16 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.path.join(ROOT, "dist"))
     ap.add_argument("--platforms", action="store_true", help="also per-platform zips (network)")
-    ap.add_argument("--wheels", default=os.path.join(ROOT, "build", "wheels"))
+    ap.add_argument("--wheels", default=WHEEL_DIR, help="the wheel download folder")
+    ap.add_argument("--stage-wheels", metavar="DIR",
+                    help="only copy the manifest's wheels into DIR (downloaded if needed)")
     ns = ap.parse_args(argv)
+    if ns.stage_wheels:
+        for rel in stage_wheels(ns.stage_wheels, bundled_wheels(ns.wheels)):
+            print(rel)
+        return 0
     os.makedirs(ns.out, exist_ok=True)
-    print(build_pure(ns.out))
+    print(build_pure(ns.out, ns.wheels))
     if ns.platforms:
         for path in build_platforms(ns.out, ns.wheels):
             print(path)

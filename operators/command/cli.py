@@ -4,7 +4,8 @@
 This module is the single-file command; many files in one command (folders, glob patterns,
 an output folder, worker processes, Dask) are ``batch.py``, which runs this command once per
 file. Its argument parser is ``parser.py``, the output file's staging and checks
-``output_files.py``, the exit codes ``usage.py``.
+``output_files.py``, the exit codes and file types ``usage.py``, the solver mesh input
+(docs/engineers.md) ``solver_run.py``.
 
 Exit codes: 0 every mesh valid at the end, 3 some mesh could not be untangled or was
 refused (the others are still processed and written), 2 bad arguments, unreadable input,
@@ -57,17 +58,18 @@ from ..shared.progress import printer
 from ..shared.result import store_last_run
 from ..ui.prefs import resolve_backend
 from ..uv import uv_runner
-from . import metrics, output_files, report
+from . import metrics, output_files, report, solver_run
 from .parser import build_parser
 from .usage import (
     EXIT_FAILED,
     EXIT_INTERNAL,
     EXIT_OK,
     EXIT_USAGE,
-    MESH_EXTENSIONS,
+    INPUT_EXTENSIONS,
     OUTPUT_EXTENSIONS,
     UsageError,
     check_writable,
+    unsupported,
     why,
 )
 
@@ -124,11 +126,12 @@ def _check_paths(ns: argparse.Namespace) -> None:
     if ns.output:
         ext = os.path.splitext(ns.output)[1].lower()
         if ext not in OUTPUT_EXTENSIONS:
-            raise UsageError(f"eegt: unsupported output type '{ext or ns.output}' (use .blend, "
-                             ".obj, .ply or .stl)")
+            raise unsupported("output", ext or ns.output)
         why = replaces_input(path, ns.output, ns.in_place)
         if why:
             raise UsageError(why)
+    solver_run.check_paths(ns)
+    if ns.output:
         check_writable(ns.output, "output")
     if ns.report:
         check_writable(ns.report, "report")
@@ -137,9 +140,8 @@ def _check_paths(ns: argparse.Namespace) -> None:
 def _check_input_type(path: str) -> None:
     """The input is of a type the command reads (UsageError otherwise)."""
     ext = os.path.splitext(path)[1].lower()
-    if ext != ".blend" and ext not in MESH_EXTENSIONS:
-        raise UsageError(f"eegt: unsupported input type '{ext}' (use .blend, .obj, .ply or "
-                         ".stl)")
+    if ext not in INPUT_EXTENSIONS:
+        raise unsupported("input", ext)
 
 
 def _load(path: str) -> None:
@@ -278,7 +280,11 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         backend, device = _backend(ns.backend, ns.device)
         rep["backend_requested"] = backend
         warming = _warm_device(backend, device)
-        _load(ns.input)
+        if solver_run.is_solver(ns.input):
+            params, rep["solver_mesh"] = solver_run.load(ns, params)
+            rep["params"] = params.as_dict()
+        else:
+            _load(ns.input)
         objs, skipped = _objects(ns.object, ns.input)
         rep["skipped"] = [{"object": name, "reason": "no faces"} for name in skipped]
         if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
@@ -309,6 +315,8 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             store_last_run(obj, res)
             results.append(res)
             measured.append(metrics.run_metrics(job, res, ns.metrics) if ns.metrics else None)
+            if ns.metrics and "solver_mesh" in rep:
+                rep["solver_mesh"]["metrics"] = solver_run.group_metrics(job, res, ns.metrics)
             print("EEGT " + res.line(), flush=True)
         rep["objects"] = [r.as_dict() for r in results]
         if ns.metrics:

@@ -6,11 +6,14 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from ...batch.solver_formats import SOLVER_EXTENSIONS
 from ...core import EEGTParams
 from ...core.choices import BACKEND, UV_SCOPE, ids
 from ..ui import props
 from . import metrics
-from .usage import EXIT_OK, EXIT_USAGE, UsageError
+from .usage import EXIT_OK, EXIT_USAGE, INPUT_EXTENSIONS, UsageError
+
+_TYPES = "/".join(INPUT_EXTENSIONS)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -31,12 +34,12 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser; one flag per EEGTParams field."""
     p = _Parser(prog="blender -b -c eegt",
                 description="Untangle and smooth planar meshes (EEGT) in a .blend, OBJ, PLY "
-                            "or STL file. Exit codes: 0 all valid, 3 some mesh failed, "
+                            "or STL file or a solver mesh (" + ", ".join(SOLVER_EXTENSIONS) +
+                            "). Exit codes: 0 all valid, 3 some mesh failed, "
                             "2 bad arguments or input, 1 internal error.")
-    p.add_argument("input", help="input .blend (all mesh objects) or .obj/.ply/.stl file")
-    p.add_argument("-o", "--output", help="output .blend/.obj/.ply/.stl (nothing is written "
-                                          "without it); the input file itself only with "
-                                          "--in-place")
+    p.add_argument("input", help=f"input {_TYPES} file (a .blend: all its mesh objects)")
+    p.add_argument("-o", "--output", help=f"output {_TYPES} (nothing is written without it); "
+                                          "the input file itself only with --in-place")
     p.add_argument("--in-place", action="store_true",
                    help="write the result over the input file (without -o, or with -o naming "
                         "it): it is replaced whole once the result is saved and checked")
@@ -92,4 +95,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-write-on-fail", action="store_true",
                    help="leave a mesh unchanged when it could not be untangled")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
+    _solver_arguments(p)
     return p
+
+
+def _solver_arguments(p: argparse.ArgumentParser) -> None:
+    """The solver mesh flags (docs/engineers.md; checked and used by solver_run.py)."""
+    g = p.add_argument_group("solver meshes (" + ", ".join(SOLVER_EXTENSIONS) + ")")
+    g.add_argument("--pin-field", metavar="NAME", default=None,
+                   help="pin the nodes where this point-data array is non-zero")
+    g.add_argument("--fixed-groups", metavar="G1,G2", default=None,
+                   help="physical groups (names or tags) whose nodes stay where they are")
+    g.add_argument("--slide-groups", metavar="G1,G2", default=None,
+                   help="physical groups (names or tags) whose boundary nodes slide along "
+                        "the boundary; the rest of the boundary follows --boundary")

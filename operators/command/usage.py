@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import os
 
+from ...batch.inputs import MESH_EXTENSIONS, USE_TYPES
+
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_FAILED = 0, 1, 2, 3
-MESH_EXTENSIONS = (".obj", ".ply", ".stl")
-OUTPUT_EXTENSIONS = (".blend", *MESH_EXTENSIONS)
+# Read and written: .blend, Blender's importers' types and the solver meshes (a solver mesh
+# output needs a solver mesh input: see solver_run.py).
+INPUT_EXTENSIONS = OUTPUT_EXTENSIONS = MESH_EXTENSIONS
 
 
 class UsageError(Exception):
@@ -21,6 +24,11 @@ class UsageError(Exception):
         super().__init__(message)
         self.code = code
         self.unwritable = unwritable
+
+
+def unsupported(kind: str, ext: str) -> UsageError:
+    """The one-line error for an input or output of a type the command cannot handle."""
+    return UsageError(f"eegt: unsupported {kind} type '{ext}' ({USE_TYPES})")
 
 
 def check_writable(path: str, what: str) -> None:

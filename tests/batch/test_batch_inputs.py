@@ -50,7 +50,8 @@ def test_empty_folder_note_hints_at_recursive(tmp_path):
     touch(tmp_path / "only" / "sub" / "x.obj")
     sources, notes = inputs.expand([str(tmp_path / "only")])
     assert sources == []
-    assert notes == [f"eegt: folder '{tmp_path / 'only'}' has no .blend/.obj/.ply/.stl files "
+    assert notes == [f"eegt: folder '{tmp_path / 'only'}' has no "
+                     ".blend/.obj/.ply/.stl/.msh/.vtk/.vtu/.inp/.mesh/.su2 files "
                      "(--recursive searches its subfolders)"]
 
 
@@ -70,7 +71,8 @@ def test_glob_matching_folders_expands_them(tree):
 def test_glob_without_match_gives_a_note(tmp_path):
     sources, notes = inputs.expand([str(tmp_path / "*.obj")])
     assert sources == []
-    assert notes == [f"eegt: '{tmp_path / '*.obj'}' matched no .blend/.obj/.ply/.stl files"]
+    assert notes == [f"eegt: '{tmp_path / '*.obj'}' matched no "
+                     ".blend/.obj/.ply/.stl/.msh/.vtk/.vtu/.inp/.mesh/.su2 files"]
 
 
 def test_explicit_files_are_kept_even_unsupported_or_missing(tree, tmp_path):
@@ -78,7 +80,7 @@ def test_explicit_files_are_kept_even_unsupported_or_missing(tree, tmp_path):
                                 str(tree / ".hidden.obj")])
     assert rels(sources) == ["notes.txt", "gone.obj", ".hidden.obj"]
     assert sources[0].problem == ("eegt: unsupported input type '.txt' (use .blend, .obj, "
-                                  ".ply or .stl)")
+                                  ".ply, .stl, .msh, .vtk, .vtu, .inp, .mesh or .su2)")
     assert sources[1].problem == f"eegt: cannot read input '{tmp_path / 'gone.obj'}': no such file"
     assert sources[2].problem is None
 

@@ -48,8 +48,9 @@ def one_error_line(capfd) -> str:
 
 @pytest.mark.parametrize(("argv", "message"), [
     (["{t}/nothing/*.obj", "{t}/empty", "-o", "{t}/out"],
-     "eegt: no input files: '{t}/nothing/*.obj' matched no .blend/.obj/.ply/.stl files; "
-     "folder '{t}/empty' has no .blend/.obj/.ply/.stl files"),
+     "eegt: no input files: '{t}/nothing/*.obj' matched no "
+     ".blend/.obj/.ply/.stl/.msh/.vtk/.vtu/.inp/.mesh/.su2 files; folder '{t}/empty' has no "
+     ".blend/.obj/.ply/.stl/.msh/.vtk/.vtu/.inp/.mesh/.su2 files"),
     (["{m}", "-o", "{t}/afile"], "eegt: output folder '{t}/afile' is a file"),
     (["{m}", "--recursive", "-o", "{t}/one.obj"],
      "eegt: -o {t}/one.obj names one file but 2 inputs matched: give an output folder"),

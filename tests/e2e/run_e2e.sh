@@ -73,6 +73,16 @@ rm -rf "$ART" && mkdir -p "$ART"
 mkdir -p "$R$W/src"
 git -c safe.directory="$REPO" ls-files -z -co --exclude-standard | while IFS= read -r -d '' f; do
     [[ -e $f ]] && printf '%s\0' "$f"; done | xargs -0 cp --parents -t "$R$W/src"
+# The wheels every zip bundles (blender_manifest.toml's `wheels`) and the solver meshes made
+# by Gmsh: the root has neither network nor gmsh, so both come from the host (the wheels from
+# build/wheels, downloaded there once).
+HOSTPY=$REPO/.venv/bin/python
+if ! "$HOSTPY" scripts/build_extension.py --stage-wheels "$R$W/src/wheels" >/dev/null; then
+    echo "e2e: the bundled wheels are not in build/wheels (see above)"; echo "0 passed, 1 failed"; exit 1
+fi
+if ! "$HOSTPY" tests/e2e/make_solver_meshes.py "$R$W/solver" >"$ART/solver_meshes.log" 2>&1; then
+    echo "e2e: making the solver meshes failed (tests/e2e/artifacts/solver_meshes.log)"
+fi
 
 # --- 3. display ----------------------------------------------------------------------------
 # Pick a free display: X sockets live in the (shared) abstract namespace, so check the host too.

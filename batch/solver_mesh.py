@@ -1,0 +1,431 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Solver meshes (Gmsh, VTK, Abaqus, Medit, SU2) read and written through meshio, with
+everything the untangler does not touch kept as it was (docs/engineers.md).
+
+Only the 2D cells (triangle, quad and polygon blocks) are faces the untangler moves; every
+other cell block (lines, vertices, volume cells), every point, cell and field data array,
+the groups and the file's format version (Gmsh 2.2 or 4.1, ASCII or binary; VTK legacy
+ASCII or binary; VTU ASCII, binary or compressed) pass through: `write_moved` changes only
+the coordinates of the nodes given as moved.
+
+Groups are named by name or by tag: meshio's cell sets, Gmsh's physical names (field data
+``name -> [tag, dim]``) and the tag arrays of the formats' cells (``gmsh:physical``,
+``medit:ref``, ``su2:tag``, ``CellEntityIds``).
+
+No bpy and no core: the command, its batches and the Blender import/export all call this
+module (faces come out as CSR arrays, which ``core.faces_from_csr`` takes). Every problem
+with a file is a `SolverMeshError` of one line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import hashlib
+import io
+import itertools
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .solver_formats import SOLVER_FORMATS, solver_format
+
+FACE_TYPES = ("triangle", "quad", "polygon")  # the 2D cells the untangler moves
+TAG_ARRAYS = ("gmsh:physical", "medit:ref", "su2:tag", "CellEntityIds")
+_POINT_TYPES = ("vertex",)
+_LINE_PREFIX = "line"
+_FACE_PREFIXES = ("triangle", "quad", "polygon")
+
+
+class SolverMeshError(ValueError):
+    """A solver mesh that cannot be read, used or written (a one-line message)."""
+
+
+def cell_dim(cell_type: str) -> int:
+    """The topological dimension of a meshio cell type (0 vertex, 1 line, 2 face, 3 volume)."""
+    if cell_type in _POINT_TYPES:
+        return 0
+    if cell_type.startswith(_LINE_PREFIX):
+        return 1
+    if cell_type.startswith(_FACE_PREFIXES):
+        return 2
+    return 3
+
+
+def file_digest(path: str) -> str:
+    """SHA-256 of a file's bytes (hex): ties a Blender mesh to the file it came from."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+@contextlib.contextmanager
+def _quiet():
+    """meshio prints warnings on the console: they are not the command's one line."""
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        yield
+
+
+def write_options(path: str, fmt: str) -> dict[str, Any]:
+    """The writer options that keep a file's own format version: Gmsh's version and
+    binary flag, VTK's legacy version and ASCII/binary, VTU's encoding and compression."""
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    if fmt == "msh":
+        m = re.search(rb"\$MeshFormat\s+(\S+)\s+(\d)", head)
+        if not m:
+            return {"fmt_version": "4.1", "binary": False}
+        version = "2.2" if m.group(1).startswith(b"2") else "4.1"
+        return {"fmt_version": version, "binary": m.group(2) == b"1"}
+    if fmt == "vtk":
+        lines = head.split(b"\n")
+        version = "5.1" if lines and b"Version 5" in lines[0] else "4.2"
+        binary = len(lines) > 2 and lines[2].strip().upper().startswith(b"BINARY")
+        return {"fmt_version": version, "binary": binary}
+    if fmt == "vtu":
+        with open(path, "rb") as fh:
+            text = fh.read()
+        compression = None
+        m = re.search(rb'compressor="vtk(\w+)DataCompressor"', text)
+        if m:
+            compression = {b"ZLib": "zlib", b"LZMA": "lzma", b"LZ4": "lz4"}.get(m.group(1))
+        binary = re.search(rb'format="(binary|appended)"', text) is not None
+        return {"binary": binary, "compression": compression if binary else None}
+    if fmt == "mesh" or fmt == "inp":
+        return {"float_fmt": ".16e"}
+    return {}
+
+
+@dataclass
+class SolverMesh:
+    """A read solver mesh: meshio's mesh, where it came from, and its 2D cells as faces."""
+
+    path: str
+    fmt: str
+    mesh: Any  # meshio.Mesh
+    options: dict[str, Any]
+    face_blocks: list[int]  # indices of the 2D cell blocks, in file order
+    offsets: np.ndarray  # (F + 1,) CSR offsets of the faces (the 2D cells, block by block)
+    corners: np.ndarray  # (offsets[-1],) node of every face corner
+
+    @property
+    def n_points(self) -> int:
+        return int(self.mesh.points.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.offsets.size - 1)
+
+    def points3d(self) -> np.ndarray:
+        """(N, 3) float64 positions; 2D files get z = 0."""
+        p = np.asarray(self.mesh.points, dtype=np.float64)
+        if p.shape[1] == 3:
+            return p.copy()
+        out = np.zeros((p.shape[0], 3), dtype=np.float64)
+        out[:, :p.shape[1]] = p
+        return out
+
+    def counts(self) -> np.ndarray:
+        """(F,) corners of every face."""
+        return np.diff(self.offsets)
+
+    def face_block_ranges(self) -> list[tuple[int, int, int]]:
+        """(block index, first face, end face) of every 2D block."""
+        out, start = [], 0
+        for b in self.face_blocks:
+            n = len(self.mesh.cells[b].data)
+            out.append((b, start, start + n))
+            start += n
+        return out
+
+    # groups ----------------------------------------------------------------------------
+
+    def group_names(self) -> list[str]:
+        """The names groups can be given by (names first, then tags), each once."""
+        names = [n for n in self.mesh.cell_sets if not n.startswith("gmsh:")]
+        names += [n for n in self.mesh.field_data if n not in names]
+        tags = sorted({int(t) for arr in self._tag_arrays() for t in np.unique(arr)})
+        return names + [str(t) for t in tags if str(t) not in names]
+
+    def _tag_arrays(self) -> list[np.ndarray]:
+        for name in TAG_ARRAYS:
+            if name in self.mesh.cell_data:
+                return [np.asarray(a).reshape(len(a), -1)[:, 0]
+                        for a in self.mesh.cell_data[name]]
+        return []
+
+    def group_cells(self, name: str) -> list[np.ndarray]:
+        """Per cell block, the bool mask of the cells in group `name` (a name or a tag)."""
+        blocks = self.mesh.cells
+        sets = {k: v for k, v in self.mesh.cell_sets.items() if not k.startswith("gmsh:")}
+        if name in sets:
+            out = []
+            for block, idx in zip(blocks, sets[name]):
+                mask = np.zeros(len(block.data), dtype=bool)
+                if idx is not None and len(idx):
+                    mask[np.asarray(idx, dtype=np.int64)] = True
+                out.append(mask)
+            return out
+        tags = self._tag_arrays()
+        if name in self.mesh.field_data and tags:
+            tag, dim = [*np.asarray(self.mesh.field_data[name]).ravel().tolist(), -1, -1][:2]
+            return [(t == tag) & (dim < 0 or cell_dim(b.type) == dim)
+                    for b, t in zip(blocks, tags)]
+        if re.fullmatch(r"-?\d+", name.strip()) and tags:
+            tag = int(name)
+            masks = [t == tag for t in tags]
+            if any(m.any() for m in masks):
+                return masks
+        have = ", ".join(self.group_names()[:20]) or "none"
+        raise SolverMeshError(f"no group '{name}' in '{self.path}' (its groups: {have})")
+
+    def group_nodes(self, name: str) -> np.ndarray:
+        """(N,) bool: the nodes of the cells of group `name`."""
+        out = np.zeros(self.n_points, dtype=bool)
+        for block, mask in zip(self.mesh.cells, self.group_cells(name)):
+            if mask.any():
+                out[np.asarray(block.data)[mask].ravel()] = True
+        return out
+
+    def group_faces(self, name: str) -> np.ndarray:
+        """(F,) bool: the faces (2D cells) of group `name`."""
+        masks = self.group_cells(name)
+        return np.concatenate([masks[b] for b in self.face_blocks])
+
+    def face_groups(self) -> dict[str, np.ndarray]:
+        """Every group holding 2D cells -> its (F,) face mask (the report's per-group
+        quality)."""
+        out = {}
+        for name in self.group_names():
+            faces = self.group_faces(name)
+            if faces.any() and not any(np.array_equal(faces, f) for f in out.values()):
+                out[name] = faces
+        return out
+
+    # pins ------------------------------------------------------------------------------
+
+    def pin_field(self, name: str) -> np.ndarray:
+        """(N,) bool: the nodes where point-data array `name` is non-zero (any component)."""
+        data = self.mesh.point_data
+        if name not in data:
+            have = ", ".join(sorted(data)[:20]) or "none"
+            raise SolverMeshError(f"no point data '{name}' in '{self.path}' (its point data: "
+                                  f"{have})")
+        arr = np.asarray(data[name])
+        return (arr.reshape(arr.shape[0], -1) != 0).any(axis=1)
+
+    # writing ---------------------------------------------------------------------------
+
+    def with_positions(self, positions: np.ndarray, moved: np.ndarray) -> Any:
+        """A copy of the meshio mesh whose `moved` nodes take `positions` ((N, 3) or the
+        file's own (N, d)); every other array is the same object as in the file."""
+        pts = np.array(self.mesh.points, copy=True)
+        moved = np.asarray(moved, dtype=bool)
+        if moved.any():
+            d = pts.shape[1]
+            pts[moved] = np.asarray(positions, dtype=pts.dtype)[moved, :d]
+        out = copy.copy(self.mesh)
+        out.points = pts
+        return out
+
+
+def read(path: str, fmt: str | None = None) -> SolverMesh:
+    """Read a solver mesh; SolverMeshError (one line) when it cannot be read or has no 2D
+    cells to work on."""
+    import meshio
+
+    fmt = fmt or solver_format(path)
+    if fmt not in SOLVER_FORMATS:
+        raise SolverMeshError(f"'{path}' is not a solver mesh (use "
+                              f"{', '.join(e for e, _ in SOLVER_FORMATS.values())})")
+    try:
+        with _quiet():
+            mesh = meshio.read(path, file_format=SOLVER_FORMATS[fmt][1])
+        options = write_options(path, fmt)
+    except OSError as exc:
+        raise SolverMeshError(f"cannot read '{path}': "
+                              f"{(exc.strerror or str(exc)).lower()}") from None
+    except (Exception, SystemExit) as exc:  # meshio exits on some files it cannot parse
+        raise SolverMeshError(f"cannot read '{path}' as {fmt}: {_one_line(exc)}") from None
+    return _checked(path, fmt, mesh, options)
+
+
+def _checked(path: str, fmt: str, mesh: Any, options: dict[str, Any]) -> SolverMesh:
+    """The faces of a read mesh, after checking there are 2D cells and sane numbers."""
+    pts = np.asarray(mesh.points)
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3) or pts.shape[0] == 0:
+        raise SolverMeshError(f"'{path}' has no points")
+    if not np.isfinite(pts).all():
+        bad = int(np.count_nonzero(~np.isfinite(pts).all(axis=1)))
+        raise SolverMeshError(f"'{path}': {bad} points have NaN or infinite coordinates")
+    face_blocks = [i for i, b in enumerate(mesh.cells) if b.type in FACE_TYPES
+                   and len(b.data)]
+    if not face_blocks:
+        kinds = sorted({b.type for b in mesh.cells if len(b.data)})
+        dims = {cell_dim(k) for k in kinds}
+        if kinds and dims == {3}:
+            why = "volume cells only (" + ", ".join(kinds) + ")"
+        elif any(cell_dim(k) == 2 for k in kinds):
+            why = "only higher-order 2D cells (" + ", ".join(
+                k for k in kinds if cell_dim(k) == 2) + ")"
+        else:
+            why = "no cells" if not kinds else "no 2D cells (" + ", ".join(kinds) + ")"
+        raise SolverMeshError(f"'{path}' has {why}: nothing to untangle (2D cells: "
+                              f"{', '.join(FACE_TYPES)})")
+    counts, corners = [], []
+    for b in face_blocks:
+        data = np.asarray(mesh.cells[b].data, dtype=np.int64)
+        counts.append(np.full(data.shape[0], data.shape[1], dtype=np.int64))
+        corners.append(data.ravel())
+    offsets = np.zeros(sum(c.size for c in counts) + 1, dtype=np.int64)
+    np.cumsum(np.concatenate(counts), out=offsets[1:])
+    flat = np.concatenate(corners)
+    if flat.min() < 0 or flat.max() >= pts.shape[0]:
+        raise SolverMeshError(f"'{path}': a 2D cell uses a point number out of range")
+    return SolverMesh(path, fmt, mesh, options, face_blocks, offsets, flat)
+
+
+def write(sm: SolverMesh, path: str, positions: np.ndarray | None = None,
+          moved: np.ndarray | None = None) -> None:
+    """Write `sm` to `path` in the format of its extension: the moved nodes take
+    `positions`, everything else is the file's own. Same format as the source: its own
+    version and encoding. SolverMeshError (one line) when the writer refuses."""
+    mesh = sm.mesh if positions is None or moved is None else \
+        sm.with_positions(positions, moved)
+    same = solver_format(path) == sm.fmt
+    write_mesh(mesh, path, sm.options if same else None)
+
+
+def write_mesh(mesh: Any, path: str, options: dict[str, Any] | None = None) -> None:
+    """Write a meshio mesh to `path` in the format of its extension with these writer
+    options (default: full precision text). SolverMeshError (one line) when the writer
+    refuses it; OSError as it is."""
+    import meshio
+
+    fmt = solver_format(path)
+    if fmt is None:
+        raise SolverMeshError(f"'{path}' is not a solver mesh path")
+    writer = getattr(meshio, SOLVER_FORMATS[fmt][1]).write
+    if fmt == "su2":
+        mesh = _su2_ready(mesh)
+    try:
+        with _quiet():
+            writer(path, mesh, **(write_options_default(fmt) if options is None else options))
+    except OSError:
+        raise
+    except Exception as exc:
+        raise SolverMeshError(f"cannot write '{path}' as {fmt}: {_one_line(exc)}") from None
+
+
+def _su2_ready(mesh: Any) -> Any:
+    """A copy of `mesh` as meshio 5.3's SU2 writer needs it: cell blocks that also unpack
+    as (type, data) pairs (its marker loop reads them so), and boundary blocks cut into
+    runs of one ``su2:tag`` each (it writes a block's markers in sorted tag order, the
+    runs keep the file's order)."""
+    import meshio
+
+    class PairBlock(meshio.CellBlock):
+        def __iter__(self):
+            return iter((self.type, self.data))
+
+    tags = mesh.cell_data.get("su2:tag")
+    blocks, data = [], {k: [] for k in mesh.cell_data}
+    for i, b in enumerate(mesh.cells):
+        cuts = [0, len(b.data)]
+        if tags is not None and cell_dim(b.type) < 2 and len(b.data):
+            t = np.asarray(tags[i]).reshape(-1)
+            cuts = [0, *(np.flatnonzero(t[1:] != t[:-1]) + 1).tolist(), len(b.data)]
+        for lo, hi in itertools.pairwise(cuts):
+            blocks.append(PairBlock(b.type, np.asarray(b.data)[lo:hi], b.tags))
+            for k in data:
+                data[k].append(np.asarray(mesh.cell_data[k][i])[lo:hi])
+    out = copy.copy(mesh)
+    out.cells, out.cell_data = blocks, data
+    return out
+
+
+def write_options_default(fmt: str) -> dict[str, Any]:
+    """Writer options for a format other than the source's: full precision text where
+    the writer takes a number format."""
+    return {"float_fmt": ".16e"} if fmt in ("msh", "inp", "mesh") else {}
+
+
+def check_written(sm: SolverMesh, path: str) -> str | None:
+    """Why the freshly written `path` is not whole (read back: the same number of points
+    and cells per type as `sm`), or None."""
+    import meshio
+
+    fmt = solver_format(path)
+    try:
+        with _quiet():
+            back = meshio.read(path, file_format=SOLVER_FORMATS[fmt][1])
+    except Exception as exc:
+        return f"the written file does not read back: {_one_line(exc)}"
+    if back.points.shape[0] != sm.n_points:
+        return f"the written file has {back.points.shape[0]} of {sm.n_points} points"
+    want = sorted((b.type, len(b.data)) for b in sm.mesh.cells)
+    have = sorted((b.type, len(b.data)) for b in back.cells)
+    if _totals(want) != _totals(have):
+        return "the written file does not hold every cell"
+    return None
+
+
+def _totals(blocks: list[tuple[str, int]]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for t, n in blocks:
+        out[t] = out.get(t, 0) + n
+    return out
+
+
+@dataclass(frozen=True)
+class NodeChoice:
+    """Which nodes the file's flags pin and the boundary mode the run takes."""
+
+    pinned: np.ndarray  # (N,) bool
+    boundary: str
+    notes: tuple[str, ...] = ()
+
+
+def node_choice(sm: SolverMesh, boundary: str, on_boundary: np.ndarray,
+                pin_field: str | None = None, fixed_groups: tuple[str, ...] = (),
+                slide_groups: tuple[str, ...] = ()) -> NodeChoice:
+    """Pins from a point-data array and groups: the pin field's non-zero nodes and the
+    fixed groups' nodes stay; the slide groups' boundary nodes slide along the boundary
+    (run in mode ``slide`` with every other boundary node pinned, unless `boundary` is
+    already ``slide``); the rest of the boundary follows `boundary`. A node in a fixed and
+    a slide group stays. `on_boundary`: (N,) bool, the faces' boundary nodes
+    (``core.boundary_nodes``)."""
+    pinned = np.zeros(sm.n_points, dtype=bool)
+    notes = []
+    if pin_field:
+        pinned |= sm.pin_field(pin_field)
+        notes.append(f"{int(np.count_nonzero(pinned))} nodes pinned by '{pin_field}'")
+    for name in fixed_groups:
+        pinned |= sm.group_nodes(name)
+    mode = boundary
+    if slide_groups:
+        if boundary == "free":
+            raise SolverMeshError("--slide-groups needs --boundary fixed or slide (with free "
+                                  "every boundary node already moves)")
+        sliding = np.zeros(sm.n_points, dtype=bool)
+        for name in slide_groups:
+            sliding |= sm.group_nodes(name)
+        if boundary == "fixed":
+            pinned |= np.asarray(on_boundary, dtype=bool) & ~sliding
+            mode = "slide"
+            notes.append("boundary outside the slide groups kept fixed")
+    return NodeChoice(pinned, mode, tuple(notes))
+
+
+def parse_groups(text: str | None) -> tuple[str, ...]:
+    """A comma list of group names or tags."""
+    return tuple(w.strip() for w in (text or "").split(",") if w.strip())
