@@ -616,3 +616,8 @@ class _Run:
             worst = prm.tol_min > 0.0 and d_avg >= 0.0 and d_min >= prm.tol_min
             if d_avg < prm.tol and not worst:
                 break
+
+
+# The frame of a run, public for warm-started runs that frame their work as a cold run does
+# (core.live).
+normalisation, as_given, stats_as_given = _normalisation, _as_given, _stats_as_given
