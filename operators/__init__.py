@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from . import (
     cli,
+    live,
     ops_pin,
     ops_quality,
     ops_untangle,
@@ -20,7 +21,7 @@ from . import (
 )
 
 _modules = (props, prefs, ops_untangle, ops_quality, ops_pin, panel, cli,
-            uv_props, ops_uv, panel_uv)
+            uv_props, ops_uv, panel_uv, live)
 
 
 def register() -> None:
