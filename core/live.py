@@ -140,8 +140,10 @@ class LiveSession:
             self._still = None
             if self._still_ids.size:
                 _, min_edge = edge_lengths(work[:, 0], work[:, 1], self.fs.groups)
+                cx = np.concatenate([work[g.nodes, 0].mean(0) for g in self.fs.groups])
+                cy = np.concatenate([work[g.nodes, 1].mean(0) for g in self.fs.groups])
                 self._still = NearestBoundary(work[self._still_ids, 0],
-                                              work[self._still_ids, 1],
+                                              work[self._still_ids, 1], cx, cy,
                                               min_cell=0.5 * min_edge)
             self._frame_of = key
         search = _AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())

@@ -23,7 +23,8 @@ from .drag import MeshDrag, UVDrag
 
 TICK = 1.0 / 60.0  # the timer's period (s): a frame runs on the first tick after a move
 PICK_PIXELS = 12.0  # a vertex within this many pixels of the cursor is grabbed
-SETTLE_FRAMES = 30  # frames run with the cursor still while the mesh keeps changing
+SETTLE_FRAMES = 30  # smoothing frames run with the cursor still while the mesh changes
+UNTANGLE_FRAMES = 1200  # untangling frames run with the cursor still (about 20 s at most)
 
 LAST_FRAMES: list[Any] = []  # the frames of the last drag (read by the tests)
 
@@ -100,8 +101,11 @@ class _LiveModal:
     def _busy(self) -> bool:
         """Whether the mesh may still change with the cursor still."""
         f = self._drag.frame
-        return f is not None and self._settle < SETTLE_FRAMES and \
-            (f.status == "tangled" or f.smooth_iterations > 1)
+        if f is None:
+            return False
+        if f.status == "tangled":
+            return self._settle < UNTANGLE_FRAMES
+        return self._settle < SETTLE_FRAMES and f.smooth_iterations > 1
 
     def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
         kind, value = event.type, event.value
