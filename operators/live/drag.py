@@ -139,7 +139,11 @@ class UVDrag:
         frame = self.session.frame(self.targets_for(cursor), iterations=iterations,
                                    budget=budget)
         t1 = time.perf_counter()
-        values = self.region.to_uv(frame.points)[self.loop_local].astype(np.float32)
+        # only the loops of UV vertices that moved: a loop a float32 step away from its UV
+        # vertex's value (welded) keeps its own bits, as Untangle & Smooth UVs keeps them
+        moved = np.any(frame.points != self.region.points, axis=1)[self.loop_local]
+        values = self.original.copy()
+        values[moved] = self.region.to_uv(frame.points)[self.loop_local[moved]]
         self._write(values)
         self.frame = frame
         self.times = StepTimes(t1 - t0, time.perf_counter() - t1)

@@ -125,9 +125,14 @@ class _LiveModal:
         if kind in {"MOUSEMOVE", "INBETWEEN_MOUSEMOVE"} and self._drag is not None:
             self._at, self._pending = self._cursor(event), True
             return {"RUNNING_MODAL"}
-        if kind == "TIMER" and event.timer is self._timer:
+        if kind == "TIMER":  # ours or another: either way a chance to run a frame
             if self._drag is not None and (self._pending or self._busy()):
-                self._frame()
+                try:
+                    self._frame()
+                except ValueError as exc:  # the mesh cannot take this place: all back
+                    self._drag.restore()
+                    self.report({"WARNING"}, str(exc).splitlines()[0])
+                    return self._end(context, {"CANCELLED"})
             return {"RUNNING_MODAL"}
         if kind in {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN",
                     "TRACKPADZOOM"}:
