@@ -136,13 +136,15 @@ class NumpyEngine:
         `free` moves, the other used nodes are the anchors: the paper)."""
         self._setup(points, faces, free, params, None, targets, motion)
 
-    def restarted(self, points: np.ndarray) -> NumpyEngine:
+    def restarted(self, points: np.ndarray, distance=None) -> NumpyEngine:
         """A fresh engine for the same run at new positions whose fixed nodes are where they
         are here: it shares the nearest-boundary search (its queries are exact, whatever
-        element centroids it was refined for) instead of building another one."""
+        element centroids it was refined for) instead of building another one. `distance`:
+        a search over the fixed nodes at their new positions when some moved (an object whose
+        `query(qx, qy)` returns the exact nearest distances, core.live)."""
         engine = NumpyEngine.__new__(NumpyEngine)
-        engine._setup(points, self.faces, self.free, self.params, self._distance, self.targets,
-                      self.motion, defer_distances=True)  # a restart may never be stepped
+        engine._setup(points, self.faces, self.free, self.params, distance or self._distance,
+                      self.targets, self.motion, defer_distances=True)  # may never be stepped
         return engine
 
     @classmethod

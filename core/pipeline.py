@@ -26,8 +26,8 @@ from .reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import EdgeInfo, checked_edges, free_nodes
 
-__all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "free_nodes", "normalisation",
-           "untangle_and_smooth"]
+__all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
+           "normalisation", "stats_as_given", "untangle_and_smooth"]
 
 LOCAL_MIN_FACES = 20_000  # untangle="auto": 'eegt+local' from this many faces on, else 'global'
 LOCAL_RINGS = (4, 8, 16)  # rings around EEGT's leftover folds tried by 'eegt+local', in turn
@@ -196,7 +196,7 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
         free = motion.movable
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
-    frozen = frozen_faces(_as_given(p, fs, center, scale), fs, free)
+    frozen = frozen_faces(as_given(p, fs, center, scale), fs, free)
     return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen)
 
 
@@ -223,7 +223,7 @@ def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
     only where it moved, and only when it is no worse than the input judged in the caller's
     coordinates (else the input, status and message saying so)."""
     p, fs, center, scale, tg = mesh.p, mesh.fs, mesh.center, mesh.scale, mesh.targets
-    before = _stats_as_given(p, fs, center, scale, tg)
+    before = stats_as_given(p, fs, center, scale, tg)
     out, after = p.copy(), before
     if status == "cancelled":
         return out, before, after, status, message
@@ -232,7 +232,7 @@ def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
     if order is not None:
         best, changed = order.back(best), order.back(changed)
     out[changed] = best[changed] * scale + center
-    after = _stats_as_given(out, fs, center, scale, tg) if changed.any() else before
+    after = stats_as_given(out, fs, center, scale, tg) if changed.any() else before
     if not (after == before or after.better_than(before)):  # judged in the caller's units
         out, after = p.copy(), before
         status = "failed" if before.n_inverted else "valid"
@@ -276,7 +276,7 @@ def normalisation(
     return center, math.ldexp(1.0, math.frexp(half)[1])
 
 
-def _as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> np.ndarray:
+def as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> np.ndarray:
     """The caller's points divided by the power-of-two scale (exact: every sign and mean
     ratio is the caller's bit for bit, and the same for any 2^k multiple of the input); the
     normalised points where the mesh sits more than 1e100 sizes from the origin."""
@@ -286,11 +286,11 @@ def _as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> n
     return (p - center) / scale
 
 
-def _stats_as_given(
+def stats_as_given(
     p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float, targets: Targets | None = None
 ) -> Stats:
     """Stats of the points as the caller has them (what `mesh_stats` of the result says)."""
-    return mesh_stats(_as_given(p, fs, center, scale), fs, targets)
+    return mesh_stats(as_given(p, fs, center, scale), fs, targets)
 
 
 def _check_orientation(p: np.ndarray, fs: FaceSet) -> None:

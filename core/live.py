@@ -1,0 +1,282 @@
+"""Live untangling: a drag's warm-started EEGT frames (NumPy; never imports bpy).
+
+A drag sets up once (``LiveSession``: topology, free nodes, targets, the search over the
+fixed nodes that do not move) and then runs frames: each frame moves the grabbed nodes to the
+cursor (they are pins), runs a few EEGT iterations from where the last frame left the mesh
+and returns the new positions with their quality. One frame is, bit for bit, the cold run
+``untangle_and_smooth(points, faces, fixed=pins, params=live_params(params, k))`` on the same
+input (EEGT untangling while a movable face is inverted, then EEGT smoothing, at most ``k``
+iterations each, the best iterate kept, never worse than its input), except that a frame may
+stop early when its time budget is spent and that a frame which ends still tangled returns its
+last iterate (where the next frame's untangling goes on) instead of the best one. Meshes the
+cold run renumbers for memory locality (``core.reorder``, 50 000 faces and more in a
+scattered numbering) run in their own order here.
+
+``uv_region`` cuts what a UV drag moves out of a welded UV map: the grabbed UV vertices'
+islands (or their selected faces), mirrored islands reflected as ``core.uv_untangle`` does.
+docs/live.md describes the tools built on it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .distance import NearestBoundary
+from .engine_numpy import NumpyEngine, edge_lengths
+from .faces import FaceSet, as_faceset
+from .params import EEGTParams
+from .pipeline import as_given, frozen_faces, normalisation, stats_as_given
+from .quality import Stats
+from .targets import prepare_targets
+from .topology import checked_edges, free_nodes
+from .uv_layout import UVLayout, island_faces
+
+__all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession", "UVRegion",
+           "live_params", "uv_region"]
+
+FRAME_ITERATIONS = 50  # at most this many untangling and this many smoothing steps a frame
+FRAME_BUDGET = 0.05  # seconds of core work a frame aims at (after its first iteration)
+_DIRECT_PAIRS = 1 << 20  # grabbed node / centroid pairs up to which distances are direct
+
+
+def live_params(params: EEGTParams | None, iterations: int) -> EEGTParams:
+    """The parameters of one frame: EEGT only (no global stage, polish or lift), a fixed
+    boundary, at most ``iterations`` untangling and smoothing iterations."""
+    return replace(params if params is not None else EEGTParams(), untangle="eegt",
+                   polish_iterations=0, lift_rounds=0, boundary="fixed",
+                   max_untangle_iterations=iterations, max_smooth_iterations=iterations)
+
+
+@dataclass(frozen=True)
+class LiveFrame:
+    """One frame's outcome (positions in the caller's coordinates)."""
+
+    points: np.ndarray  # (N, 2) float64
+    stats: Stats  # of ``points``: inverted faces, worst and mean quality
+    status: str  # "valid" | "untangled" | "tangled" (movable faces still inverted)
+    untangle_iterations: int
+    smooth_iterations: int
+    seconds: float
+
+
+class _AnchorSearch:
+    """Exact distance from element centroids to the nearest fixed node, the fixed nodes being
+    the ones that stay (one ``NearestBoundary``) and the grabbed ones at this frame's place:
+    the minimum of the two exact distances is the distance to the union, bit for bit."""
+
+    def __init__(self, still: NearestBoundary | None, gx: np.ndarray, gy: np.ndarray):
+        self.still, self.gx, self.gy = still, gx, gy
+
+    def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
+        if self.gx.size == 0:
+            return self.still.query(qx, qy)
+        if self.gx.size * qx.size > _DIRECT_PAIRS:
+            near = NearestBoundary(self.gx, self.gy).query(qx, qy)
+        else:
+            dx = self.gx[:, None] - qx[None, :]
+            dy = self.gy[:, None] - qy[None, :]
+            dx *= dx
+            dy *= dy
+            dx += dy
+            near = np.sqrt(np.minimum.reduce(dx, axis=0))
+        return near if self.still is None else np.minimum(self.still.query(qx, qy), near)
+
+
+class LiveSession:
+    """One drag: set up once, then ``frame`` per cursor position.
+
+    ``points`` (N, 2) and ``faces`` a counterclockwise planar mesh; ``fixed`` (N,) bool pins
+    that stay; ``grab`` the node ids that follow the cursor (pins too); ``targets`` per-corner
+    target shapes as in ``untangle_and_smooth``. ValueError (one line) for bad input or when
+    nothing can move."""
+
+    def __init__(self, points, faces, grab, fixed=None, params: EEGTParams | None = None,
+                 targets=None):
+        p = np.array(points, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 2 or not np.isfinite(p).all():
+            raise ValueError("points must be a finite (N, 2) array")
+        self.fs: FaceSet = as_faceset(faces, p.shape[0])
+        n = p.shape[0]
+        self.grab = np.asarray(grab, dtype=np.int64).ravel()
+        if self.grab.size and (self.grab.min() < 0 or self.grab.max() >= n):
+            raise ValueError(f"grabbed nodes must be node ids 0..{n - 1}")
+        if np.unique(self.grab).size != self.grab.size:
+            raise ValueError("grabbed nodes must be distinct")
+        pins = np.zeros(n, dtype=bool) if fixed is None else np.array(fixed, dtype=bool)
+        if pins.shape != (n,):
+            raise ValueError(f"fixed must be an ({n},) bool array, got shape {pins.shape}")
+        pins[self.grab] = True
+        self.pins = pins
+        edges = checked_edges(None, self.fs, n)
+        self.free = free_nodes(n, self.fs, pins, edges=edges)
+        if not self.free.any():
+            raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
+        self.params = params if params is not None else EEGTParams()
+        self._engine_params = live_params(self.params, 1)  # steps read no iteration cap
+        self.targets = prepare_targets(targets, self.fs)
+        self.points = p.copy()
+        used = self.fs.used_nodes(n)
+        still = ~self.free & used
+        still[self.grab] = False
+        self._still_ids = np.flatnonzero(still)
+        self._engine: NumpyEngine | None = None
+        self._frame_of: tuple[float, float, float] | None = None  # the still search's frame
+        self._still: NearestBoundary | None = None
+        self.step_seconds = 0.0  # the last frame's time per iteration
+
+    def _engine_at(self, work: np.ndarray, key: tuple[float, float, float]) -> NumpyEngine:
+        """The engine at ``work`` (normalised): the first frame builds it as a cold run does,
+        later ones restart it with the fixed nodes' search (rebuilt only when the frame's
+        centre or scale changed)."""
+        if self._engine is None:
+            self._engine = NumpyEngine(work, self.fs, self.free, self._engine_params, self.targets,
+                                       None)
+            self._frame_of, self._still = None, None
+            return self._engine
+        if self._frame_of != key:
+            self._still = None
+            if self._still_ids.size:
+                _, min_edge = edge_lengths(work[:, 0], work[:, 1], self.fs.groups)
+                cx = np.concatenate([work[g.nodes, 0].mean(0) for g in self.fs.groups])
+                cy = np.concatenate([work[g.nodes, 1].mean(0) for g in self.fs.groups])
+                self._still = NearestBoundary(work[self._still_ids, 0],
+                                              work[self._still_ids, 1], cx, cy,
+                                              min_cell=0.5 * min_edge)
+            self._frame_of = key
+        search = _AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())
+        self._engine = self._engine.restarted(work, search)
+        return self._engine
+
+    def frame(self, grab_to=None, iterations: int = FRAME_ITERATIONS,
+              budget: float | None = FRAME_BUDGET) -> LiveFrame:
+        """Move the grabbed nodes to ``grab_to`` ((k, 2) in ``grab`` order; None: where they
+        are), run at most ``iterations`` untangling then smoothing iterations from the last
+        frame's positions, stopping once ``budget`` seconds would be passed (after one
+        iteration at least; None: no time limit), and keep the result as the next frame's
+        start."""
+        t0 = time.perf_counter()
+        p = self.points.copy()
+        if grab_to is not None:
+            p[self.grab] = np.asarray(grab_to, dtype=np.float64).reshape(-1, 2)
+        if not np.isfinite(p).all():
+            raise ValueError("grabbed positions must be finite")
+        prm = live_params(self.params, iterations)
+        fs, free = self.fs, self.free
+        center, scale = normalisation(p, fs)
+        work = (p - center) / scale
+        frozen = frozen_faces(as_given(p, fs, center, scale), fs, free)
+        n_frozen = int(frozen.sum())
+        engine = self._engine_at(work, (float(center[0]), float(center[1]), float(scale)))
+        deadline = None if budget is None else t0 + budget
+        best = engine.stats()
+        engine.save_best()
+        current = best
+        n_untangle = n_smooth = 0
+        step = 0.0
+
+        def late() -> bool:
+            return deadline is not None and time.perf_counter() + step > deadline
+
+        def advance(phase: str) -> Stats:
+            nonlocal best, step
+            t = time.perf_counter()
+            s = engine.step(phase)
+            step = time.perf_counter() - t
+            if s.better_than(best):
+                best = s
+                engine.save_best()
+            return s
+
+        failed = False
+        if current.n_inverted > n_frozen:
+            for _ in range(prm.max_untangle_iterations):
+                current = advance("untangle")
+                n_untangle += 1
+                if current.n_inverted <= n_frozen or late():
+                    break
+            failed = best.n_inverted > n_frozen
+        if not failed and (n_untangle == 0 or not late()):
+            for _ in range(prm.max_smooth_iterations):
+                previous = current
+                current = advance("smooth")
+                n_smooth += 1
+                d_avg, d_min = current.q_avg - previous.q_avg, current.q_min - previous.q_min
+                worst = prm.tol_min > 0.0 and d_avg >= 0.0 and d_min >= prm.tol_min
+                if (d_avg < prm.tol and not worst) or late():
+                    break
+        before = stats_as_given(p, fs, center, scale, self.targets)
+        out, after = p.copy(), before
+        # still tangled: the last iterate, so that the next frame goes on from there (the
+        # best one may be the frame's start, and the untangling would never get further)
+        reached = engine.points() if failed else engine.best_points()
+        changed = np.any(reached != work, axis=1) & free
+        out[changed] = reached[changed] * scale + center
+        if changed.any():
+            after = stats_as_given(out, fs, center, scale, self.targets)
+            if not failed and not (after == before or after.better_than(before)):
+                out, after = p.copy(), before
+        self.points = out
+        if n_untangle + n_smooth:
+            self.step_seconds = step
+        status = "tangled" if after.n_inverted else (
+            "untangled" if before.n_inverted else "valid")
+        return LiveFrame(out, after, status, n_untangle, n_smooth, time.perf_counter() - t0)
+
+
+@dataclass(frozen=True)
+class UVRegion:
+    """What one UV drag moves, as a planar mesh over its own nodes."""
+
+    faces: FaceSet  # the region's faces over local nodes
+    nodes: np.ndarray  # (n,) UV vertex of each local node
+    face_ids: np.ndarray  # (f,) the region's faces in the UV map
+    rows: np.ndarray  # (c,) corner row in the UV map's faces of each local corner
+    points: np.ndarray  # (n, 2) oriented positions (mirrored islands reflected)
+    mirrored: np.ndarray  # (n,) bool: the node's island is mirrored
+    fixed: np.ndarray  # (n,) bool: pinned or on the border of the region
+    grab: np.ndarray  # local ids of the grabbed UV vertices
+
+    def to_uv(self, points: np.ndarray) -> np.ndarray:
+        """Region positions back to UV values (mirrored islands reflected back)."""
+        out = np.array(points, dtype=np.float64)
+        out[self.mirrored, 0] *= -1.0
+        return out
+
+    def from_uv(self, uv: np.ndarray) -> np.ndarray:
+        """UV values (of the region's nodes) to region positions."""
+        return self.to_uv(uv)
+
+
+def uv_region(layout: UVLayout, grab: np.ndarray, selected: np.ndarray | None = None,
+              scope: str = "tangles", pins: np.ndarray | None = None,
+              points: np.ndarray | None = None) -> UVRegion:
+    """The region a drag of the UV vertices ``grab`` moves: the faces of their islands (scope
+    "selection": only the ``selected`` faces of them); UV vertices used by a face outside the
+    region and ``pins`` stay, as in ``core.uv_untangle.untangle_uv``. ``points``: the UV
+    vertices' current values (default the layout's). ValueError (one line) when a grabbed
+    UV vertex is in no usable island."""
+    grab = np.unique(np.asarray(grab, dtype=np.int64).ravel())
+    if grab.size == 0:
+        raise ValueError("no UV vertex to grab")
+    side = layout.orientation()
+    islands = np.unique(layout.node_island[grab])
+    if (side[islands] == 0).any():
+        raise ValueError("the grabbed UV vertex's island has no UV area: unwrap it first")
+    region = np.isin(layout.island, islands)
+    if scope == "selection" and selected is not None:
+        region &= np.asarray(selected, dtype=bool)
+    face_ids = np.flatnonzero(region)
+    sub, nodes, rows = island_faces(layout.faces, face_ids)
+    keep = np.zeros(layout.n_nodes, dtype=bool) if pins is None else np.array(pins, bool)
+    keep[layout.faces.indices[np.repeat(~region, layout.faces.counts)]] = True
+    local = np.full(layout.n_nodes, -1, dtype=np.int64)
+    local[nodes] = np.arange(nodes.size)
+    g = local[grab]
+    if (g < 0).any():
+        raise ValueError("a grabbed UV vertex is outside the faces that move (select it)")
+    pos = layout.oriented_points(side, layout.points if points is None else points)[nodes]
+    return UVRegion(sub, nodes, face_ids, rows, pos, side[layout.node_island[nodes]] < 0,
+                    keep[nodes], g)
