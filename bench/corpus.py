@@ -111,7 +111,8 @@ def _box(x0: float, y0: float, x1: float, y1: float):
     def f(h: float) -> np.ndarray:
         corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]])
         out = []
-        for a, b in zip(corners[:-1], corners[1:]):
+        for i in range(4):
+            a, b = corners[i], corners[i + 1]
             k = max(2, round(np.hypot(*(b - a)) / h))
             t = np.arange(k)[:, None] / k
             out.append(a + t * (b - a))
@@ -369,7 +370,7 @@ def _make(spec: CaseSpec) -> dict:
 
         gen = {"square": jittered_square, "holes3": holed_square, "holes3quad": holed_quads}
         pts, fs = gen[spec.domain](spec.n, seed=spec.seed)
-        ref = pts  # generated tangled: no untangled rest shape
+        ref, _ = gen[spec.domain](spec.n, jitter=0.0, seed=spec.seed)  # the same, unjittered
         fixed = boundary_nodes(pts.shape[0], fs)
         return {"points": pts, "faces": fs, "fixed": fixed, "reference": ref, "extra": {}}
     ref, fs = base_mesh(spec.domain, spec.mesher, spec.n)
