@@ -398,13 +398,14 @@ def load(spec: CaseSpec) -> Case:
                  fixed=made["fixed"], reference=made["reference"],
                  meta=json.dumps({"params": spec.params, **made["extra"]}))
         tmp.replace(path)
-    data = np.load(path)
-    off = data["offsets"]
-    fs = faces_from_csr(off[:-1], np.diff(off), data["indices"])
-    meta = json.loads(str(data["meta"]))
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    points = arrays["points"]
+    fs = FaceSet(arrays["offsets"], arrays["indices"], points.shape[0])
+    meta = json.loads(str(arrays["meta"]))
     return Case(spec.name, spec.family, spec.seed, {**spec.params, **meta.get("params", {}),
                 **{k: v for k, v in meta.items() if k != "params"}},
-                data["points"], fs, data["fixed"], data["reference"])
+                points, fs, arrays["fixed"], arrays["reference"])
 
 
 SEEDS = (1, 2, 3)
