@@ -17,6 +17,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q --group dev
+	@# gmsh (test and benchmark meshes) loads X11/OpenGL libraries a slim Debian lacks
+	@$(PY) -c 'import gmsh' 2>/dev/null || { [ "$$(id -u)" = 0 ] && apt-get update -q && \
+	  apt-get install -y -q libglu1-mesa libgl1 libxcursor1 libxft2 libxinerama1; }
 	touch $(STAMP)
 
 lint: $(STAMP)
