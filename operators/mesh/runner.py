@@ -80,10 +80,9 @@ class ObjectResult(RunResult):
 
     def line(self) -> str:
         """The one report line of this object."""
-        if self.status == "error":
-            return f"{self.object}: not changed: {self.message}"
-        if self.status == "cancelled":
-            return f"{self.object}: cancelled, not changed"
+        unchanged = self.unchanged_line(self.object)
+        if unchanged:
+            return unchanged
         b, a = self.before or {}, self.after or {}
         text = (f"{self.object}: inverted {b.get('n_inverted')} -> {a.get('n_inverted')}, "
                 f"q_min {b.get('q_min', 0):.3f} -> {a.get('q_min', 0):.3f}, "

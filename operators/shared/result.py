@@ -59,6 +59,15 @@ class RunResult:
     def line(self) -> str:  # pragma: no cover - each kind words its own
         raise NotImplementedError
 
+    def unchanged_line(self, name: str) -> str | None:
+        """The report line of a run that changed nothing (an error or a cancel), else None;
+        every kind words these two alike."""
+        if self.status == "error":
+            return f"{name}: not changed: {self.message}"
+        if self.status == "cancelled":
+            return f"{name}: cancelled, not changed"
+        return None
+
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the per-object entry of the CLI report): "kind", then every
         field in declaration order."""

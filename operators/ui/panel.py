@@ -78,13 +78,8 @@ class VIEW3D_PT_eegt_params(_EEGTTab, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}  # noqa: RUF012
 
     def draw(self, context: bpy.types.Context) -> None:
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.eegt_settings
-        for f in props.param_fields():
-            if f.name not in props.MAIN_PANEL_FIELDS:
-                layout.prop(settings, f.name)
+        props.draw_param_fields(self.layout, context.scene.eegt_settings,
+                                skip=props.MAIN_PANEL_FIELDS)
 
 
 class VIEW3D_PT_eegt_last_run(_EEGTTab, bpy.types.Panel):

@@ -96,6 +96,16 @@ def param_fields() -> list[dataclasses.Field]:
     return list(dataclasses.fields(EEGTParams))
 
 
+def draw_param_fields(layout, settings, skip: tuple[str, ...] = ()) -> None:
+    """Draw every parameter of ``settings`` but those in ``skip`` into a panel's layout, as
+    the sidebars' Parameters sub-panels show them."""
+    layout.use_property_split = True
+    layout.use_property_decorate = False
+    for f in param_fields():
+        if f.name not in skip:
+            layout.prop(settings, f.name)
+
+
 def field_label(name: str) -> str:
     """Human label of a parameter (falls back to the field name)."""
     return LABELS.get(name, name.replace("_", " ").title())

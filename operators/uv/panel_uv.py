@@ -56,12 +56,7 @@ class IMAGE_PT_eegt_uv_params(_EEGTUVTab, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}  # noqa: RUF012
 
     def draw(self, context: bpy.types.Context) -> None:
-        layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
-        settings = context.scene.eegt_settings
-        for f in props.param_fields():
-            layout.prop(settings, f.name)
+        props.draw_param_fields(self.layout, context.scene.eegt_settings)
 
 
 class IMAGE_PT_eegt_uv_last_run(_EEGTUVTab, bpy.types.Panel):

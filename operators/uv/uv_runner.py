@@ -56,10 +56,9 @@ class UVObjectResult(RunResult):
     def line(self) -> str:
         """The one report line of this object."""
         name = f"{self.object} UV '{self.uv_map}'" if self.uv_map else self.object
-        if self.status == "error":
-            return f"{name}: not changed: {self.message}"
-        if self.status == "cancelled":
-            return f"{name}: cancelled, not changed"
+        unchanged = self.unchanged_line(name)
+        if unchanged:
+            return unchanged
         b, a = self.before or {}, self.after or {}
         text = (f"{name}: flipped {b.get('flipped')} -> {a.get('flipped')}, "
                 f"inverted {b.get('inverted')} -> {a.get('inverted')}, "
