@@ -256,13 +256,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     only islands without area, or every selected UV vertex fixed.
     """
     t0 = time.perf_counter()
-    selected = np.asarray(selected, dtype=bool)
-    if selected.shape != (layout.faces.n_faces,):
-        raise ValueError(f"selected must be a ({layout.faces.n_faces},) bool array")
-    if not selected.any():
-        raise ValueError("no UV faces selected")
-    if scope not in SCOPES:
-        raise ValueError(f"scope must be one of {', '.join(SCOPES)}, got {scope!r}")
+    selected = _checked_selection(layout, selected, scope)
     side = layout.orientation()
     keep = np.zeros(layout.n_nodes, dtype=bool) if fixed is None else np.array(fixed, bool)
     keep[layout.faces.indices[np.repeat(~selected, layout.faces.counts)]] = True
@@ -272,9 +266,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     out = layout.points.copy()
     moved = np.zeros(layout.n_nodes, dtype=bool)
     runs: list[IslandRun] = []
-    sel_ids = np.flatnonzero(selected)
-    sel_ids = sel_ids[np.argsort(layout.island[sel_ids], kind="stable")]
-    groups = np.split(sel_ids, np.flatnonzero(np.diff(layout.island[sel_ids])) + 1)
+    groups = _selected_by_island(layout, selected)
     backend_name = ""
     for k, ids in enumerate(groups):
         isl = int(layout.island[ids[0]])
@@ -323,6 +315,26 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     result.status = _overall(runs)
     result.notes = _notes(runs)
     return result
+
+
+def _checked_selection(layout: UVLayout, selected, scope: str) -> np.ndarray:
+    """The selection as a (F,) bool array; ValueError (one line) for a wrong shape, an empty
+    selection or an unknown scope."""
+    selected = np.asarray(selected, dtype=bool)
+    if selected.shape != (layout.faces.n_faces,):
+        raise ValueError(f"selected must be a ({layout.faces.n_faces},) bool array")
+    if not selected.any():
+        raise ValueError("no UV faces selected")
+    if scope not in SCOPES:
+        raise ValueError(f"scope must be one of {', '.join(SCOPES)}, got {scope!r}")
+    return selected
+
+
+def _selected_by_island(layout: UVLayout, selected: np.ndarray) -> list[np.ndarray]:
+    """The selected face ids, one array per island, islands in increasing order."""
+    sel_ids = np.flatnonzero(selected)
+    sel_ids = sel_ids[np.argsort(layout.island[sel_ids], kind="stable")]
+    return np.split(sel_ids, np.flatnonzero(np.diff(layout.island[sel_ids])) + 1)
 
 
 def _settle(layout: UVLayout, points: np.ndarray, selected: np.ndarray, side: np.ndarray,

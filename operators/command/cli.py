@@ -293,35 +293,7 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
             objs = _uv_objects(objs, ns.uv, rep)
         if reference is not None:
             _check_reference(objs, reference)
-        results, measured = [], []
-        for obj in objs:
-            progress = None if ns.quiet else printer(obj.name)
-            if ns.uv is not None:
-                res = uv_runner.run_object(obj, params, ns.uv or None, backend=backend,
-                                           device=device, use_pins=not ns.no_pinned,
-                                           scope=ns.uv_scope, progress=progress,
-                                           write_on_fail=not ns.no_write_on_fail)
-                store_last_run(obj, res)
-                results.append(res)
-                measured.append(None)  # --metrics measure positions, which --uv leaves alone
-                print("EEGT " + res.line(), flush=True)
-                continue
-            job = runner.prepare(obj, use_pinned=not ns.no_pinned, project=ns.project,
-                                 reference=reference)
-            runner.compute(job, params, backend, progress, device)
-            ok = job.error is None and job.result is not None and \
-                job.result.status in ("valid", "untangled")
-            res = runner.apply(obj, job, write=ok or not ns.no_write_on_fail)
-            store_last_run(obj, res)
-            results.append(res)
-            measured.append(metrics.run_metrics(job, res, ns.metrics) if ns.metrics else None)
-            if ns.metrics and "solver_mesh" in rep:
-                rep["solver_mesh"]["metrics"] = solver_run.group_metrics(job, res, ns.metrics)
-            print("EEGT " + res.line(), flush=True)
-        rep["objects"] = [r.as_dict() for r in results]
-        if ns.metrics:
-            for entry, m in zip(rep["objects"], measured):
-                entry["metrics"] = m
+        results = _run_objects(objs, ns, params, backend, device, reference, rep)
         if ns.output:
             staged = output_files.stage(ns.output)
         else:
@@ -342,6 +314,48 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
     if warming is not None:
         warming.join()
     return _commit(ns, rep, code, staged), rep
+
+
+def _run_objects(objs, ns, params, backend: str, device, reference,
+                 rep: dict[str, Any]) -> list:
+    """Run every object in turn (one report line each), keep each one's last run and fill
+    the report's objects (with their metrics when asked)."""
+    results, measured = [], []
+    for obj in objs:
+        progress = None if ns.quiet else printer(obj.name)
+        if ns.uv is not None:
+            res = uv_runner.run_object(obj, params, ns.uv or None, backend=backend,
+                                       device=device, use_pins=not ns.no_pinned,
+                                       scope=ns.uv_scope, progress=progress,
+                                       write_on_fail=not ns.no_write_on_fail)
+            m = None  # --metrics measure positions, which --uv leaves alone
+        else:
+            res, m = _run_mesh_object(obj, ns, params, backend, device, reference, progress,
+                                      rep)
+        store_last_run(obj, res)
+        results.append(res)
+        measured.append(m)
+        print("EEGT " + res.line(), flush=True)
+    rep["objects"] = [r.as_dict() for r in results]
+    if ns.metrics:
+        for entry, m in zip(rep["objects"], measured):
+            entry["metrics"] = m
+    return results
+
+
+def _run_mesh_object(obj, ns, params, backend: str, device, reference, progress,
+                     rep: dict[str, Any]):
+    """(result, metrics or None) of one object's vertex-position run."""
+    job = runner.prepare(obj, use_pinned=not ns.no_pinned, project=ns.project,
+                         reference=reference)
+    runner.compute(job, params, backend, progress, device)
+    ok = job.error is None and job.result is not None and \
+        job.result.status in ("valid", "untangled")
+    res = runner.apply(obj, job, write=ok or not ns.no_write_on_fail)
+    m = metrics.run_metrics(job, res, ns.metrics) if ns.metrics else None
+    if ns.metrics and "solver_mesh" in rep:
+        rep["solver_mesh"]["metrics"] = solver_run.group_metrics(job, res, ns.metrics)
+    return res, m
 
 
 def _fail(rep: dict[str, Any], message: str) -> int:
