@@ -40,6 +40,7 @@ __all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession", "UVRe
 FRAME_ITERATIONS = 50  # at most this many untangling and this many smoothing steps a frame
 FRAME_BUDGET = 0.05  # seconds of core work a frame aims at (after its first iteration)
 _DIRECT_PAIRS = 1 << 20  # grabbed node / centroid pairs up to which distances are direct
+_BOX_SLACK = 1e-9  # relative margin on the box bound (its rounding)
 
 
 def live_params(params: EEGTParams | None, iterations: int) -> EEGTParams:
@@ -63,26 +64,72 @@ class LiveFrame:
 
 
 class _AnchorSearch:
-    """Exact distance from element centroids to the nearest fixed node, the fixed nodes being
-    the ones that stay (one ``NearestBoundary``) and the grabbed ones at this frame's place:
-    the minimum of the two exact distances is the distance to the union, bit for bit."""
+    """Exact distance from element centroids to the nearest fixed node during a drag, the
+    fixed nodes being the ones that stay (``still``, one ``NearestBoundary``) and the grabbed
+    ones at this frame's place (``gx``, ``gy``): the minimum of the two exact distances is
+    the distance to the union, bit for bit (a minimum over a set does not depend on how the
+    set is split or ordered).
 
-    def __init__(self, still: NearestBoundary | None, gx: np.ndarray, gy: np.ndarray):
+    The still distances are kept per element between queries (``StillDistances``): only
+    centroids whose bits changed are measured again. The grabbed nodes are measured only for
+    centroids that may be nearer to them than to a still node: a centroid farther from the
+    grabbed nodes' bounding box than from its nearest still node keeps the still distance."""
+
+    def __init__(self, still: StillDistances | None, gx: np.ndarray, gy: np.ndarray):
         self.still, self.gx, self.gy = still, gx, gy
 
     def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
         if self.gx.size == 0:
             return self.still.query(qx, qy)
-        if self.gx.size * qx.size > _DIRECT_PAIRS:
-            near = NearestBoundary(self.gx, self.gy).query(qx, qy)
-        else:
-            dx = self.gx[:, None] - qx[None, :]
-            dy = self.gy[:, None] - qy[None, :]
-            dx *= dx
-            dy *= dy
-            dx += dy
-            near = np.sqrt(np.minimum.reduce(dx, axis=0))
-        return near if self.still is None else np.minimum(self.still.query(qx, qy), near)
+        if self.still is None:
+            return _nearest(self.gx, self.gy, qx, qy)
+        out = self.still.query(qx, qy).copy()
+        # a lower bound of the distance to the grabbed nodes: to their bounding box
+        bx = np.maximum(np.maximum(self.gx.min() - qx, qx - self.gx.max()), 0.0)
+        by = np.maximum(np.maximum(self.gy.min() - qy, qy - self.gy.max()), 0.0)
+        box = np.sqrt(bx * bx + by * by) * (1.0 - _BOX_SLACK)
+        near = np.flatnonzero(~(out < box))  # NaN centroids too
+        if near.size:
+            out[near] = np.minimum(out[near], _nearest(self.gx, self.gy, qx[near], qy[near]))
+        return out
+
+
+def _nearest(bx: np.ndarray, by: np.ndarray, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
+    """Exact distance from each (qx, qy) to the nearest (bx, by): over all pairs while they
+    are few, else by a ``NearestBoundary`` (the same minimum of the same squares)."""
+    if bx.size * qx.size > _DIRECT_PAIRS:
+        return NearestBoundary(bx, by).query(qx, qy)
+    dx = bx[:, None] - qx[None, :]
+    dy = by[:, None] - qy[None, :]
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return np.sqrt(np.minimum.reduce(dx, axis=0))
+
+
+class StillDistances:
+    """Distances from element centroids to the nearest of a drag's fixed nodes that stay,
+    kept per element: a query measures only the centroids whose bits differ from the last
+    query's (the rest keep their distance, the same bits as measuring them again)."""
+
+    def __init__(self, search: NearestBoundary):
+        self.search = search
+        self.qx = self.qy = self.d = None
+        self.measured = 0  # centroids measured by the last query
+
+    def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
+        if self.d is None or self.d.size != qx.size:
+            self.qx, self.qy = qx.copy(), qy.copy()
+            self.d = self.search.query(qx, qy)
+            self.measured = qx.size
+            return self.d
+        moved = np.flatnonzero((qx != self.qx) | (qy != self.qy))
+        self.measured = moved.size
+        if moved.size:
+            mx, my = qx[moved], qy[moved]
+            self.d[moved] = self.search.query(mx, my)
+            self.qx[moved], self.qy[moved] = mx, my
+        return self.d
 
 
 class LiveSession:
@@ -124,31 +171,38 @@ class LiveSession:
         self._still_ids = np.flatnonzero(still)
         self._engine: NumpyEngine | None = None
         self._frame_of: tuple[float, float, float] | None = None  # the still search's frame
-        self._still: NearestBoundary | None = None
+        self._still: StillDistances | None = None
         self.step_seconds = 0.0  # the last frame's time per iteration
+        self._prepare()
 
     def _engine_at(self, work: np.ndarray, key: tuple[float, float, float]) -> NumpyEngine:
-        """The engine at ``work`` (normalised): the first frame builds it as a cold run does,
-        later ones restart it with the fixed nodes' search (rebuilt only when the frame's
-        centre or scale changed)."""
+        """The engine restarted at ``work`` (normalised) with the fixed nodes' search: the
+        still nodes' distances are kept while the frame's centre and scale stay (a new
+        normalisation measures them again)."""
         if self._engine is None:
-            self._engine = NumpyEngine(work, self.fs, self.free, self._engine_params, self.targets,
-                                       None)
-            self._frame_of, self._still = None, None
-            return self._engine
+            self._engine = NumpyEngine.initial_state(work, self.fs, self.free,
+                                                     self._engine_params, self.targets)
         if self._frame_of != key:
             self._still = None
             if self._still_ids.size:
                 _, min_edge = edge_lengths(work[:, 0], work[:, 1], self.fs.groups)
                 cx = np.concatenate([work[g.nodes, 0].mean(0) for g in self.fs.groups])
                 cy = np.concatenate([work[g.nodes, 1].mean(0) for g in self.fs.groups])
-                self._still = NearestBoundary(work[self._still_ids, 0],
-                                              work[self._still_ids, 1], cx, cy,
-                                              min_cell=0.5 * min_edge)
+                self._still = StillDistances(NearestBoundary(
+                    work[self._still_ids, 0], work[self._still_ids, 1], cx, cy,
+                    min_cell=0.5 * min_edge))
+                self._still.query(cx, cy)  # the centroids at the start, measured once
             self._frame_of = key
         search = _AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())
         self._engine = self._engine.restarted(work, search)
         return self._engine
+
+    def _prepare(self) -> None:
+        """The drag's set-up at the start positions: the engine's state and the still nodes'
+        search with their distances, so that the first frame costs what later ones do."""
+        center, scale = normalisation(self.points, self.fs)
+        self._engine_at((self.points - center) / scale,
+                        (float(center[0]), float(center[1]), float(scale)))
 
     def frame(self, grab_to=None, iterations: int = FRAME_ITERATIONS,
               budget: float | None = FRAME_BUDGET) -> LiveFrame:
