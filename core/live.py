@@ -28,7 +28,8 @@ from .distance import NearestBoundary
 from .engine_numpy import NumpyEngine, edge_lengths
 from .faces import FaceSet, as_faceset
 from .params import EEGTParams
-from .pipeline import as_given, frozen_faces, normalisation, stats_as_given
+from .pipeline import as_given, frozen_faces, normalisation
+from .live_reuse import AnchorSearch, GivenQuality, StillDistances
 from .quality import Stats
 from .targets import prepare_targets
 from .topology import checked_edges, free_nodes
@@ -39,8 +40,6 @@ __all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession", "UVRe
 
 FRAME_ITERATIONS = 50  # at most this many untangling and this many smoothing steps a frame
 FRAME_BUDGET = 0.05  # seconds of core work a frame aims at (after its first iteration)
-_DIRECT_PAIRS = 1 << 20  # grabbed node / centroid pairs up to which distances are direct
-_BOX_SLACK = 1e-9  # relative margin on the box bound (its rounding)
 
 
 def live_params(params: EEGTParams | None, iterations: int) -> EEGTParams:
@@ -61,75 +60,6 @@ class LiveFrame:
     untangle_iterations: int
     smooth_iterations: int
     seconds: float
-
-
-class _AnchorSearch:
-    """Exact distance from element centroids to the nearest fixed node during a drag, the
-    fixed nodes being the ones that stay (``still``, one ``NearestBoundary``) and the grabbed
-    ones at this frame's place (``gx``, ``gy``): the minimum of the two exact distances is
-    the distance to the union, bit for bit (a minimum over a set does not depend on how the
-    set is split or ordered).
-
-    The still distances are kept per element between queries (``StillDistances``): only
-    centroids whose bits changed are measured again. The grabbed nodes are measured only for
-    centroids that may be nearer to them than to a still node: a centroid farther from the
-    grabbed nodes' bounding box than from its nearest still node keeps the still distance."""
-
-    def __init__(self, still: StillDistances | None, gx: np.ndarray, gy: np.ndarray):
-        self.still, self.gx, self.gy = still, gx, gy
-
-    def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
-        if self.gx.size == 0:
-            return self.still.query(qx, qy)
-        if self.still is None:
-            return _nearest(self.gx, self.gy, qx, qy)
-        out = self.still.query(qx, qy).copy()
-        # a lower bound of the distance to the grabbed nodes: to their bounding box
-        bx = np.maximum(np.maximum(self.gx.min() - qx, qx - self.gx.max()), 0.0)
-        by = np.maximum(np.maximum(self.gy.min() - qy, qy - self.gy.max()), 0.0)
-        box = np.sqrt(bx * bx + by * by) * (1.0 - _BOX_SLACK)
-        near = np.flatnonzero(~(out < box))  # NaN centroids too
-        if near.size:
-            out[near] = np.minimum(out[near], _nearest(self.gx, self.gy, qx[near], qy[near]))
-        return out
-
-
-def _nearest(bx: np.ndarray, by: np.ndarray, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
-    """Exact distance from each (qx, qy) to the nearest (bx, by): over all pairs while they
-    are few, else by a ``NearestBoundary`` (the same minimum of the same squares)."""
-    if bx.size * qx.size > _DIRECT_PAIRS:
-        return NearestBoundary(bx, by).query(qx, qy)
-    dx = bx[:, None] - qx[None, :]
-    dy = by[:, None] - qy[None, :]
-    dx *= dx
-    dy *= dy
-    dx += dy
-    return np.sqrt(np.minimum.reduce(dx, axis=0))
-
-
-class StillDistances:
-    """Distances from element centroids to the nearest of a drag's fixed nodes that stay,
-    kept per element: a query measures only the centroids whose bits differ from the last
-    query's (the rest keep their distance, the same bits as measuring them again)."""
-
-    def __init__(self, search: NearestBoundary):
-        self.search = search
-        self.qx = self.qy = self.d = None
-        self.measured = 0  # centroids measured by the last query
-
-    def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
-        if self.d is None or self.d.size != qx.size:
-            self.qx, self.qy = qx.copy(), qy.copy()
-            self.d = self.search.query(qx, qy)
-            self.measured = qx.size
-            return self.d
-        moved = np.flatnonzero((qx != self.qx) | (qy != self.qy))
-        self.measured = moved.size
-        if moved.size:
-            mx, my = qx[moved], qy[moved]
-            self.d[moved] = self.search.query(mx, my)
-            self.qx[moved], self.qy[moved] = mx, my
-        return self.d
 
 
 class LiveSession:
@@ -172,6 +102,7 @@ class LiveSession:
         self._engine: NumpyEngine | None = None
         self._frame_of: tuple[float, float, float] | None = None  # the still search's frame
         self._still: StillDistances | None = None
+        self._given = GivenQuality(self.fs, self.targets)
         self.step_seconds = 0.0  # the last frame's time per iteration
         self._prepare()
 
@@ -193,8 +124,8 @@ class LiveSession:
                     min_cell=0.5 * min_edge))
                 self._still.query(cx, cy)  # the centroids at the start, measured once
             self._frame_of = key
-        search = _AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())
-        self._engine = self._engine.restarted(work, search)
+        search = AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())
+        self._engine = self._engine.restarted(work, search, keep_quality=True)
         return self._engine
 
     def _prepare(self) -> None:
@@ -221,7 +152,8 @@ class LiveSession:
         fs, free = self.fs, self.free
         center, scale = normalisation(p, fs)
         work = (p - center) / scale
-        frozen = frozen_faces(as_given(p, fs, center, scale), fs, free)
+        given = as_given(p, fs, center, scale)
+        frozen = frozen_faces(given, fs, free)
         n_frozen = int(frozen.sum())
         engine = self._engine_at(work, (float(center[0]), float(center[1]), float(scale)))
         deadline = None if budget is None else t0 + budget
@@ -261,7 +193,7 @@ class LiveSession:
                 worst = prm.tol_min > 0.0 and d_avg >= 0.0 and d_min >= prm.tol_min
                 if (d_avg < prm.tol and not worst) or late():
                     break
-        before = stats_as_given(p, fs, center, scale, self.targets)
+        before = self._given.stats(given)
         out, after = p.copy(), before
         # still tangled: the last iterate, so that the next frame goes on from there (the
         # best one may be the frame's start, and the untangling would never get further)
@@ -269,7 +201,7 @@ class LiveSession:
         changed = np.any(reached != work, axis=1) & free
         out[changed] = reached[changed] * scale + center
         if changed.any():
-            after = stats_as_given(out, fs, center, scale, self.targets)
+            after = self._given.stats(as_given(out, fs, center, scale))
             if not failed and not (after == before or after.better_than(before)):
                 out, after = p.copy(), before
         self.points = out
