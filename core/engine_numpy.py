@@ -136,15 +136,20 @@ class NumpyEngine:
         `free` moves, the other used nodes are the anchors: the paper)."""
         self._setup(points, faces, free, params, None, targets, motion)
 
-    def restarted(self, points: np.ndarray, distance=None) -> NumpyEngine:
+    def restarted(self, points: np.ndarray, distance=None,
+                  keep_quality: bool = False) -> NumpyEngine:
         """A fresh engine for the same run at new positions whose fixed nodes are where they
         are here: it shares the nearest-boundary search (its queries are exact, whatever
         element centroids it was refined for) instead of building another one. `distance`:
         a search over the fixed nodes at their new positions when some moved (an object whose
-        `query(qx, qy)` returns the exact nearest distances, core.live)."""
+        `query(qx, qy)` returns the exact nearest distances, core.live). `keep_quality`:
+        faces whose nodes all keep this engine's bits keep their quality (a face's quality
+        depends on its own corners only: the same bits), the others are measured."""
         engine = NumpyEngine.__new__(NumpyEngine)
+        known = (self.x, self.y, self.q) if keep_quality else None
         engine._setup(points, self.faces, self.free, self.params, distance or self._distance,
-                      self.targets, self.motion, defer_distances=True)  # may never be stepped
+                      self.targets, self.motion, defer_distances=True,  # may never be stepped
+                      known=known)
         return engine
 
     @classmethod
@@ -164,10 +169,13 @@ class NumpyEngine:
         return None if self._distance is _UNIFORM else self._distance.tree
 
     def _setup(self, points, faces: FaceSet, free, params: EEGTParams, nearest, targets,
-               motion: BoundaryMotion | None = None, defer_distances: bool = False) -> None:
+               motion: BoundaryMotion | None = None, defer_distances: bool = False,
+               known=None) -> None:
         """State at `points`; `nearest`: distances to these fixed nodes (None: set them up);
         defer_distances: leave the distance weights to the first step (`inv_d_pow` None:
-        this engine's `step`, or the OpenCL engine's on the device), the same values later."""
+        this engine's `step`, or the OpenCL engine's on the device), the same values later;
+        `known`: (x, y, per-group q) of another state of these faces, whose q faces with
+        unchanged corners keep."""
         self.params = params
         self.faces = faces
         self.targets = targets
@@ -181,9 +189,10 @@ class NumpyEngine:
         self.free = np.ascontiguousarray(free, dtype=bool)
         self.groups = faces.groups
         self.corner_nodes = np.concatenate([g.nodes.ravel() for g in self.groups])
-        self.q = self._quality_all()
+        self.q = self._quality_all() if known is None else self._quality_since(*known)
         self.lbar, min_edge = self._edge_lengths()
-        centroids = self._centroids()
+        needs_centroids = nearest is None or not (defer_distances or nearest is _UNIFORM)
+        centroids = self._centroids() if needs_centroids else None
         if nearest is None and motion is not None:
             nearest = _UNIFORM
             if motion.anchor_x.size:
@@ -241,6 +250,21 @@ class NumpyEngine:
             group_quality(*self._gather(g), None if t is None else t.corners)
             for g, t in zip(self.groups, self.group_targets)
         ]
+
+    def _quality_since(self, x: np.ndarray, y: np.ndarray, q: list[np.ndarray]) -> list[np.ndarray]:
+        """`_quality_all`, measuring only the faces with a corner whose bits differ from
+        (x, y), where the per-group qualities were `q`."""
+        moved = (self.x != x) | (self.y != y)
+        out = []
+        for g, t, qg in zip(self.groups, self.group_targets, q):
+            cols = np.flatnonzero(moved[g.nodes].any(axis=0))
+            qg = qg.copy()
+            if cols.size:
+                nodes = g.nodes[:, cols]
+                corners = None if t is None else (t.corners[0][:, cols], t.corners[1][:, cols])
+                qg[cols] = group_quality(self.x[nodes], self.y[nodes], corners)
+            out.append(qg)
+        return out
 
     # -- the iteration -------------------------------------------------------------------
     def stats(self) -> Stats:

@@ -27,8 +27,9 @@ import numpy as np
 from .distance import NearestBoundary
 from .engine_numpy import NumpyEngine, edge_lengths
 from .faces import FaceSet, as_faceset
+from .live_reuse import AnchorSearch, GivenQuality, StillDistances
 from .params import EEGTParams
-from .pipeline import as_given, frozen_faces, normalisation, stats_as_given
+from .pipeline import as_given, frozen_faces, normalisation
 from .quality import Stats
 from .targets import prepare_targets
 from .topology import checked_edges, free_nodes
@@ -38,8 +39,8 @@ __all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession", "UVRe
            "live_params", "uv_region"]
 
 FRAME_ITERATIONS = 50  # at most this many untangling and this many smoothing steps a frame
-FRAME_BUDGET = 0.05  # seconds of core work a frame aims at (after its first iteration)
-_DIRECT_PAIRS = 1 << 20  # grabbed node / centroid pairs up to which distances are direct
+FRAME_BUDGET = 0.04  # seconds a frame aims at, its writes into Blender included (at least
+# one iteration runs: a mesh whose single iteration takes longer passes it)
 
 
 def live_params(params: EEGTParams | None, iterations: int) -> EEGTParams:
@@ -60,29 +61,6 @@ class LiveFrame:
     untangle_iterations: int
     smooth_iterations: int
     seconds: float
-
-
-class _AnchorSearch:
-    """Exact distance from element centroids to the nearest fixed node, the fixed nodes being
-    the ones that stay (one ``NearestBoundary``) and the grabbed ones at this frame's place:
-    the minimum of the two exact distances is the distance to the union, bit for bit."""
-
-    def __init__(self, still: NearestBoundary | None, gx: np.ndarray, gy: np.ndarray):
-        self.still, self.gx, self.gy = still, gx, gy
-
-    def query(self, qx: np.ndarray, qy: np.ndarray) -> np.ndarray:
-        if self.gx.size == 0:
-            return self.still.query(qx, qy)
-        if self.gx.size * qx.size > _DIRECT_PAIRS:
-            near = NearestBoundary(self.gx, self.gy).query(qx, qy)
-        else:
-            dx = self.gx[:, None] - qx[None, :]
-            dy = self.gy[:, None] - qy[None, :]
-            dx *= dx
-            dy *= dy
-            dx += dy
-            near = np.sqrt(np.minimum.reduce(dx, axis=0))
-        return near if self.still is None else np.minimum(self.still.query(qx, qy), near)
 
 
 class LiveSession:
@@ -124,39 +102,48 @@ class LiveSession:
         self._still_ids = np.flatnonzero(still)
         self._engine: NumpyEngine | None = None
         self._frame_of: tuple[float, float, float] | None = None  # the still search's frame
-        self._still: NearestBoundary | None = None
+        self._still: StillDistances | None = None
+        self._given = GivenQuality(self.fs, self.targets)
         self.step_seconds = 0.0  # the last frame's time per iteration
+        self._tail = 0.0  # the last frame's seconds after its iterations
+        self._prepare()
 
     def _engine_at(self, work: np.ndarray, key: tuple[float, float, float]) -> NumpyEngine:
-        """The engine at ``work`` (normalised): the first frame builds it as a cold run does,
-        later ones restart it with the fixed nodes' search (rebuilt only when the frame's
-        centre or scale changed)."""
+        """The engine restarted at ``work`` (normalised) with the fixed nodes' search: the
+        still nodes' distances are kept while the frame's centre and scale stay (a new
+        normalisation measures them again)."""
         if self._engine is None:
-            self._engine = NumpyEngine(work, self.fs, self.free, self._engine_params, self.targets,
-                                       None)
-            self._frame_of, self._still = None, None
-            return self._engine
+            self._engine = NumpyEngine.initial_state(work, self.fs, self.free,
+                                                     self._engine_params, self.targets)
         if self._frame_of != key:
             self._still = None
             if self._still_ids.size:
                 _, min_edge = edge_lengths(work[:, 0], work[:, 1], self.fs.groups)
                 cx = np.concatenate([work[g.nodes, 0].mean(0) for g in self.fs.groups])
                 cy = np.concatenate([work[g.nodes, 1].mean(0) for g in self.fs.groups])
-                self._still = NearestBoundary(work[self._still_ids, 0],
-                                              work[self._still_ids, 1], cx, cy,
-                                              min_cell=0.5 * min_edge)
+                self._still = StillDistances(NearestBoundary(
+                    work[self._still_ids, 0], work[self._still_ids, 1], cx, cy,
+                    min_cell=0.5 * min_edge))
+                self._still.query(cx, cy)  # the centroids at the start, measured once
             self._frame_of = key
-        search = _AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())
-        self._engine = self._engine.restarted(work, search)
+        search = AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())
+        self._engine = self._engine.restarted(work, search, keep_quality=True)
         return self._engine
+
+    def _prepare(self) -> None:
+        """The drag's set-up at the start positions: the engine's state and the still nodes'
+        search with their distances, so that the first frame costs what later ones do."""
+        center, scale = normalisation(self.points, self.fs)
+        self._engine_at((self.points - center) / scale,
+                        (float(center[0]), float(center[1]), float(scale)))
 
     def frame(self, grab_to=None, iterations: int = FRAME_ITERATIONS,
               budget: float | None = FRAME_BUDGET) -> LiveFrame:
         """Move the grabbed nodes to ``grab_to`` ((k, 2) in ``grab`` order; None: where they
         are), run at most ``iterations`` untangling then smoothing iterations from the last
         frame's positions, stopping once ``budget`` seconds would be passed (after one
-        iteration at least; None: no time limit), and keep the result as the next frame's
-        start."""
+        iteration at least; None: no time limit; the work after the iterations counts, as
+        long as the last frame's took), and keep the result as the next frame's start."""
         t0 = time.perf_counter()
         p = self.points.copy()
         if grab_to is not None:
@@ -167,10 +154,11 @@ class LiveSession:
         fs, free = self.fs, self.free
         center, scale = normalisation(p, fs)
         work = (p - center) / scale
-        frozen = frozen_faces(as_given(p, fs, center, scale), fs, free)
+        given = as_given(p, fs, center, scale)
+        frozen = frozen_faces(given, fs, free)
         n_frozen = int(frozen.sum())
         engine = self._engine_at(work, (float(center[0]), float(center[1]), float(scale)))
-        deadline = None if budget is None else t0 + budget
+        deadline = None if budget is None else t0 + budget - self._tail
         best = engine.stats()
         engine.save_best()
         current = best
@@ -207,7 +195,8 @@ class LiveSession:
                 worst = prm.tol_min > 0.0 and d_avg >= 0.0 and d_min >= prm.tol_min
                 if (d_avg < prm.tol and not worst) or late():
                     break
-        before = stats_as_given(p, fs, center, scale, self.targets)
+        t_tail = time.perf_counter()
+        before = self._given.stats(given)
         out, after = p.copy(), before
         # still tangled: the last iterate, so that the next frame goes on from there (the
         # best one may be the frame's start, and the untangling would never get further)
@@ -215,7 +204,7 @@ class LiveSession:
         changed = np.any(reached != work, axis=1) & free
         out[changed] = reached[changed] * scale + center
         if changed.any():
-            after = stats_as_given(out, fs, center, scale, self.targets)
+            after = self._given.stats(as_given(out, fs, center, scale))
             if not failed and not (after == before or after.better_than(before)):
                 out, after = p.copy(), before
         self.points = out
@@ -223,7 +212,9 @@ class LiveSession:
             self.step_seconds = step
         status = "tangled" if after.n_inverted else (
             "untangled" if before.n_inverted else "valid")
-        return LiveFrame(out, after, status, n_untangle, n_smooth, time.perf_counter() - t0)
+        t1 = time.perf_counter()
+        self._tail = t1 - t_tail
+        return LiveFrame(out, after, status, n_untangle, n_smooth, t1 - t0)
 
 
 @dataclass(frozen=True)

@@ -259,17 +259,34 @@ def _failed(why: str, run: _Run, message: str) -> str:
     return f"{head}; the run: {message.removeprefix('failed: ')}"
 
 
+def _used_rows(p: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """The rows of p that belong to a face (p itself when all do)."""
+    used = fs.used_nodes(p.shape[0])
+    return p if used.all() else p[used]
+
+
+def _column_min(p: np.ndarray) -> np.ndarray:
+    """p.min(axis=0) (a minimum has one value whatever the order: the same bits), column by
+    column, which NumPy does several times faster on an (N, 2) array."""
+    return np.array([p[:, k].min() for k in range(p.shape[1])])
+
+
+def _column_max(p: np.ndarray) -> np.ndarray:
+    """p.max(axis=0), column by column (as `_column_min`)."""
+    return np.array([p[:, k].max() for k in range(p.shape[1])])
+
+
 def normalisation(
     p: np.ndarray, fs: FaceSet, centre_on: np.ndarray | None = None
 ) -> tuple[np.ndarray, float]:
     """(centre, scale) that map the used nodes into [-1, 1]^2: the bounding-box centre (of
     the `centre_on` nodes if given) and a power of two (so that scaling is exact), computed
     without overflow up to 1e308."""
-    used = p[fs.used_nodes(p.shape[0])]
-    lo, hi = used.min(axis=0), used.max(axis=0)
+    used = _used_rows(p, fs)
+    lo, hi = _column_min(used), _column_max(used)
     half = float(np.max(0.5 * hi - 0.5 * lo))
     if centre_on is not None:
-        lo, hi = p[centre_on].min(axis=0), p[centre_on].max(axis=0)
+        lo, hi = _column_min(p[centre_on]), _column_max(p[centre_on])
     center = 0.5 * lo + 0.5 * hi
     if not half > 0.0:
         return center, 1.0
@@ -281,7 +298,7 @@ def as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> np
     ratio is the caller's bit for bit, and the same for any 2^k multiple of the input); the
     normalised points where the mesh sits more than 1e100 sizes from the origin."""
     q = p / scale
-    if float(np.max(np.abs(q[fs.used_nodes(p.shape[0])]))) < 1e100:
+    if float(np.max(np.abs(_used_rows(q, fs)))) < 1e100:
         return q
     return (p - center) / scale
 

@@ -35,6 +35,11 @@ class StepTimes:
     write: float = 0.0
 
 
+def core_budget(budget: float | None, last: StepTimes) -> float | None:
+    """The core's share of a frame's ``budget``: what the last frame's writes left of it."""
+    return None if budget is None else budget - last.write
+
+
 def nearest_within(points: np.ndarray, at: np.ndarray, radius: float,
                    among: np.ndarray | None = None) -> int | None:
     """Row of ``points`` nearest to ``at`` within ``radius`` (only rows in the bool mask
@@ -139,7 +144,7 @@ class UVDrag:
         warm from the last frame, the changed UVs written into the edit mesh."""
         t0 = time.perf_counter()
         frame = self.session.frame(self.targets_for(cursor), iterations=iterations,
-                                   budget=budget)
+                                   budget=core_budget(budget, self.times))
         t1 = time.perf_counter()
         # only the loops of UV vertices that moved: a loop a float32 step away from its UV
         # vertex's value (welded) keeps its own bits, as Untangle & Smooth UVs keeps them
@@ -234,7 +239,8 @@ class MeshDrag:
             if self.anchor is None:
                 self.anchor = np.asarray(at, dtype=np.float64)
             targets = self.start + (np.asarray(at, dtype=np.float64) - self.anchor)
-        frame = self.session.frame(targets, iterations=iterations, budget=budget)
+        frame = self.session.frame(targets, iterations=iterations,
+                                   budget=core_budget(budget, self.times))
         t1 = time.perf_counter()
         moved = frame.points != self.job.points2d
         co = self.original.copy()
