@@ -25,10 +25,9 @@ $(STAMP): pyproject.toml
 lint: $(STAMP)
 	$(PY) -m ruff check .
 
-# Lint and the headless-Blender and batch tests not marked slow or e2e (they cover the
-# operators, the command and the batch): the check while working; `make test` runs all.
+# Lint and every test not marked slow or e2e: the check while working; `make test` runs all.
 test-fast: lint
-	$(PY) -m pytest -q -m "not slow and not e2e" tests/blender tests/batch
+	$(PY) -m pytest -q -m "not slow and not e2e" tests
 
 test-core: $(STAMP)
 	$(PY) -m pytest -q -m "not blender and not e2e" tests
