@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Literal, Protocol
 import numpy as np
 
 from ..choices import global_stage_on_device
+from .state import REL_TOL
 
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
@@ -54,7 +55,7 @@ class Solver(Protocol):
         *,
         max_it: int,
         guard: bool,
-        rel_tol: float = 1e-7,
+        rel_tol: float = REL_TOL,
         tick: Callable[[int], bool] | None = None,
     ) -> tuple[np.ndarray, int]: ...
 

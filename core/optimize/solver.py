@@ -10,7 +10,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..fpmath import add_reduce, add_reduce_rows
-from .state import ARMIJO, CURVATURE, LBFGS_MEMORY, TRIALS, State, skipped_trials, stops
+from .state import (
+    ARMIJO,
+    CURVATURE,
+    LBFGS_MEMORY,
+    REL_TOL,
+    TRIALS,
+    State,
+    skipped_trials,
+    stops,
+)
 
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
@@ -26,7 +35,7 @@ def lbfgs(
     *,
     max_it: int,
     guard: bool,
-    rel_tol: float = 1e-7,
+    rel_tol: float = REL_TOL,
     tick: Callable[[int], bool] | None = None,
 ) -> tuple[np.ndarray, int]:
     """L-BFGS with a diagonal preconditioner and Armijo backtracking from v0.

@@ -21,7 +21,7 @@ from ..opencl.runtime import LOCK, runtime
 from .dispatch import TooLarge, on_host, single_kernel_corners
 from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
-from .state import LBFGS_MEMORY, State, line_search_defines, stops
+from .state import LBFGS_MEMORY, REL_TOL, State, line_search_defines, stops
 
 __all__ = ["KERNEL_FILE", "OpenCLLbfgs", "build_options", "device_solver", "kernel_source"]
 
@@ -140,7 +140,7 @@ class OpenCLLbfgs:
         *,
         max_it: int,
         guard: bool,
-        rel_tol: float = 1e-7,
+        rel_tol: float = REL_TOL,
         tick: Callable[[int], bool] | None = None,
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}

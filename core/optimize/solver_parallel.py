@@ -26,7 +26,15 @@ from ..opencl.runtime import LOCK, runtime
 from .dispatch import SMALL_CORNERS, Solver, TooLarge, route, single_kernel_corners
 from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
-from .state import LBFGS_MEMORY, LIMIT_MARGIN, TRIALS, State, line_search_defines, stops
+from .state import (
+    LBFGS_MEMORY,
+    LIMIT_MARGIN,
+    REL_TOL,
+    TRIALS,
+    State,
+    line_search_defines,
+    stops,
+)
 
 __all__ = ["KERNEL_FILE", "SMALL_CORNERS", "ParallelLbfgs", "build_options", "device_solver",
            "kernel_source", "reduction_plan"]
@@ -491,7 +499,7 @@ class ParallelLbfgs:
         *,
         max_it: int,
         guard: bool,
-        rel_tol: float = 1e-7,
+        rel_tol: float = REL_TOL,
         tick: Callable[[int], bool] | None = None,
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}

@@ -30,6 +30,7 @@ TICK_CORNERS = 500_000  # ... and every TICK_CORNERS / corners iterations (big m
 
 LIMIT_MARGIN = 1e-6  # trial steps within this (relative) of a det root are evaluated
 TRIALS = 40  # line-search halvings
+REL_TOL = 1e-7  # a solve's default stop: 5 iterations lower F by less than this (relative)
 ARMIJO = 1e-4  # sufficient decrease: accept a trial step when e_t <= e + ARMIJO step slope
 CURVATURE = 1e-12  # keep a pair (s, y) only when s.y > CURVATURE |s| |y|
 
