@@ -44,7 +44,7 @@ class EEGTParams:
         },
     )
     max_untangle_iterations: int = field(
-        default=5000, metadata={"help": "Untangling gives up after this many iterations."}
+        default=20000, metadata={"help": "Untangling gives up after this many iterations."}
     )
     max_smooth_iterations: int = field(
         default=1000, metadata={"help": "Smoothing stops after this many iterations."}

@@ -24,6 +24,8 @@ from .submesh import Neighbourhood
 __all__ = ["lift_min_quality", "untangle_global"]
 
 INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on spun holes: docs)
+INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses a larger mesh
+# in more iterations, and eps shrinking before it has moved stalls it (docs: "Long eps rounds")
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -185,6 +187,7 @@ class _Continuation:
         self.opt, self.progress, self.run_lbfgs = opt, progress, run_lbfgs
         self.v = st.pack(st.x, st.y)
         self.eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else EPS_MIN
+        self.inner = max(INNER_ITER, int(np.ceil(INNER_PER_SQRT_NODE * np.sqrt(free.sum()))))
         self.best_v, self.best_inv = self.v, n_inv
         self.valid = dmin > 0.0  # every corner that can move is positive (others constant)
         self.total = 0
@@ -218,12 +221,12 @@ class _Continuation:
             self.eps = self._next_eps(decrease, dmin)
 
     def _cap(self, guard: bool) -> int:
-        """The round's L-BFGS iterations: while tangled INNER_ITER per eps; once valid, one
+        """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one
         long run, no memory restarts (the rest of the polish budget)."""
         left = self.opt.max_iter - self.total
         if guard:
             return min(left, self.opt.polish_iter - self.polish_used)
-        return min(left, INNER_ITER)
+        return min(left, self.inner)
 
     def _tick(self) -> Callable[[int], bool] | None:
         """The progress tick of a round (long runs report, and cancel, from inside)."""
