@@ -1,7 +1,7 @@
 """The peer untangler side by side: the 2D program of ssloy/invertible-maps (`untangle2d`,
 foldover-free L-BFGS on a regularized distortion energy, boundary nodes locked).
 
-The program is not part of this repository: build it outside (docs/results_corpus.md says
+The program is not part of this repository: build it outside (docs/corpus.md says
 how) and name it with EEGT_PEER_UNTANGLER=/path/to/untangle2d. Without it, `run_peer`
 raises PeerMissing with a one-line reason and the benchmarks skip the peer's column.
 
