@@ -36,6 +36,8 @@ LIFT_RINGS = 6  # rounds after the first move only the nodes within this many ri
 LIFT_ACTIVE = 1.0  # ... the elements with q < LIFT_ACTIVE * floor (a small local problem)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
+POLISH_FLAT = 0.05  # the chunked whole-mesh run stops when a run gains less than this share
+#                     of the mean quality its runs gained so far (its gains have flattened)
 
 
 def _checked_input(points, free) -> tuple[np.ndarray, np.ndarray]:
@@ -285,18 +287,25 @@ class _Continuation:
 
 
 def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: GlobalOptions,
-          tick: Callable[[int], bool] | None) -> tuple[np.ndarray, int]:
-    """The lift's whole-mesh run: one L-BFGS run, or (opt.lift_chunk > 0) runs of that many
-    iterations with fresh memory each, until one lowers the energy by less than
-    opt.lift_rel_tol (relative). Fresh memory matters on a large mesh with a few stiff
-    corners (a just-untangled spot): the memory's scale then shrinks every step of the whole
-    mesh (docs/global_untangle.md, "Restarts")."""
+          tick: Callable[[int], bool] | None,
+          show: Callable[[np.ndarray], None] | None = None
+          ) -> tuple[np.ndarray, int, np.ndarray]:
+    """The lift's whole-mesh run: (point, iterations, element qualities there). One L-BFGS
+    run, or (opt.lift_chunk > 0) runs of that many iterations with fresh memory each, until
+    one lowers the energy by less than opt.lift_rel_tol (relative) or its mean quality gain
+    falls under POLISH_FLAT times the gain of the runs so far (the gains have flattened).
+    Fresh memory matters on a large mesh with a few stiff corners (a just-untangled spot):
+    the memory's scale then shrinks every step of the whole mesh (docs/global_untangle.md,
+    "Restarts"). show(qualities) sees each run's end point (the live progress numbers)."""
     chunk, max_it, tol = opt.lift_chunk, opt.lift_first_iter, opt.lift_rel_tol
     if chunk <= 0:
-        return run_lbfgs(st.view(en), st, v, EPS_MIN, max_it=max_it, guard=True, rel_tol=tol,
-                         tick=tick)
+        v, its = run_lbfgs(st.view(en), st, v, EPS_MIN, max_it=max_it, guard=True,
+                           rel_tol=tol, tick=tick)
+        return v, its, en.element_quality(*st.unpack(v))
     total = 0
     e0 = en.value(*st.unpack(v), EPS_MIN)
+    q = en.element_quality(*st.unpack(v))
+    a_start = a0 = add_reduce(q) / q.size
     while total < max_it:
         sub = None if tick is None else (lambda it, base=total: tick(base + it))
         v, its = run_lbfgs(
@@ -305,13 +314,17 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
             tick=sub,
         )
         total += its
+        q = en.element_quality(*st.unpack(v))
+        if show is not None:
+            show(q)
         if tick is not None and stops(tick(total)):
             break
         e1 = en.value(*st.unpack(v), EPS_MIN)
-        if its < chunk or not e0 - e1 > tol * abs(e0):
+        a1 = add_reduce(q) / q.size
+        if its < chunk or not e0 - e1 > tol * abs(e0) or a1 - a0 < POLISH_FLAT * (a1 - a_start):
             break
-        e0 = e1
-    return v, total
+        e0, a0 = e1, a1
+    return v, total, q
 
 
 def lift_min_quality(
@@ -405,6 +418,7 @@ class _Lift:
         self.total = 0
         self.trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run
         info["trail"] = self.trail
+        self.live = (self.m0, self.a0)  # the current iterate's (q_min, q_avg): progress
         self.cancel = False
 
     def climb(self) -> bool:
@@ -414,8 +428,7 @@ class _Lift:
             en.qc = self._floor(r)
             tick = self._tick(r)
             if r == 0:  # the whole mesh: maximise q_avg at the input's floor
-                vt, its = _runs(self.run_lbfgs, en, st, self.v, self.opt, tick)
-                qt = en.element_quality(*st.unpack(vt))
+                vt, its, qt = _runs(self.run_lbfgs, en, st, self.v, self.opt, tick, self._show)
             else:  # only near the elements under the new floor: the rest is at its optimum
                 found = self._local_round(tick)
                 if found is None:
@@ -424,10 +437,12 @@ class _Lift:
             self.total += its
             qm, qa = float(qt.min()), add_reduce(qt) / qt.size
             self.trail.append((qm, qa))
+            kept = r == 0 or self._keeps(qm, qa)
+            shown = (qm, qa) if kept else (self.cur_m, self.cur_a)  # the iterate going on
             if self.cancel or (progress is not None and
-                               stops(progress(self.total, r, self.cur_m, self.cur_a))):
+                               stops(progress(self.total, r, *shown))):
                 return False
-            if r > 0 and not self._keeps(qm, qa):
+            if not kept:
                 break
             # the first run maximises q_avg at the input's floor: the start of the climb
             self.v, self.q, self.cur_m, self.cur_a = vt, qt, qm, qa
@@ -449,13 +464,18 @@ class _Lift:
         """Round r's progress tick, with the kept iterate's qualities."""
         if self.progress is None:
             return None
-        progress, done, m, a = self.progress, self.total, self.cur_m, self.cur_a
+        progress, done = self.progress, self.total
+        self.live = (self.cur_m, self.cur_a)
 
         def tick(it: int) -> bool:
-            self.cancel = self.cancel or stops(progress(done + it, r, m, a))
+            self.cancel = self.cancel or stops(progress(done + it, r, *self.live))
             return not self.cancel
 
         return tick
+
+    def _show(self, q: np.ndarray) -> None:
+        """The whole-mesh run's latest end point: its numbers go to the progress ticks."""
+        self.live = (float(q.min()), add_reduce(q) / q.size)
 
     def _local_round(self, tick) -> tuple[np.ndarray, int, np.ndarray] | None:
         """One L-BFGS run over the free nodes near the elements under the floor: (point,
