@@ -32,8 +32,8 @@ LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_
 LIFT_GROW = 1.15  # floor of the next round: min(q_min * GROW, q_min + GAP * (q_avg - q_min))
 LIFT_GAP = 0.15
 LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE times as much
-LIFT_RINGS = 6  # rounds after the first move only the nodes within this many rings of ...
-LIFT_ACTIVE = 1.0  # ... the elements with q < LIFT_ACTIVE * floor (a small local problem)
+LIFT_ACTIVE = 1.0  # rounds after the first move only the nodes within options.lift_rings
+#                    rings of the elements with q < LIFT_ACTIVE * floor (a small local problem)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
 POLISH_FLAT = 0.05  # the chunked whole-mesh run stops when a run gains less than this share
@@ -342,10 +342,10 @@ def lift_min_quality(
     Maximises the mean quality q_avg subject to a soft floor q_e >= qc on every element
     (`LiftEnergy`, guarded L-BFGS: the mesh stays valid), first with qc = the input's q_min,
     then for up to `options.lift_rounds` rounds with a rising floor, each over only the free
-    nodes within LIFT_RINGS rings of the elements under the new floor. A round is kept only
-    when q_min rises, q_avg stays within LIFT_AVG_DROP (relative) of the best q_avg seen and,
-    once q_min >= LIFT_POOR q_avg, at least the input's, and any q_avg it costs buys at least
-    LIFT_RATE times as much q_min.
+    nodes within `options.lift_rings` rings of the elements under the new floor. A round is
+    kept only when q_min rises, q_avg stays within LIFT_AVG_DROP (relative) of the best q_avg
+    seen and, once q_min >= LIFT_POOR q_avg, at least the input's, and any q_avg it costs buys
+    at least LIFT_RATE times as much q_min.
     Returns (points, info) with the kept iterate: the input itself (bit-identical) when
     nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
     q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
@@ -485,7 +485,7 @@ class _Lift:
         if self.near is None:
             self.near = Neighbourhood(mesh.groups, mesh.free, mesh.factors)
         (sub, nodes, sfree, sub_f), elems = self.near.submesh(self.q < LIFT_ACTIVE * en.qc,
-                                                                LIFT_RINGS)
+                                                                self.opt.lift_rings)
         if not sfree.any():
             return None
         sp = np.stack([x[nodes], y[nodes]], axis=1)
