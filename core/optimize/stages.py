@@ -36,8 +36,6 @@ LIFT_ACTIVE = 1.0  # rounds after the first move only the nodes within options.l
 #                    rings of the elements with q < LIFT_ACTIVE * floor (a small local problem)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
-POLISH_FLAT = 0.05  # the chunked whole-mesh run stops when a run gains less than this share
-#                     of the mean quality its runs gained so far (its gains have flattened)
 
 
 def _checked_input(points, free) -> tuple[np.ndarray, np.ndarray]:
@@ -292,11 +290,10 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
           ) -> tuple[np.ndarray, int, np.ndarray]:
     """The lift's whole-mesh run: (point, iterations, element qualities there). One L-BFGS
     run, or (opt.lift_chunk > 0) runs of that many iterations with fresh memory each, until
-    one lowers the energy by less than opt.lift_rel_tol (relative) or its mean quality gain
-    falls under POLISH_FLAT times the gain of the runs so far (the gains have flattened).
-    Fresh memory matters on a large mesh with a few stiff corners (a just-untangled spot):
-    the memory's scale then shrinks every step of the whole mesh (docs/global_untangle.md,
-    "Restarts"). show(qualities) sees each run's end point (the live progress numbers)."""
+    one lowers the energy by less than opt.lift_rel_tol (relative). Fresh memory matters on
+    a large mesh with a few stiff corners (a just-untangled spot): the memory's scale then
+    shrinks every step of the whole mesh (docs/global_untangle.md, "Restarts").
+    show(qualities), with a tick, sees each run's end point (the live progress numbers)."""
     chunk, max_it, tol = opt.lift_chunk, opt.lift_first_iter, opt.lift_rel_tol
     if chunk <= 0:
         v, its = run_lbfgs(st.view(en), st, v, EPS_MIN, max_it=max_it, guard=True,
@@ -304,8 +301,7 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
         return v, its, en.element_quality(*st.unpack(v))
     total = 0
     e0 = en.value(*st.unpack(v), EPS_MIN)
-    q = en.element_quality(*st.unpack(v))
-    a_start = a0 = add_reduce(q) / q.size
+    q = None  # the qualities at v, once measured
     while total < max_it:
         sub = None if tick is None else (lambda it, base=total: tick(base + it))
         v, its = run_lbfgs(
@@ -314,17 +310,18 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
             tick=sub,
         )
         total += its
-        q = en.element_quality(*st.unpack(v))
-        if show is not None:
-            show(q)
-        if tick is not None and stops(tick(total)):
-            break
+        q = None
+        if tick is not None:
+            if show is not None:
+                q = en.element_quality(*st.unpack(v))
+                show(q)
+            if stops(tick(total)):
+                break
         e1 = en.value(*st.unpack(v), EPS_MIN)
-        a1 = add_reduce(q) / q.size
-        if its < chunk or not e0 - e1 > tol * abs(e0) or a1 - a0 < POLISH_FLAT * (a1 - a_start):
+        if its < chunk or not e0 - e1 > tol * abs(e0):
             break
-        e0, a0 = e1, a1
-    return v, total, q
+        e0 = e1
+    return v, total, en.element_quality(*st.unpack(v)) if q is None else q
 
 
 def lift_min_quality(
