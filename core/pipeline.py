@@ -36,6 +36,8 @@ LOCAL_SHARE = 0.5  # a sub-mesh of more than this share of the faces: the whole 
 LOCAL_LEFT = 0.1  # ... and so when EEGT left more than this share of the inverted faces
 LOCAL_POLISH_TOL = 1e-4  # 'eegt+local' polish: stops when a run gains less (relative) ...
 LOCAL_POLISH_CHUNK = 10  # ... its runs of this many iterations, with fresh L-BFGS memory each
+LOCAL_LIFT_RINGS = 3  # 'eegt+local' lift rounds: rings around the faces under the floor (a
+#                       round's cost follows its sub-mesh: docs/global_untangle.md)
 
 Progress = Callable[[int, str, Stats], object]
 
@@ -557,6 +559,7 @@ class _Run:
             lift_rounds=self.params.lift_rounds,
             lift_rel_tol=LOCAL_POLISH_TOL,
             lift_chunk=LOCAL_POLISH_CHUNK,
+            lift_rings=LOCAL_LIFT_RINGS,
             solver=self.lbfgs,
         )
         try:

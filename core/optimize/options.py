@@ -20,7 +20,9 @@ class GlobalOptions:
     bounds the first, whole-mesh run of `lift_min_quality` (it maximises the mean quality) and
     lift_rounds its rising-floor rounds; a lift run stops when 5 iterations lower its energy by
     less than lift_rel_tol (relative); lift_chunk > 0 splits the whole-mesh run into runs of
-    that many iterations with fresh L-BFGS memory; solver runs each L-BFGS solve (None: NumPy).
+    that many iterations with fresh L-BFGS memory; each later lift round moves only the free
+    nodes within lift_rings rings of the elements under its floor; solver runs each L-BFGS
+    solve (None: NumPy).
     """
 
     max_iter: int = 3000
@@ -31,11 +33,14 @@ class GlobalOptions:
     lift_rounds: int = 6
     lift_rel_tol: float = 1e-5
     lift_chunk: int = 0
+    lift_rings: int = 6
     solver: Solver | None = None
 
     def __post_init__(self) -> None:
         if not self.polish_power > 0.0:
             raise ValueError("polish_power must be > 0")
+        if self.lift_rings < 0:
+            raise ValueError("lift_rings must be >= 0")
 
     def run(self, sliding: bool = False) -> Solver:
         """The L-BFGS to call (`dispatch.solver_to_run`)."""

@@ -34,8 +34,8 @@ LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_
 LIFT_GROW = 1.15  # floor of the next round: min(q_min * GROW, q_min + GAP * (q_avg - q_min))
 LIFT_GAP = 0.15
 LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE times as much
-LIFT_RINGS = 6  # rounds after the first move only the nodes within this many rings of ...
-LIFT_ACTIVE = 1.0  # ... the elements with q < LIFT_ACTIVE * floor (a small local problem)
+LIFT_ACTIVE = 1.0  # rounds after the first move only the nodes within options.lift_rings
+#                    rings of the elements with q < LIFT_ACTIVE * floor (a small local problem)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
 
@@ -288,18 +288,23 @@ class _Continuation:
 
 
 def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: GlobalOptions,
-          tick: Callable[[int], bool] | None) -> tuple[np.ndarray, int]:
-    """The lift's whole-mesh run: one L-BFGS run, or (opt.lift_chunk > 0) runs of that many
-    iterations with fresh memory each, until one lowers the energy by less than
-    opt.lift_rel_tol (relative). Fresh memory matters on a large mesh with a few stiff
-    corners (a just-untangled spot): the memory's scale then shrinks every step of the whole
-    mesh (docs/global_untangle.md, "Restarts")."""
+          tick: Callable[[int], bool] | None,
+          show: Callable[[np.ndarray], None] | None = None
+          ) -> tuple[np.ndarray, int, np.ndarray]:
+    """The lift's whole-mesh run: (point, iterations, element qualities there). One L-BFGS
+    run, or (opt.lift_chunk > 0) runs of that many iterations with fresh memory each, until
+    one lowers the energy by less than opt.lift_rel_tol (relative). Fresh memory matters on
+    a large mesh with a few stiff corners (a just-untangled spot): the memory's scale then
+    shrinks every step of the whole mesh (docs/global_untangle.md, "Restarts").
+    show(qualities), with a tick, sees each run's end point (the live progress numbers)."""
     chunk, max_it, tol = opt.lift_chunk, opt.lift_first_iter, opt.lift_rel_tol
     if chunk <= 0:
-        return run_lbfgs(st.view(en), st, v, EPS_MIN, max_it=max_it, guard=True, rel_tol=tol,
-                         tick=tick)
+        v, its = run_lbfgs(st.view(en), st, v, EPS_MIN, max_it=max_it, guard=True,
+                           rel_tol=tol, tick=tick)
+        return v, its, en.element_quality(*st.unpack(v))
     total = 0
     e0 = en.value(*st.unpack(v), EPS_MIN)
+    q = None  # the qualities at v, once measured
     while total < max_it:
         sub = None if tick is None else (lambda it, base=total: tick(base + it))
         v, its = run_lbfgs(
@@ -308,13 +313,18 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
             tick=sub,
         )
         total += its
-        if tick is not None and stops(tick(total)):
-            break
+        q = None
+        if tick is not None:
+            if show is not None:
+                q = en.element_quality(*st.unpack(v))
+                show(q)
+            if stops(tick(total)):
+                break
         e1 = en.value(*st.unpack(v), EPS_MIN)
         if its < chunk or not e0 - e1 > tol * abs(e0):
             break
         e0 = e1
-    return v, total
+    return v, total, en.element_quality(*st.unpack(v)) if q is None else q
 
 
 def lift_min_quality(
@@ -332,10 +342,10 @@ def lift_min_quality(
     Maximises the mean quality q_avg subject to a soft floor q_e >= qc on every element
     (`LiftEnergy`, guarded L-BFGS: the mesh stays valid), first with qc = the input's q_min,
     then for up to `options.lift_rounds` rounds with a rising floor, each over only the free
-    nodes within LIFT_RINGS rings of the elements under the new floor. A round is kept only
-    when q_min rises, q_avg stays within LIFT_AVG_DROP (relative) of the best q_avg seen and,
-    once q_min >= LIFT_POOR q_avg, at least the input's, and any q_avg it costs buys at least
-    LIFT_RATE times as much q_min.
+    nodes within `options.lift_rings` rings of the elements under the new floor. A round is
+    kept only when q_min rises, q_avg stays within LIFT_AVG_DROP (relative) of the best q_avg
+    seen and, once q_min >= LIFT_POOR q_avg, at least the input's, and any q_avg it costs buys
+    at least LIFT_RATE times as much q_min.
     Returns (points, info) with the kept iterate: the input itself (bit-identical) when
     nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
     q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
@@ -408,6 +418,7 @@ class _Lift:
         self.total = 0
         self.trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run
         info["trail"] = self.trail
+        self.live = (self.m0, self.a0)  # the current iterate's (q_min, q_avg): progress
         self.cancel = False
 
     def climb(self) -> bool:
@@ -417,8 +428,7 @@ class _Lift:
             en.qc = self._floor(r)
             tick = self._tick(r)
             if r == 0:  # the whole mesh: maximise q_avg at the input's floor
-                vt, its = _runs(self.run_lbfgs, en, st, self.v, self.opt, tick)
-                qt = en.element_quality(*st.unpack(vt))
+                vt, its, qt = _runs(self.run_lbfgs, en, st, self.v, self.opt, tick, self._show)
             else:  # only near the elements under the new floor: the rest is at its optimum
                 found = self._local_round(tick)
                 if found is None:
@@ -427,10 +437,12 @@ class _Lift:
             self.total += its
             qm, qa = float(qt.min()), add_reduce(qt) / qt.size
             self.trail.append((qm, qa))
+            kept = r == 0 or self._keeps(qm, qa)
+            shown = (qm, qa) if kept else (self.cur_m, self.cur_a)  # the iterate going on
             if self.cancel or (progress is not None and
-                               stops(progress(self.total, r, self.cur_m, self.cur_a))):
+                               stops(progress(self.total, r, *shown))):
                 return False
-            if r > 0 and not self._keeps(qm, qa):
+            if not kept:
                 break
             # the first run maximises q_avg at the input's floor: the start of the climb
             self.v, self.q, self.cur_m, self.cur_a = vt, qt, qm, qa
@@ -452,13 +464,18 @@ class _Lift:
         """Round r's progress tick, with the kept iterate's qualities."""
         if self.progress is None:
             return None
-        progress, done, m, a = self.progress, self.total, self.cur_m, self.cur_a
+        progress, done = self.progress, self.total
+        self.live = (self.cur_m, self.cur_a)
 
         def tick(it: int) -> bool:
-            self.cancel = self.cancel or stops(progress(done + it, r, m, a))
+            self.cancel = self.cancel or stops(progress(done + it, r, *self.live))
             return not self.cancel
 
         return tick
+
+    def _show(self, q: np.ndarray) -> None:
+        """The whole-mesh run's latest end point: its numbers go to the progress ticks."""
+        self.live = (float(q.min()), add_reduce(q) / q.size)
 
     def _local_round(self, tick) -> tuple[np.ndarray, int, np.ndarray] | None:
         """One L-BFGS run over the free nodes near the elements under the floor: (point,
@@ -468,7 +485,7 @@ class _Lift:
         if self.near is None:
             self.near = Neighbourhood(mesh.groups, mesh.free, mesh.factors)
         (sub, nodes, sfree, sub_f), elems = self.near.submesh(self.q < LIFT_ACTIVE * en.qc,
-                                                                LIFT_RINGS)
+                                                                self.opt.lift_rings)
         if not sfree.any():
             return None
         sp = np.stack([x[nodes], y[nodes]], axis=1)
