@@ -21,6 +21,12 @@ def faces_of(m):
     return [row for c in m.cells if c.type in FACES for row in np.asarray(c.data)]
 
 
+def xyz(points):
+    """(N, 3) points: 2D formats (Medit, SU2) get z = 0, as meshcheck measures in 3D."""
+    points = np.asarray(points, dtype=np.float64)
+    return points if points.shape[1] == 3 else np.column_stack([points, np.zeros(len(points))])
+
+
 def same_arrays(a, b):
     return all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(a, b)) and \
         len(a) == len(b)
@@ -36,11 +42,11 @@ a, b = meshio.read(args[0]), meshio.read(args[1])
 faces = faces_of(a)
 moved = np.flatnonzero((a.points != b.points).any(axis=1))
 lines = np.unique(np.concatenate([np.asarray(c.data).ravel() for c in a.cells
-                                  if c.type.startswith("line")]))
+                                  if c.type.startswith("line")] + [np.zeros(0, np.int64)]))
 out = {
     "meshio": meshio.__file__,
-    "inverted": [meshcheck.stats(a.points, faces)["n_inverted"],
-                 meshcheck.stats(b.points, faces)["n_inverted"]],
+    "inverted": [meshcheck.stats(xyz(a.points), faces)["n_inverted"],
+                 meshcheck.stats(xyz(b.points), faces)["n_inverted"]],
     "blocks": [[c.type, len(c.data)] for c in a.cells],
     "blocks_same": [c.type for c in a.cells] == [c.type for c in b.cells] and
     same_arrays([c.data for c in a.cells], [c.data for c in b.cells]),

@@ -57,6 +57,34 @@ def t_solver_cli_msh_round_trip():
             f"moved, blocks {res['blocks']} kept, {res['head'][1][1]}")
 
 
+EVERY_FORMAT = ("vtk", "vtk_ascii", "vtu", "vtu_ascii", "inp", "mesh", "su2")
+
+
+@test
+def t_solver_cli_every_format_round_trip():
+    """blender -b -c eegt channel.EXT -o fixed.EXT for every other format (the Gmsh channel
+    converted by meshio on the host): exit 0, 0 inverted, every block, data array and the
+    format line as in the input, no boundary node moved."""
+    base = fresh_dir(f"{OUT}/solver_formats")
+    done = []
+    for name in EVERY_FORMAT:
+        ext = name.split("_")[0]
+        src, out = f"{SOLVER}/channel_{name}.{ext}", f"{base}/fixed_{name}.{ext}"
+        rc, text = blender(["-b", "-c", "eegt", src, "-o", out, "--quiet"], timeout=240,
+                           log=f"solver_{name}")
+        check(rc == 0, f"{name}: exit {rc}: {tail(text)}")
+        res = solver_check(src, out, log=f"solver_{name}_check")
+        check(res["inverted"][0] > 0 and res["inverted"][1] == 0,
+              f"{name}: inverted {res['inverted'][0]} -> {res['inverted'][1]}")
+        check(0 < res["moved"] < res["n_points"], f"{name}: {res['moved']} moved")
+        for key in ("blocks_same", "cell_data_same", "point_data_same", "field_data_same"):
+            check(res[key], f"{name}: {key} is false")
+        check(res["head"][0] == res["head"][1], f"{name}: format line {res['head']}")
+        check(res["boundary_moved"] == 0, f"{name}: {res['boundary_moved']} boundary nodes moved")
+        done.append(f"{name} {res['inverted'][0]}->0")
+    return ", ".join(done)
+
+
 @test
 def t_solver_import_untangle_export():
     """Import > Solver mesh, Untangle & Smooth, Export > Solver mesh in a user's script: the
