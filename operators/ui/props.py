@@ -13,6 +13,7 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
+from ...batch.run_stats import MESH, Kind
 from ...core import MEASURES, EEGTParams
 from ...core.choices import BACKEND, PARAMETERS, Bound, Enumeration
 
@@ -182,23 +183,28 @@ def _settings_class() -> type:
 EEGT_PG_settings = _settings_class()
 
 
-class EEGT_PG_last_run(bpy.types.PropertyGroup):
-    """Statistics of the last EEGT run on an object (shown in the sidebar)."""
+def last_run_class(name: str, doc: str, kind: Kind, extra: dict[str, Any]) -> type:
+    """A property group keeping an object's last run of one kind: whether it ran, its
+    status, message and seconds, each stat of the kind (``batch/run_stats.py``) before and
+    after (an int for a count, else a float) and the kind's ``extra`` properties."""
+    annotations: dict[str, Any] = {"has_run": BoolProperty(default=False),
+                                   "status": StringProperty(default=""),
+                                   "message": StringProperty(default=""), **extra}
+    for stat in kind.stats:
+        for when in ("before", "after"):
+            annotations[f"{stat.name}_{when}"] = (IntProperty(default=0) if stat.integer
+                                                  else FloatProperty(default=0.0))
+    annotations["seconds"] = FloatProperty(default=0.0)
+    return type(name, (bpy.types.PropertyGroup,), {"__annotations__": annotations,
+                                                    "__doc__": doc})
 
-    has_run: BoolProperty(default=False)  # type: ignore[valid-type]
-    status: StringProperty(default="")  # type: ignore[valid-type]
-    message: StringProperty(default="")  # type: ignore[valid-type]
-    backend: StringProperty(default="")  # type: ignore[valid-type]
-    inverted_before: IntProperty(default=0)  # type: ignore[valid-type]
-    inverted_after: IntProperty(default=0)  # type: ignore[valid-type]
-    q_min_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    q_min_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    q_avg_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    q_avg_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    untangle_iterations: IntProperty(default=0)  # type: ignore[valid-type]
-    smooth_iterations: IntProperty(default=0)  # type: ignore[valid-type]
-    global_iterations: IntProperty(default=0)  # type: ignore[valid-type]
-    seconds: FloatProperty(default=0.0)  # type: ignore[valid-type]
+
+EEGT_PG_last_run = last_run_class(
+    "EEGT_PG_last_run", "Statistics of the last EEGT run on an object (shown in the sidebar)",
+    MESH, {"backend": StringProperty(default=""),
+           "untangle_iterations": IntProperty(default=0),
+           "smooth_iterations": IntProperty(default=0),
+           "global_iterations": IntProperty(default=0)})
 
 
 classes = (EEGT_PG_settings, EEGT_PG_last_run)

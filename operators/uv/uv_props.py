@@ -10,10 +10,11 @@ from __future__ import annotations
 from typing import Any
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, StringProperty
 
+from ...batch.run_stats import UV
 from ...core.choices import UV_SCOPE, UV_TARGET
-from ..ui.props import enum_items
+from ..ui.props import enum_items, last_run_class
 
 TARGET_ITEMS = enum_items(UV_TARGET)
 SCOPE_ITEMS = enum_items(UV_SCOPE, upper=True)
@@ -50,24 +51,10 @@ EEGT_PG_uv_settings = type("EEGT_PG_uv_settings", (bpy.types.PropertyGroup,), {
 })
 
 
-class EEGT_PG_uv_last_run(bpy.types.PropertyGroup):
-    """Statistics of the last UV run on an object (shown in the UV editor's sidebar)."""
-
-    has_run: BoolProperty(default=False)  # type: ignore[valid-type]
-    status: StringProperty(default="")  # type: ignore[valid-type]
-    message: StringProperty(default="")  # type: ignore[valid-type]
-    uv_map: StringProperty(default="")  # type: ignore[valid-type]
-    flipped_before: IntProperty(default=0)  # type: ignore[valid-type]
-    flipped_after: IntProperty(default=0)  # type: ignore[valid-type]
-    inverted_before: IntProperty(default=0)  # type: ignore[valid-type]
-    inverted_after: IntProperty(default=0)  # type: ignore[valid-type]
-    overlapping_before: IntProperty(default=0)  # type: ignore[valid-type]
-    overlapping_after: IntProperty(default=0)  # type: ignore[valid-type]
-    distortion_mean_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    distortion_mean_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    distortion_worst_before: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    distortion_worst_after: FloatProperty(default=0.0)  # type: ignore[valid-type]
-    seconds: FloatProperty(default=0.0)  # type: ignore[valid-type]
+EEGT_PG_uv_last_run = last_run_class(
+    "EEGT_PG_uv_last_run",
+    "Statistics of the last UV run on an object (shown in the UV editor's sidebar)",
+    UV, {"uv_map": StringProperty(default="")})
 
 
 classes = (EEGT_PG_uv_settings, EEGT_PG_uv_last_run)
