@@ -220,14 +220,28 @@ def up_to_date(input_path: str, output: str | None) -> bool:
 
 
 def pid_alive(pid: int) -> bool:
-    """Whether a process with this id runs on this machine."""
+    """Whether a process with this id runs on this machine. A zombie does not: a worker
+    whose batch was killed hard is re-parented, and where nothing reaps it (PID 1 of many
+    containers) it stays a zombie that still answers a signal check."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except (PermissionError, OSError):
         return True
-    return True
+    return not _is_zombie(pid)
+
+
+def _is_zombie(pid: int) -> bool:
+    """Whether /proc says the process has exited and waits to be reaped (False where there
+    is no /proc)."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            stat = fh.read()
+    except OSError:
+        return False
+    state = stat[stat.rfind(b")") + 1:].split()
+    return bool(state) and state[0] in (b"Z", b"X")
 
 
 def stale_temporaries(folders: Iterable[str],

@@ -185,3 +185,23 @@ def test_pid_alive_sees_this_process_and_not_a_reaped_one():
     p.wait()
     assert inputs.pid_alive(os.getpid())
     assert not inputs.pid_alive(p.pid)
+
+
+def test_pid_alive_counts_an_unreaped_zombie_as_dead():
+    """A worker killed with its batch stays a zombie where nothing reaps it; its temporary
+    file must still count as stale."""
+    import subprocess
+    import sys
+    import time
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    try:
+        deadline = time.time() + 30
+        while time.time() < deadline:
+            with open(f"/proc/{p.pid}/stat", "rb") as fh:
+                if fh.read().rsplit(b")", 1)[1].split()[0] == b"Z":
+                    break
+            time.sleep(0.02)
+        os.kill(p.pid, 0)  # the zombie still answers a signal check
+        assert not inputs.pid_alive(p.pid)
+    finally:
+        p.wait()
