@@ -635,7 +635,7 @@ __kernel void direction_z(__global const double *q, __global const int *zf,
 // FoldoverEnergy.step_limit, operation for operation: corner k of the sweep, at the point in
 // Z (the current point v: the accepted trial, or v placed again) along DZ; its det is
 // cc + bb t + aa t^2. LIM[k] = the step t1 past which the det is <= 0 up to the first trial
-// step s0 (INFINITY: none).
+// step s0 (INFINITY: none, or the det stays positive up to 2 s0).
 __kernel void limit_corner(__global const double *S, __global const double *Z,
                            __global const double *DZ, __global const int *CI,
                            __global const double *W, __global double *LIM, const int nc)
@@ -658,7 +658,12 @@ __kernel void limit_corner(__global const double *S, __global const double *Z,
     const double bb = (j00 * k11 + k00 * j11) - (j01 * k10 + k01 * j10);
     const double aa = k00 * k11 - k01 * k10;
     const double s0 = S[S_STEP];
+    const double s1 = 2.0 * s0;  // det positive on [0, 2 s0]: no limit below s0
     double t1 = INFINITY;
+    if (cc + MIN_NAN(bb, 0.0) * s1 + MIN_NAN(aa, 0.0) * (s1 * s1) > 0.0) {  // np.minimum
+        LIM[k] = t1;
+        return;
+    }
     if (cc > 0.0 && aa == 0.0 && bb < 0.0)
         t1 = -cc / bb;
     const double disc = bb * bb - (4.0 * aa) * cc;
