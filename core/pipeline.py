@@ -37,7 +37,8 @@ LOCAL_LEFT = 0.1  # ... and so when EEGT left more than this share of the invert
 LOCAL_POLISH_TOL = 1e-4  # 'eegt+local' polish: stops when a run gains less (relative) ...
 LOCAL_POLISH_CHUNK = 10  # ... its runs of this many iterations, with fresh L-BFGS memory each
 LOCAL_LIFT_RINGS = 3  # 'eegt+local' lift rounds: rings around the faces under the floor (a
-#                       round's cost follows its sub-mesh: docs/global_untangle.md)
+#                       round's cost follows its sub-mesh: docs/global_untangle.md) ...
+LOCAL_LIFT_GROW = 1.3  # ... and a floor up to this x the q_min before (GlobalOptions.lift_grow)
 
 Progress = Callable[[int, str, Stats], object]
 
@@ -560,6 +561,7 @@ class _Run:
             lift_rel_tol=LOCAL_POLISH_TOL,
             lift_chunk=LOCAL_POLISH_CHUNK,
             lift_rings=LOCAL_LIFT_RINGS,
+            lift_grow=LOCAL_LIFT_GROW,
             solver=self.lbfgs,
         )
         try:

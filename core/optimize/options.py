@@ -6,7 +6,9 @@ from dataclasses import dataclass
 
 from .dispatch import Solver, solver_to_run
 
-__all__ = ["GlobalOptions"]
+__all__ = ["LIFT_GROW", "GlobalOptions"]
+
+LIFT_GROW = 1.15  # a lift round's floor: at most this x the q_min before it (`lift_grow`)
 
 
 @dataclass(frozen=True)
@@ -21,7 +23,8 @@ class GlobalOptions:
     lift_rounds its rising-floor rounds; a lift run stops when 5 iterations lower its energy by
     less than lift_rel_tol (relative); lift_chunk > 0 splits the whole-mesh run into runs of
     that many iterations with fresh L-BFGS memory; each later lift round moves only the free
-    nodes within lift_rings rings of the elements under its floor; solver runs each L-BFGS
+    nodes within lift_rings rings of the elements under its floor, a floor at most lift_grow
+    times the q_min before it; solver runs each L-BFGS
     solve (None: NumPy).
     """
 
@@ -34,6 +37,7 @@ class GlobalOptions:
     lift_rel_tol: float = 1e-5
     lift_chunk: int = 0
     lift_rings: int = 6
+    lift_grow: float = LIFT_GROW
     solver: Solver | None = None
 
     def __post_init__(self) -> None:
@@ -41,6 +45,8 @@ class GlobalOptions:
             raise ValueError("polish_power must be > 0")
         if self.lift_rings < 0:
             raise ValueError("lift_rings must be >= 0")
+        if not self.lift_grow > 1.0:
+            raise ValueError("lift_grow must be > 1")
 
     def run(self, sliding: bool = False) -> Solver:
         """The L-BFGS to call (`dispatch.solver_to_run`)."""

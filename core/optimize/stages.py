@@ -31,8 +31,7 @@ SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
 # lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
 LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_deform: docs)
-LIFT_GROW = 1.15  # floor of the next round: min(q_min * GROW, q_min + GAP * (q_avg - q_min))
-LIFT_GAP = 0.15
+LIFT_GAP = 0.15  # next floor: min(q_min * options.lift_grow, q_min + GAP (q_avg - q_min))
 LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE times as much
 LIFT_ACTIVE = 1.0  # rounds after the first move only the nodes within options.lift_rings
 #                    rings of the elements with q < LIFT_ACTIVE * floor (a small local problem)
@@ -458,7 +457,7 @@ class _Lift:
         if r == 0:
             return self.m0
         m, a = self.cur_m, self.cur_a
-        return min(m * LIFT_GROW, m + LIFT_GAP * (a - m))
+        return min(m * self.opt.lift_grow, m + LIFT_GAP * (a - m))
 
     def _tick(self, r: int) -> Callable[[int], bool] | None:
         """Round r's progress tick, with the kept iterate's qualities."""
