@@ -403,6 +403,7 @@ class _Run:
         self.engine.save_best()
         self.n_untangle = self.n_smooth = self.n_global = 0
         self.polished = False  # the global stage's polish (or the lift stage) has run
+        self.lifted = 0  # lift rounds the last lift kept
         self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
         self._near: Neighbourhood | None = None  # made by the local untangle, if it runs
         self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
@@ -456,7 +457,8 @@ class _Run:
                 current = self.lift_stage()
             elif mode != "eegt+local" and prm.polish_iterations > 0:
                 current = self.global_stage(polish=prm.polish_iterations)
-        self.smooth_eegt(current)
+        if not (mode == "eegt+local" and self.lifted):  # lifted rounds leave EEGT smoothing
+            self.smooth_eegt(current)  # no better iterate to find (docs/global_untangle.md)
         verb = f"untangled in {self.n_untangle} iterations, " if tangled else ""
         glob = f"{self.n_global} optimization iterations, " if self.n_global else ""
         b = self.best
@@ -673,6 +675,7 @@ class _Run:
         self.n_global += int(info["iterations"])
         if info.get("status") == "cancelled":
             raise _CancelRun
+        self.lifted = int(info.get("rounds", 0))
         return out
 
     def smooth_eegt(self, current: Stats) -> None:
