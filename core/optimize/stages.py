@@ -204,7 +204,7 @@ class _Continuation:
     def solve(self, t_start: float) -> None:
         """Rounds until the budget, a stop rule or a cancel ends them."""
         opt, en = self.opt, self.en
-        while self.total < opt.max_iter:
+        while self.total < opt.max_iter + self._extra():
             self.rounds += 1
             self.eps_hist.append(self.eps)
             guard = self.valid  # valid: polish the quality, never invert a corner again
@@ -229,15 +229,20 @@ class _Continuation:
         long run, no memory restarts (the rest of the polish budget)."""
         left = self.opt.max_iter - self.total
         if guard:
-            return min(left, self._polish_budget() - self.polish_used)
+            return min(left + self._extra(), self._polish_budget() - self.polish_used)
         return min(left, self.inner)
+
+    def _extra(self) -> int:
+        """What the polish budget adds to max_iter (only once the mesh is valid)."""
+        return max(self._polish_budget() - self.opt.polish_iter, 0) if self.valid else 0
 
     def _polish_budget(self) -> int:
         """The polish's iterations: polish_iter, or as many as the untangling took (at most
-        one round, `inner`) when that is more; none when polish_iter is 0."""
+        one round, `inner`) when that is more and options.long_polish; none when polish_iter
+        is 0. What it adds to polish_iter comes on top of max_iter."""
         polish = self.opt.polish_iter
-        if polish <= 0:
-            return 0
+        if polish <= 0 or not self.opt.long_polish:
+            return max(polish, 0)
         return max(polish, min(self.untangle_its, self.inner))
 
     def _tick(self) -> Callable[[int], bool] | None:
