@@ -524,7 +524,8 @@ class _Run:
 
             polish = self.params.polish_iterations  # the sub-mesh leaves the stage well shaped
             budget = min(self.params.max_untangle_iterations, LOCAL_MAX_ITER)
-            options = GlobalOptions(max_iter=budget + polish, polish_iter=polish)
+            options = GlobalOptions(max_iter=budget + polish, polish_iter=polish,
+                                    long_polish=False)
             sub_pts, info = untangle_global(
                 start[nodes], sub, sfree, options,
                 progress=relay if self.progress is not None else None, factors=sub_f,

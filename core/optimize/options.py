@@ -16,7 +16,9 @@ class GlobalOptions:
     """Budgets and the solver of one global-stage call.
 
     max_iter bounds all L-BFGS iterations of `untangle_global`; polish_iter those it spends
-    improving quality once no element is inverted (0: stop at the first valid iterate);
+    improving quality once no element is inverted (0: stop at the first valid iterate), or
+    (long_polish) as many as the untangling took when that is more, up to one eps round, on
+    top of max_iter;
     polish_power p > 0 polishes sum (f / 2)^p instead of the paper's sum f (p > 1 raises q_min
     and lowers q_avg, p < 1 the opposite); time_limit (s) stops it early; lift_first_iter
     bounds the first, whole-mesh run of `lift_min_quality` (it maximises the mean quality) and
@@ -30,6 +32,7 @@ class GlobalOptions:
 
     max_iter: int = 3000
     polish_iter: int = 300
+    long_polish: bool = True
     polish_power: float = 1.0
     time_limit: float | None = None
     lift_first_iter: int = 150

@@ -29,6 +29,9 @@ INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
+# the polish gets at least as many iterations as the untangling took, up to one round
+# (`inner`): a fold that took long to untangle leaves the mesh far from the energy's optimum
+# (docs: "Polish after a long untangle")
 # lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
 LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_deform: docs)
 LIFT_GAP = 0.15  # next floor: min(q_min * options.lift_grow, q_min + GAP (q_avg - q_min))
@@ -190,6 +193,7 @@ class _Continuation:
         self.best_v, self.best_inv = self.v, n_inv
         self.valid = dmin > 0.0  # every corner that can move is positive (others constant)
         self.total = 0
+        self.untangle_its = 0  # L-BFGS iterations before the mesh was valid
         self.polish_used = 0
         self.status = ""
         self.eps_hist: list[float] = []
@@ -199,7 +203,7 @@ class _Continuation:
     def solve(self, t_start: float) -> None:
         """Rounds until the budget, a stop rule or a cancel ends them."""
         opt, en = self.opt, self.en
-        while self.total < opt.max_iter:
+        while self.total < opt.max_iter + self._extra():
             self.rounds += 1
             self.eps_hist.append(self.eps)
             guard = self.valid  # valid: polish the quality, never invert a corner again
@@ -224,8 +228,21 @@ class _Continuation:
         long run, no memory restarts (the rest of the polish budget)."""
         left = self.opt.max_iter - self.total
         if guard:
-            return min(left, self.opt.polish_iter - self.polish_used)
+            return min(left + self._extra(), self._polish_budget() - self.polish_used)
         return min(left, self.inner)
+
+    def _extra(self) -> int:
+        """What the polish budget adds to max_iter (only once the mesh is valid)."""
+        return max(self._polish_budget() - self.opt.polish_iter, 0) if self.valid else 0
+
+    def _polish_budget(self) -> int:
+        """The polish's iterations: polish_iter, or as many as the untangling took (at most
+        one round, `inner`) when that is more and options.long_polish; none when polish_iter
+        is 0. What it adds to polish_iter comes on top of max_iter."""
+        polish = self.opt.polish_iter
+        if polish <= 0 or not self.opt.long_polish:
+            return max(polish, 0)
+        return max(polish, min(self.untangle_its, self.inner))
 
     def _tick(self) -> Callable[[int], bool] | None:
         """The progress tick of a round (long runs report, and cancel, from inside)."""
@@ -248,6 +265,8 @@ class _Continuation:
         self.total += its
         if guard:
             self.polish_used += its
+        else:
+            self.untangle_its += its
         return its
 
     def _take_iterate(self, its: int, guard: bool) -> tuple[float, float, int]:

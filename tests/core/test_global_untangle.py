@@ -412,3 +412,25 @@ def test_local_mode_leaves_out_eegt_smoothing_after_a_kept_lift_round() -> None:
     assert lifted.smooth_iterations == 0 and plain.smooth_iterations >= 1
     assert lifted.global_iterations > plain.global_iterations  # the rounds ran
     assert lifted.after.q_min > plain.after.q_min + 0.01  # measured 0.861 against 0.848
+
+
+def test_long_untangle_gets_a_polish_as_long_as_the_untangling() -> None:
+    """A hole spun 100 degrees takes over 1000 L-BFGS iterations to untangle; the polish then
+    gets as many (up to one eps round, 1000 here) instead of polish_iter's 300, on top of
+    max_iter, and raises q_min from 0.151 to 0.316 (measured); long_polish=False keeps 300."""
+    pts, groups = spun_hole(12, 64, 100, False)
+    free = ~boundary_mask(len(pts), groups)
+    short_out, short = untangle_global(pts, groups, free,
+                                       GlobalOptions(max_iter=5300, long_polish=False))
+    out, info = untangle_global(pts, groups, free, GlobalOptions(max_iter=5300))
+    assert short["status"] == info["status"] == "untangled"
+    assert short["iterations"] <= info["iterations"] - 500  # 1413 against 2175
+    assert quality(short_out, groups)[0] < 0.2 < 0.3 < quality(out, groups)[0]
+    # the longer polish comes on top of max_iter: a cap just past the untangling still
+    # leaves it its full length
+    cap = short["iterations"] - 250
+    _, capped = untangle_global(pts, groups, free, GlobalOptions(max_iter=cap))
+    assert capped["status"] == "untangled" and capped["iterations"] > cap + 500
+    # polish_iter=0 still returns the first valid iterate, after over 1000 iterations
+    _, first = untangle_global(pts, groups, free, GlobalOptions(max_iter=5300, polish_iter=0))
+    assert first["status"] == "untangled" and 1000 < first["iterations"] <= cap
