@@ -66,6 +66,7 @@ def chi_scalar(d: float, eps: float) -> float:
 
 
 LIMIT_PIECE = 16384  # corners per piece of `step_limit` (its arrays stay in cache)
+QUALITY_PIECE = 65536  # corners per piece of the scratch-free whole-mesh measures
 
 
 def _corner_limit(c: np.ndarray, f: np.ndarray, w00: np.ndarray, w01: np.ndarray,
@@ -224,7 +225,39 @@ class FoldoverEnergy:
         self.weight = np.where(n == 3.0, 1.0, 1.0 / n)
         self.idx = np.concatenate([self.i1, self.i2, self.i0])
         self.tick_every = max(1, min(TICK_EVERY, TICK_CORNERS // max(i0.size, 1)))
-        self._bk = _Blocks(i0.size, self.w00, self.w01, self.w11)
+        self._blocks: _Blocks | None = None  # made on the first host evaluation
+
+    @property
+    def _bk(self) -> _Blocks:
+        """The host's per-corner scratch, made when a host evaluation first needs it: a
+        device solve never does, so the run does not hold it (about 43 doubles per corner)."""
+        if self._blocks is None:
+            self._blocks = _Blocks(self.i0.size, self.w00, self.w01, self.w11)
+        return self._blocks
+
+    def _corner_u(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(u_k = |J|_F^2 / (2 det J) of every corner (0 where det <= 0), whether its det is
+        <= 0, the smallest det), in pieces of QUALITY_PIECE corners: the operations of `_jac`
+        and `_frob` in order, so the same bits, without the corner scratch of `_Blocks`."""
+        m = self.i0.size
+        u = np.empty(m)
+        bad = np.empty(m, dtype=bool)
+        dmin = np.inf
+        for lo in range(0, m, QUALITY_PIECE):
+            k = slice(lo, min(m, lo + QUALITY_PIECE))
+            i0, i1, i2 = self.i0[k], self.i1[k], self.i2[k]
+            x0, y0 = x.take(i0), y.take(i0)
+            e1x, e1y = x.take(i1) - x0, y.take(i1) - y0
+            e2x, e2y = x.take(i2) - x0, y.take(i2) - y0
+            w00, w01, w11 = self.w00[k], self.w01[k], self.w11[k]
+            j00, j10 = e1x * w00, e1y * w00
+            j01, j11 = e1x * w01 + e2x * w11, e1y * w01 + e2y * w11
+            d = j00 * j11 - j01 * j10
+            t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
+            dmin = np.minimum(dmin, np.minimum.reduce(d))  # NaN, as np.minimum over all
+            u[k] = 0.5 * t / np.where(d > 0.0, d, np.inf)
+            np.less_equal(d, 0.0, out=bad[k])
+        return u, bad, float(dmin)
 
     # -- flat layouts ----------------------------------------------------------------------
     def flat_layout(self, pos: np.ndarray) -> tuple[np.ndarray, int]:
@@ -409,17 +442,11 @@ class LiftEnergy(FoldoverEnergy):
 
     def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(E,) mean ratio of each element (0 where a corner is not positive)."""
-        self._jac(np.concatenate([x, y]), self._full_layout()[0])
-        bk = self._bk  # its scratch arrays: no corner-sized temporaries on a large mesh
-        d = bk.d
-        u = np.multiply(bk.half, self._frob(), bk.u)
-        np.copyto(bk.tmp, np.inf)
-        np.copyto(bk.tmp, d, where=d > 0.0)
-        np.divide(u, bk.tmp, u)  # 1 / q_k = 0.5 t / d; d <= 0: 0, so q_k = inf
+        u, bad_corner, _ = self._corner_u(x, y)  # 1 / q_k; det <= 0: 0, so q_k = inf
         with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
-            q = np.bincount(self.eid, np.divide(bk.one, u, bk.tmp), self.n_elem) / self.n_corners
+            q = np.bincount(self.eid, np.divide(1.0, u, u), self.n_elem) / self.n_corners
         bad = np.zeros(self.n_elem, dtype=bool)
-        bad[self.eid[d <= 0.0]] = True
+        bad[self.eid[bad_corner]] = True
         return np.where(bad, 0.0, q)
 
     def element_quality_of(self, elems: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -446,8 +473,18 @@ class LiftEnergy(FoldoverEnergy):
         return np.where(bad, 0.0, q)
 
     def value(self, x: np.ndarray, y: np.ndarray, eps: float) -> float:
-        """F (inf where a corner det is not positive), without the gradient."""
-        return self.evaluate(np.concatenate([x, y]), self._full_layout(), eps)[0]
+        """F (inf where a corner det is not positive), without the gradient: `evaluate`'s
+        operations in order (the same bits), without its corner scratch and its state."""
+        u, _, dmin = self._corner_u(x, y)
+        if not dmin > 0.0:
+            return float("inf")
+        q = np.bincount(self.eid, 1.0 / u, self.n_elem) / self.n_corners
+        qc = np.full(self.n_elem, self.qc)
+        gap = np.subtract(qc, q)  # (qc - q)_+ / qc
+        np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
+        w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
+        energy = fpmath.add_reduce(np.subtract(np.multiply(w, gap, w), q, w))
+        return energy + LIFT_BARRIER * fpmath.add_reduce(np.multiply(self.weight, u, u))
 
     def evaluate(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
         bk = self._bk

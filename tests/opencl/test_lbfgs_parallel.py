@@ -474,3 +474,21 @@ def test_lift_on_a_large_jittered_mesh_bit_identical_with_fewer_trials(solver, m
     assert_same_calls(host, dev)
     its = sum(i for _, i in dev.results)
     assert len(trials) < 2 * its, (len(trials), its)
+
+
+def test_device_lift_holds_no_host_corner_scratch(solver, monkeypatch):
+    """A lift whose solves run on the device (whole-mesh run and rounds) never makes the
+    host's per-corner scratch (its measures work in pieces), and keeps the host's bits."""
+    from core.optimize import energy as energy_mod
+
+    p, fs = holed_square(20_000, seed=3)
+    groups, free = fs.by_arity(), free_nodes(len(p), fs)
+    u, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
+    made = []
+    real = energy_mod._Blocks
+    monkeypatch.setattr(energy_mod, "_Blocks", lambda *a: made.append(a[0]) or real(*a))
+    opts = dict(lift_first_iter=60, lift_rounds=3, lift_chunk=10, lift_rel_tol=1e-4)
+    b, info = lift_min_quality(u, groups, free, GlobalOptions(solver=solver, **opts))
+    assert made == [] and info["rounds"] >= 1
+    a, _ = lift_min_quality(u, groups, free, GlobalOptions(**opts))
+    assert made and np.array_equal(a, b)  # the host's run evaluates on its scratch
