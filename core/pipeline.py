@@ -458,7 +458,7 @@ class _Run:
             elif mode != "eegt+local" and prm.polish_iterations > 0:
                 current = self.global_stage(polish=prm.polish_iterations)
         if not (mode == "eegt+local" and self.lifted):  # lifted rounds leave EEGT smoothing
-            self.smooth_eegt(current)  # no better iterate to find (docs/global_untangle.md)
+            self.smooth_eegt(current)  # no better iterate to find (docs/scale.md)
         verb = f"untangled in {self.n_untangle} iterations, " if tangled else ""
         glob = f"{self.n_global} optimization iterations, " if self.n_global else ""
         b = self.best
