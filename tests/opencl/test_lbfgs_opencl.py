@@ -24,6 +24,7 @@ from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
 eo = pytest.importorskip("core.engine_opencl")
 ort = pytest.importorskip("core.opencl.runtime")
 lo = pytest.importorskip("core.optimize.solver_opencl")
+from solver_recorder import Recorder  # noqa: E402  (same folder)
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
 
@@ -40,18 +41,6 @@ def mesh(name: str):
     fs = as_faceset(f, len(p))
     groups = fs.by_arity()
     return p, fs, groups, free_nodes(len(p), fs)
-
-
-class Recorder:
-    """Wraps a solver and keeps every call's result."""
-
-    def __init__(self, run):
-        self.run, self.results = run, []
-
-    def __call__(self, *args, **kw):
-        out = self.run(*args, **kw)
-        self.results.append((out[0].copy(), out[1]))
-        return out
 
 
 SHARED = ["quad_hole", "mixed_quad_tri", "polygon_voronoi", "tri_two_holes"]

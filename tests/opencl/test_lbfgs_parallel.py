@@ -25,6 +25,7 @@ from core.pipeline import free_nodes
 eo = pytest.importorskip("core.engine_opencl")
 ort = pytest.importorskip("core.opencl.runtime")
 lp = pytest.importorskip("core.optimize.solver_parallel")
+from solver_recorder import Recorder  # noqa: E402  (same folder)
 from test_opencl import big_ngon_mesh, polygon_meshes  # noqa: E402  (same folder)
 
 
@@ -44,18 +45,6 @@ def mesh(name: str):
     p, f = load2d(name)
     fs = as_faceset(f, len(p))
     return p, fs.by_arity(), free_nodes(len(p), fs)
-
-
-class Recorder:
-    """Wraps a solver and keeps every call's result."""
-
-    def __init__(self, run):
-        self.run, self.results = run, []
-
-    def __call__(self, *args, **kw):
-        out = self.run(*args, **kw)
-        self.results.append((out[0].copy(), out[1]))
-        return out
 
 
 def run_stage(p, groups, free, run, polish_iter=300, lift_rounds=10):
