@@ -66,8 +66,7 @@ def chi_scalar(d: float, eps: float) -> float:
 
 
 LIMIT_PIECE = 16384  # corners per piece of `step_limit` (its arrays stay in cache)
-QUALITY_PIECE = 65536  # corners per piece of the scratch-free whole-mesh measures
-JAC_PIECE = 65536  # corners per piece of `_jac` (its temporaries stay in cache)
+PIECE = 65536  # corners per piece of `_jac` and of the scratch-free measures (in cache)
 
 
 def _corner_limit(c: np.ndarray, f: np.ndarray, w00: np.ndarray, w01: np.ndarray,
@@ -128,12 +127,10 @@ class _Blocks:
         self.w00, self.w01, self.w11 = two  # W^-1 entries for [x, y] pairs of blocks
         # z[gather] = [x1, y1, x2, y2, x0, y0]; e1 = [e1x, e1y], e2 = [e2x, e2y]
         self.c, *_ = blocks(6)
-        self.c1, self.c2, self.c0 = self.c[: 2 * m], self.c[2 * m : 4 * m], self.c[4 * m :]
         self.j, self.j00, self.j10, self.j01, self.j11 = blocks(4)
-        self.ja, self.jb = self.j[: 2 * m], self.j[2 * m :]  # [j00, j10], [j01, j11]
         self.g, self.g00, self.g10, self.g01, self.g11 = blocks(4)  # dF/dJ
         self.ga, self.gb = self.g[: 2 * m], self.g[2 * m :]
-        self.sq, self.s00, self.s10, self.s01, self.s11 = self.g, *self.g.reshape(4, m)  # j^2
+        self.sq = self.g  # J squared, entry by entry
         # dF/dE per corner node: [ge1x, ge1y, ge2x, ge2y, -(ge1x + ge2x), -(ge1y + ge2y)]
         self.ge, *_ = blocks(6)
         self.ge1, self.ge2, self.ge0 = self.ge[: 2 * m], self.ge[2 * m : 4 * m], self.ge[4 * m :]
@@ -145,8 +142,8 @@ class _Blocks:
         self.one_theta = np.full(m, 1.0 - THETA)
         self.two_one_theta = np.full(m, 2.0 * (1.0 - THETA))
         self.two_theta = np.full(m, 2.0 * THETA)
-        self.pieces = [self._piece(slice(lo, min(m, lo + JAC_PIECE)), m, w00, w01, w11)
-                       for lo in range(0, m, JAC_PIECE)]
+        self.pieces = [self._piece(slice(lo, min(m, lo + PIECE)), m, w00, w01, w11)
+                       for lo in range(0, m, PIECE)]
 
     def _piece(self, k: slice, m: int, w00, w01, w11) -> tuple[np.ndarray, ...]:
         """Views of one piece of corners k: its rows of c (6), e1, e2 (2 each), J (4), J
@@ -248,27 +245,32 @@ class FoldoverEnergy:
             self._blocks = _Blocks(self.i0.size, self.w00, self.w01, self.w11)
         return self._blocks
 
+    def _corner_du(self, k, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(det J, u = |J|_F^2 / (2 det J), 0 where det <= 0) of the corners k (a slice or
+        ids), with temporaries of k's size: the operations of `_jac` in order (the same
+        bits)."""
+        i0, i1, i2 = self.i0[k], self.i1[k], self.i2[k]
+        x0, y0 = x.take(i0), y.take(i0)
+        e1x, e1y = x.take(i1) - x0, y.take(i1) - y0
+        e2x, e2y = x.take(i2) - x0, y.take(i2) - y0
+        w00, w01, w11 = self.w00[k], self.w01[k], self.w11[k]
+        j00, j10 = e1x * w00, e1y * w00
+        j01, j11 = e1x * w01 + e2x * w11, e1y * w01 + e2y * w11
+        d = j00 * j11 - j01 * j10
+        t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
+        return d, 0.5 * t / np.where(d > 0.0, d, np.inf)
+
     def _corner_u(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        """(u_k = |J|_F^2 / (2 det J) of every corner (0 where det <= 0), whether its det is
-        <= 0, the smallest det), in pieces of QUALITY_PIECE corners: the operations of `_jac`
-        and `_frob` in order, so the same bits, without the corner scratch of `_Blocks`."""
+        """(u of every corner (`_corner_du`), whether its det is <= 0, the smallest det), in
+        pieces of PIECE corners, without the corner scratch of `_Blocks`."""
         m = self.i0.size
         u = np.empty(m)
         bad = np.empty(m, dtype=bool)
         dmin = np.inf
-        for lo in range(0, m, QUALITY_PIECE):
-            k = slice(lo, min(m, lo + QUALITY_PIECE))
-            i0, i1, i2 = self.i0[k], self.i1[k], self.i2[k]
-            x0, y0 = x.take(i0), y.take(i0)
-            e1x, e1y = x.take(i1) - x0, y.take(i1) - y0
-            e2x, e2y = x.take(i2) - x0, y.take(i2) - y0
-            w00, w01, w11 = self.w00[k], self.w01[k], self.w11[k]
-            j00, j10 = e1x * w00, e1y * w00
-            j01, j11 = e1x * w01 + e2x * w11, e1y * w01 + e2y * w11
-            d = j00 * j11 - j01 * j10
-            t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
+        for lo in range(0, m, PIECE):
+            k = slice(lo, min(m, lo + PIECE))
+            d, u[k] = self._corner_du(k, x, y)
             dmin = np.minimum(dmin, np.minimum.reduce(d))  # NaN, as np.minimum over all
-            u[k] = 0.5 * t / np.where(d > 0.0, d, np.inf)
             np.less_equal(d, 0.0, out=bad[k])
         return u, bad, float(dmin)
 
@@ -323,8 +325,8 @@ class FoldoverEnergy:
         return out
 
     def _jac(self, z: np.ndarray, index: np.ndarray) -> None:
-        """J = [j00, j10, j01, j11], d = det J and t = |J|_F^2 (`_frob`) of every corner into
-        the blocks, in pieces of JAC_PIECE corners (their temporaries stay in cache: about a
+        """J = [j00, j10, j01, j11], d = det J and t = |J|_F^2 of every corner into the
+        blocks, in pieces of PIECE corners (their temporaries stay in cache: about a
         third of the time of whole-array passes at 1M corners); each value is the same
         operation on the same operands as on whole arrays."""
         bk = self._bk
@@ -343,10 +345,6 @@ class FoldoverEnergy:
             add(sq[0], sq[2], t)
             add(t, sq[1], t)
             add(t, sq[3], t)
-
-    def _frob(self) -> np.ndarray:
-        """t = j00^2 + j01^2 + j10^2 + j11^2 of the blocks' J (made by `_jac`)."""
-        return self._bk.t
 
     def _scatter(self, a: np.ndarray, b: np.ndarray, n_bins: int, index: np.ndarray):
         """Node gradient (flat, layout order) of dF/dJ = a J + b cof(J), cof(J) = [[j11, -j10],
@@ -376,7 +374,7 @@ class FoldoverEnergy:
         """F_eps."""
         self._jac(np.concatenate([x, y]), self._full_layout()[0])
         d = self._bk.d.copy()
-        num = (1.0 - THETA) * self._frob()
+        num = (1.0 - THETA) * self._bk.t
         num += THETA * (d * d + 1.0)
         ch = chi_array(d, eps, np.sqrt(eps * eps + d * d))
         u = num / ch
@@ -396,7 +394,7 @@ class FoldoverEnergy:
             np.multiply(bk.half, np.add(d, root, chi), chi)
         else:
             chi[:] = chi_array(d, eps, root)
-        np.multiply(bk.one_theta, self._frob(), num)  # (1 - theta) t + theta (d^2 + 1)
+        np.multiply(bk.one_theta, bk.t, num)  # (1 - theta) t + theta (d^2 + 1)
         np.add(num, np.multiply(bk.theta, np.add(dd, bk.one, bk.tmp), bk.tmp), num)
         np.divide(self.weight, chi, inv_chi)
         if self.power != 1.0:  # F = sum w (u / 2)^p with u = num / chi
@@ -461,12 +459,39 @@ class LiftEnergy(FoldoverEnergy):
 
     def element_quality(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(E,) mean ratio of each element (0 where a corner is not positive)."""
-        u, bad_corner, _ = self._corner_u(x, y)  # 1 / q_k; det <= 0: 0, so q_k = inf
+        u, bad_corner, _ = self._corner_u(x, y)
+        return self._quality_of(self._element_mean(u, np.empty_like(u)), bad_corner)
+
+    def value_and_quality(self, x: np.ndarray, y: np.ndarray) -> tuple[float, np.ndarray]:
+        """(`value`, `element_quality`) at x, y from one pass over the corners."""
+        u, bad_corner, dmin = self._corner_u(x, y)
+        tmp = np.empty_like(u)
+        q = self._element_mean(u, tmp)
+        energy = self._energy_of(u, q, np.empty(self.n_elem), tmp)[0] if dmin > 0.0 else np.inf
+        return float(energy), self._quality_of(q, bad_corner)
+
+    def _element_mean(self, u: np.ndarray, tmp: np.ndarray) -> np.ndarray:
+        """(E,) mean over each element's corners of q_k = 1 / u_k (u_k = 0: inf)."""
         with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
-            q = np.bincount(self.eid, np.divide(1.0, u, u), self.n_elem) / self.n_corners
+            return np.bincount(self.eid, np.divide(1.0, u, tmp), self.n_elem) / self.n_corners
+
+    def _quality_of(self, q: np.ndarray, bad_corner: np.ndarray) -> np.ndarray:
+        """The element means q, 0 for an element with a corner whose det is <= 0."""
         bad = np.zeros(self.n_elem, dtype=bool)
         bad[self.eid[bad_corner]] = True
         return np.where(bad, 0.0, q)
+
+    def _energy_of(self, u: np.ndarray, q: np.ndarray, qc: np.ndarray,
+                   tmp: np.ndarray) -> tuple[float, np.ndarray]:
+        """(F, (qc - q_e)_+ / qc) from the corners' u and the element means q of a point
+        whose dets are all positive; qc (E,) and tmp (corners) are scratch."""
+        qc.fill(self.qc)
+        gap = np.subtract(qc, q)  # (qc - q)_+ / qc
+        np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
+        w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
+        energy = fpmath.add_reduce(np.subtract(np.multiply(w, gap, w), q, w))
+        energy += LIFT_BARRIER * fpmath.add_reduce(np.multiply(self.weight, u, tmp))
+        return energy, gap
 
     def element_quality_of(self, elems: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """`element_quality(x, y)[elems]` bit for bit (ascending element ids), from those
@@ -475,16 +500,7 @@ class LiftEnergy(FoldoverEnergy):
             self._by_elem = bincount_csr(self.eid, self.n_elem)
         ptr, order = self._by_elem
         cnt = ptr[elems + 1] - ptr[elems]
-        k = order[ragged_arange(ptr[elems], cnt)]
-        i0, i1, i2 = self.i0[k], self.i1[k], self.i2[k]
-        e1x, e1y = x[i1] - x[i0], y[i1] - y[i0]
-        e2x, e2y = x[i2] - x[i0], y[i2] - y[i0]
-        w00, w01, w11 = self.w00[k], self.w01[k], self.w11[k]
-        j00, j10 = e1x * w00, e1y * w00  # the operations of `_jac` and `_frob`, in order
-        j01, j11 = e1x * w01 + e2x * w11, e1y * w01 + e2y * w11
-        d = j00 * j11 - j01 * j10
-        t = j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11
-        u = 0.5 * t / np.where(d > 0.0, d, np.inf)
+        d, u = self._corner_du(order[ragged_arange(ptr[elems], cnt)], x, y)
         local = np.repeat(np.arange(elems.size), cnt)
         with np.errstate(divide="ignore"):
             q = np.bincount(local, 1.0 / u, minlength=elems.size) / self.n_corners[elems]
@@ -497,13 +513,8 @@ class LiftEnergy(FoldoverEnergy):
         u, _, dmin = self._corner_u(x, y)
         if not dmin > 0.0:
             return float("inf")
-        q = np.bincount(self.eid, 1.0 / u, self.n_elem) / self.n_corners
-        qc = np.full(self.n_elem, self.qc)
-        gap = np.subtract(qc, q)  # (qc - q)_+ / qc
-        np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
-        w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
-        energy = fpmath.add_reduce(np.subtract(np.multiply(w, gap, w), q, w))
-        return energy + LIFT_BARRIER * fpmath.add_reduce(np.multiply(self.weight, u, u))
+        q = self._element_mean(u, np.empty_like(u))
+        return float(self._energy_of(u, q, np.empty(self.n_elem), np.empty_like(u))[0])
 
     def evaluate(self, z: np.ndarray, layout, eps: float) -> tuple[float, float, bool]:
         bk = self._bk
@@ -512,16 +523,9 @@ class LiftEnergy(FoldoverEnergy):
         dmin = float(np.minimum.reduce(d))
         if not dmin > 0.0:  # only reached by rejected trial steps: infinite energy
             return float("inf"), dmin, False
-        np.divide(np.multiply(bk.half, self._frob(), u), d, u)  # 1 / q_k = 0.5 t / d
-        q = np.bincount(self.eid, np.divide(bk.one, u, bk.tmp), self.n_elem) / self.n_corners
-        qc = self._qc_e
-        qc.fill(self.qc)
-        gap = np.subtract(qc, q)  # (qc - q)_+ / qc
-        np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
-        w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
-        energy = fpmath.add_reduce(np.subtract(np.multiply(w, gap, w), q, w))
-        energy += LIFT_BARRIER * fpmath.add_reduce(np.multiply(self.weight, u, bk.tmp))
-        self._gap = gap
+        np.divide(np.multiply(bk.half, bk.t, u), d, u)  # 1 / q_k = 0.5 t / d
+        q = self._element_mean(u, bk.tmp)
+        energy, self._gap = self._energy_of(u, q, self._qc_e, bk.tmp)
         return energy, dmin, True
 
     def gradient(self, layout) -> np.ndarray:

@@ -29,9 +29,6 @@ INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
-# the polish gets at least as many iterations as the untangling took, up to one round
-# (`inner`): a fold that took long to untangle leaves the mesh far from the energy's optimum
-# (docs: "Polish after a long untangle")
 # lift_min_quality (max mean quality subject to a rising quality floor; see the docs)
 LIFT_ITER = 200  # L-BFGS iterations per later round (100 stopped short on naca_deform: docs)
 LIFT_GAP = 0.15  # next floor: min(q_min * options.lift_grow, q_min + GAP (q_avg - q_min))
@@ -237,8 +234,10 @@ class _Continuation:
 
     def _polish_budget(self) -> int:
         """The polish's iterations: polish_iter, or as many as the untangling took (at most
-        one round, `inner`) when that is more and options.long_polish; none when polish_iter
-        is 0. What it adds to polish_iter comes on top of max_iter."""
+        one round, `inner`) when that is more and options.long_polish (a fold that took long
+        to untangle leaves the mesh far from the energy's optimum: docs/global_untangle.md,
+        "Polish after a long untangle"); none when polish_iter is 0. What it adds to
+        polish_iter comes on top of max_iter."""
         polish = self.opt.polish_iter
         if polish <= 0 or not self.opt.long_polish:
             return max(polish, 0)
@@ -321,8 +320,7 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
                            rel_tol=tol, tick=tick)
         return v, its, en.element_quality(*st.unpack(v))
     total = 0
-    e0 = en.value(*st.unpack(v), EPS_MIN)
-    q = None  # the qualities at v, once measured
+    e0, q = en.value_and_quality(*st.unpack(v))  # the energy and qualities at v
     while total < max_it:
         sub = None if tick is None else (lambda it, base=total: tick(base + it))
         v, its = run_lbfgs(
@@ -331,18 +329,16 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
             tick=sub,
         )
         total += its
-        q = None
+        e1, q = en.value_and_quality(*st.unpack(v))
         if tick is not None:
             if show is not None:
-                q = en.element_quality(*st.unpack(v))
                 show(q)
             if stops(tick(total)):
                 break
-        e1 = en.value(*st.unpack(v), EPS_MIN)
         if its < chunk or not e0 - e1 > tol * abs(e0):
             break
         e0 = e1
-    return v, total, en.element_quality(*st.unpack(v)) if q is None else q
+    return v, total, q
 
 
 def lift_min_quality(

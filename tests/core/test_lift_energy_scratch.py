@@ -47,7 +47,9 @@ def test_value_is_the_evaluation_bit_for_bit_without_its_scratch(name, monkeypat
     en.qc = 0.8  # some elements under the floor: the penalty term counts
     v = en.value(x, y, 1e-9)
     q = en.element_quality(x, y)
-    assert not made  # neither measure made the host's corner scratch
+    both = en.value_and_quality(x, y)
+    assert not made  # no measure made the host's corner scratch
+    assert both[0] == v and np.array_equal(both[1], q)
     assert 0.0 < q.min() < 0.8 < q.max()
     z = np.concatenate([x, y])
     assert v == en.evaluate(z, en.flat_layout(np.arange(z.size).reshape(2, -1)), 1e-9)[0]
