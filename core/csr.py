@@ -22,6 +22,8 @@ def bincount_csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     which `np.bincount(keys, w)` adds them, so a kernel's gather sums like NumPy."""
     ptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(np.bincount(keys, minlength=n), out=ptr[1:])
+    if keys.size > 1 and np.greater_equal(keys[1:], keys[:-1]).all():  # already in order
+        return ptr, np.arange(keys.size, dtype=np.int64)
     return ptr, np.argsort(keys, kind="stable")
 
 

@@ -19,6 +19,7 @@ __all__ = ["Factors", "corner_factor_values", "corner_triangles", "mesh_tables",
 Factors = Mapping[int, tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field
+EDGE_PIECE = 65536  # edges per piece of the per-edge arithmetic (its temporaries stay in cache)
 
 
 def mesh_tables(
@@ -26,29 +27,29 @@ def mesh_tables(
 ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray, np.ndarray]:
     """Stack polygons by arity: per-arity arrays, element arity, directed edges, edge element."""
     faces: list[np.ndarray] = []
-    arity: list[np.ndarray] = []
-    ea: list[np.ndarray] = []
-    eb: list[np.ndarray] = []
-    ee: list[np.ndarray] = []
-    base = 0
     for n in sorted(groups):
         f = np.asarray(groups[n], dtype=np.int64).reshape(-1, int(n))
         if f.shape[0] == 0:
             continue
         if n < 3:
             raise ValueError("polygons need at least 3 nodes")
-        m = f.shape[0]
         faces.append(f)
-        arity.append(np.full(m, n, dtype=np.int64))
-        ea.append(f.ravel())
-        eb.append(np.roll(f, -1, axis=1).ravel())
-        ee.append(np.repeat(base + np.arange(m, dtype=np.int64), n))
-        base += m
     if not faces:
         z = np.zeros(0, dtype=np.int64)
         return [], z, np.stack([z, z]), z
-    edges = np.stack([np.concatenate(ea), np.concatenate(eb)])
-    return faces, np.concatenate(arity), edges, np.concatenate(ee)
+    n_edges = sum(f.size for f in faces)
+    edges = np.empty((2, n_edges), dtype=np.int64)  # filled in place: no stacked copies
+    arity = np.empty(sum(f.shape[0] for f in faces), dtype=np.int64)
+    edge_elem = np.empty(n_edges, dtype=np.int64)
+    base = at = 0
+    for f in faces:
+        m, n = f.shape
+        arity[base : base + m] = n
+        edges[0, at : at + f.size].reshape(m, n)[:] = f
+        f.take(np.roll(np.arange(n), -1), axis=1, out=edges[1, at : at + f.size].reshape(m, n))
+        edge_elem[at : at + f.size].reshape(m, n)[:] = np.arange(base, base + m)[:, None]
+        base, at = base + m, at + f.size
+    return faces, arity, edges, edge_elem
 
 
 def corner_triangles(
@@ -108,32 +109,42 @@ def reference_sizes(
     Node size = mean length of its incident edges; element size = geometric mean of its
     nodes' sizes, smoothed SIZE_SMOOTHING times through the nodes; then one global factor so
     the regular reference polygons add up to the domain area (which folds cannot change).
+    Per-edge arithmetic runs in cache-sized pieces into two edge-length buffers that the
+    later gathers reuse (fresh arrays of a million edges cost more to map than to fill).
     """
     n_nodes = points.shape[0]
     n_elem = arity.shape[0]
     x, y = np.ascontiguousarray(points[:, 0]), np.ascontiguousarray(points[:, 1])
-    x0, y0, x1, y1 = x.take(edges[0]), y.take(edges[0]), x.take(edges[1]), y.take(edges[1])
-    dx, dy = x1 - x0, y1 - y0
-    elen = np.sqrt(dx * dx + dy * dy)
-    del dx, dy
+    tail, head = edges[0], edges[1]
+    m = tail.size
+    elen, cross = np.empty(m), np.empty(m)
+    for lo in range(0, m, EDGE_PIECE):
+        k = slice(lo, min(m, lo + EDGE_PIECE))
+        x0, y0, x1, y1 = x.take(tail[k]), y.take(tail[k]), x.take(head[k]), y.take(head[k])
+        dx, dy = x1 - x0, y1 - y0
+        np.sqrt(dx * dx + dy * dy, out=elen[k])
+        np.subtract(x0 * y1, x1 * y0, out=cross[k])
+    dom_area = 0.5 * fpmath.add_reduce(cross)
     positive = elen[elen > 0]
     floor = 1e-3 * (fpmath.add_reduce(positive) / positive.size if positive.size else 1.0)
-    elen = np.maximum(elen, floor)
-    cnt = np.bincount(edges[0], minlength=n_nodes).astype(np.float64)
-    hn = np.bincount(edges[0], weights=elen, minlength=n_nodes)
-    hn = hn + np.bincount(edges[1], weights=elen, minlength=n_nodes)
-    hn = np.maximum(hn / np.maximum(2.0 * cnt, 1.0), floor)
+    del positive
+    np.maximum(elen, floor, out=elen)
+    cnt = np.bincount(tail, minlength=n_nodes).astype(np.float64)
+    hn = np.bincount(tail, weights=elen, minlength=n_nodes)
+    hn += np.bincount(head, weights=elen, minlength=n_nodes)
+    hn /= np.maximum(2.0 * cnt, 1.0)
+    hn = np.maximum(hn, floor, out=hn)
     lh = fpmath.log(np.append(hn, floor))  # the floor's log in the same call
     lh, log_floor = lh[:-1], float(lh[-1])
     deg = arity.astype(np.float64)
-    le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
+    gathered = elen  # per-edge scratch from here on
+    le = np.bincount(edge_elem, weights=lh.take(tail, out=gathered), minlength=n_elem) / deg
     for _ in range(SIZE_SMOOTHING):
-        lh = np.bincount(edges[0], weights=le[edge_elem], minlength=n_nodes)
+        lh = np.bincount(tail, weights=le.take(edge_elem, out=gathered), minlength=n_nodes)
         lh = np.where(cnt > 0, lh / np.maximum(cnt, 1.0), log_floor)
-        le = np.bincount(edge_elem, weights=lh[edges[0]], minlength=n_elem) / deg
+        le = np.bincount(edge_elem, weights=lh.take(tail, out=gathered), minlength=n_elem) / deg
     size = fpmath.exp(le)
     ref_area = arity * size**2 / (4.0 * per_arity(arity, fpmath.tan_pi_over))
-    dom_area = 0.5 * fpmath.add_reduce(x0 * y1 - x1 * y0)
     total = fpmath.add_reduce(ref_area)
     if dom_area > 0.0 and total > 0.0:
         size = size * np.sqrt(dom_area / total)

@@ -12,6 +12,8 @@ from .mesh_tables import Factors
 
 __all__ = ["Neighbourhood", "active_submesh"]
 
+DISTINCT_SORT = 16  # `_distinct` sorts fewer than n / this ids, marks more
+
 SubMesh = tuple[dict[int, np.ndarray], np.ndarray, np.ndarray, "Factors | None"]
 
 
@@ -26,6 +28,7 @@ class Neighbourhood:
         self.faces = [np.asarray(groups[n], dtype=np.int64).reshape(-1, int(n))
                       for n in self.arities]
         self.free, self.factors = free, factors
+        self._loc: np.ndarray | None = None  # `_local`'s buffer
         sizes = [f.shape[0] for f in self.faces]
         self.first = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
         self.n_elem = int(self.first[-1])
@@ -45,7 +48,8 @@ class Neighbourhood:
     def _elements_of(self, nodes: np.ndarray) -> np.ndarray:
         """The distinct elements (ascending) that contain one of `nodes`."""
         lo = self.node_ptr[nodes]
-        return np.unique(self.node_elem[ragged_arange(lo, self.node_ptr[nodes + 1] - lo)])
+        return _distinct(self.node_elem[ragged_arange(lo, self.node_ptr[nodes + 1] - lo)],
+                         self.n_elem)
 
     def _nodes_of(self, elems: np.ndarray) -> np.ndarray:
         """The distinct nodes (ascending) of `elems` (ascending element ids)."""
@@ -54,7 +58,18 @@ class Neighbourhood:
             lo, hi = np.searchsorted(elems, self.first[k : k + 2])
             if hi > lo:
                 parts.append(f[elems[lo:hi] - self.first[k]].ravel())
-        return np.unique(np.concatenate(parts)) if parts else np.zeros(0, dtype=np.int64)
+        if not parts:
+            return np.zeros(0, dtype=np.int64)
+        return _distinct(np.concatenate(parts) if len(parts) > 1 else parts[0],
+                         self.free.shape[0])
+
+    def _local(self, nodes: np.ndarray) -> np.ndarray:
+        """A map from mesh node ids to positions in `nodes`, valid at `nodes` only (one
+        buffer of the mesh's size, reused: a gather instead of a search per lookup)."""
+        if self._loc is None:
+            self._loc = np.empty(self.free.shape[0], dtype=np.int64)
+        self._loc[nodes] = np.arange(nodes.size)
+        return self._loc
 
     def submesh(self, seed: np.ndarray, rings: int) -> tuple[SubMesh, np.ndarray]:
         """`active_submesh` of these groups, and the sub-mesh's element ids (in the order of
@@ -66,19 +81,30 @@ class Neighbourhood:
         move_nodes = near[self.free[near]]
         elems = self._elements_of(move_nodes)
         nodes = self._nodes_of(elems)
+        loc = self._local(nodes)
         out, sub_factors = {}, None
         for k, (n, f) in enumerate(zip(self.arities, self.faces, strict=True)):
             lo, hi = np.searchsorted(elems, self.first[k : k + 2])
             if hi <= lo:
                 continue
             rows = elems[lo:hi] - self.first[k]
-            out[n] = np.searchsorted(nodes, f[rows])
+            out[n] = loc[f[rows]]
             if self.factors is not None:
                 sub_factors = sub_factors or {}
                 sub_factors[n] = tuple(np.asarray(u).reshape(-1, n)[rows] for u in self.factors[n])
         move = np.zeros(nodes.size, dtype=bool)
-        move[np.searchsorted(nodes, move_nodes)] = True
+        move[loc[move_nodes]] = True
         return (out, nodes, move, sub_factors), elems
+
+
+def _distinct(ids: np.ndarray, n: int) -> np.ndarray:
+    """np.unique(ids) for ids in [0, n): a sort for a few ids, a mark over all n for many
+    (a pass over n costs about as much as sorting n / 16 ids)."""
+    if ids.size * DISTINCT_SORT < n:
+        return np.unique(ids)
+    mark = np.zeros(n, dtype=bool)
+    mark[ids] = True
+    return np.flatnonzero(mark)
 
 
 def active_submesh(

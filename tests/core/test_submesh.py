@@ -98,3 +98,23 @@ def test_element_quality_of_is_element_quality_bit_for_bit(name):
     assert folded.size > 0
     assert np.array_equal(en.element_quality_of(folded, x, y), np.zeros(folded.size))
     assert np.array_equal(en.element_quality_of(np.arange(en.n_elem), x, y), whole)
+
+
+@pytest.mark.parametrize("sort_below", [0, 10**9])
+def test_submesh_by_marks_and_by_sorting_give_the_same_sub_mesh(monkeypatch, sort_below):
+    import core.optimize.submesh as sm
+
+    p, f = load2d("polygon_voronoi")
+    fs = as_faceset(f, len(p))
+    groups, free = fs.by_arity(), free_nodes(len(p), fs)
+    seed = np.zeros(fs.n_faces, dtype=bool)
+    seed[[2, 30, 31]] = True
+    want = Neighbourhood(groups, free).submesh(seed, 2)
+    monkeypatch.setattr(sm, "DISTINCT_SORT", sort_below)  # 0: always sort; huge: always mark
+    got = Neighbourhood(groups, free).submesh(seed, 2)
+    assert np.array_equal(got[1], want[1]) and got[1].size > 10
+    for a, b in zip(got[0][1:3], want[0][1:3], strict=True):
+        assert np.array_equal(a, b)
+    assert sorted(got[0][0]) == sorted(want[0][0])
+    for n in want[0][0]:
+        assert np.array_equal(got[0][0][n], want[0][0][n])
