@@ -183,3 +183,18 @@ def test_mean_ratio_against_targets_is_scale_safe():
         warnings.simplefilter("error")
         assert [quality(t * 2.0**k, face, targets=t)[0] for k in (-1000, -520, 520, 1000)] \
             == [unit] * 4
+
+
+@pytest.mark.parametrize("n", [3, 4, 5, 9])
+def test_mean_ratio_in_pieces_is_the_whole_group_bit_for_bit(monkeypatch, n):
+    import core.mean_ratio as mr
+
+    rng = np.random.default_rng(n)
+    X, Y = rng.random((n, 1001)), rng.random((n, 1001))  # some faces inverted, some not
+    targets = (rng.random((n, 1001)) - 0.5, 1.0 + rng.random((n, 1001)))
+    whole = [mr._mean_ratio(X, Y, c, True) for c in (None, targets)]
+    monkeypatch.setattr(mr, "FACE_PIECE", 64)  # 16 pieces of 62-63 faces
+    pieces = [mr._mean_ratio(X, Y, c, True) for c in (None, targets)]
+    for (qa, sa), (qb, sb) in zip(whole, pieces, strict=True):
+        assert np.array_equal(qa, qb) and np.array_equal(sa, sb)
+    assert 0.0 < whole[0][0].max() <= 1.0 and (whole[0][0] == 0.0).any()
