@@ -69,17 +69,16 @@ LIMIT_PIECE = 16384  # corners per piece of `step_limit` (its arrays stay in cac
 PIECE = 65536  # corners per piece of `_jac` and of the scratch-free measures (in cache)
 
 
-def _corner_limit(c: np.ndarray, f: np.ndarray, w00: np.ndarray, w01: np.ndarray,
-                  w11: np.ndarray, s0: float) -> float:
-    """`FoldoverEnergy.step_limit` of some corners: c, f the (6, m) corner coordinates
-    (x1, y1, x2, y2, x0, y0) of the point and of the direction."""
-    e1x, e1y, e2x, e2y = c[0] - c[4], c[1] - c[5], c[2] - c[4], c[3] - c[5]
+def _corner_limit(j: np.ndarray, cc: np.ndarray, f: np.ndarray, w00: np.ndarray,
+                  w01: np.ndarray, w11: np.ndarray, s0: float) -> float:
+    """`FoldoverEnergy.step_limit` of some corners: j the (4, m) rows [j00, j10, j01, j11]
+    of J at the point and cc = det J (as `_jac` computes them), f the (6, m) corner
+    coordinates (x1, y1, x2, y2, x0, y0) of the direction."""
+    j00, j10, j01, j11 = j
     f1x, f1y, f2x, f2y = f[0] - f[4], f[1] - f[5], f[2] - f[4], f[3] - f[5]
-    j00, j10 = e1x * w00, e1y * w00
-    j01, j11 = e1x * w01 + e2x * w11, e1y * w01 + e2y * w11
     k00, k10 = f1x * w00, f1y * w00
     k01, k11 = f1x * w01 + f2x * w11, f1y * w01 + f2y * w11
-    cc = j00 * j11 - j01 * j10  # det(J + t K) = cc + bb t + aa t^2
+    # det(J + t K) = cc + bb t + aa t^2
     bb = (j00 * k11 + k00 * j11) - (j01 * k10 + k01 * j10)
     aa = k00 * k11 - k01 * k10
     # A corner whose det stays positive on [0, 2 s0] (its lower bound there is) cannot
@@ -306,21 +305,25 @@ class FoldoverEnergy:
         return self._pack[1], self._pack[2]
 
     # -- corner Jacobians ------------------------------------------------------------------
-    def step_limit(self, z: np.ndarray, dz: np.ndarray, index: np.ndarray, s0: float) -> float:
+    def step_limit(self, z: np.ndarray, dz: np.ndarray, index: np.ndarray, s0: float,
+                   at_point: bool = False) -> float:
         """The smallest step t at which some energy corner's det, a quadratic in t along
         z + t dz, turns non-positive and stays so up to s0 (inf: none, or every det stays
         positive up to 2 s0, which skips no trial either). The line search
         skips the trial steps above it: they would be rejected for a det <= 0 (see
         `solver.skipped_trials`). opencl/lbfgs_parallel.cl `limit_corner` is its twin, operation
-        for operation. Worked in cache-sized pieces: some forty passes over the corners."""
+        for operation. at_point: the last `evaluate` was at z, so J and det J there are
+        still in the blocks (`gradient` leaves them) and are not computed again. The rest
+        works in cache-sized pieces."""
         m, bk = self.i0.size, self._bk
-        c, f = bk.c.reshape(6, m), bk.ge.reshape(6, m)  # scratch until the next `evaluate`
-        z.take(index, None, bk.c, "clip")  # = z[index]
-        dz.take(index, None, bk.ge, "clip")
+        if not at_point:
+            self._jac(z, index)
+        j, f = bk.j.reshape(4, m), bk.ge.reshape(6, m)  # f: scratch until the next `evaluate`
+        dz.take(index, None, bk.ge, "clip")  # = dz[index]
         out = np.inf
         for lo in range(0, m, LIMIT_PIECE):
             hi = min(m, lo + LIMIT_PIECE)
-            out = min(out, _corner_limit(c[:, lo:hi], f[:, lo:hi], self.w00[lo:hi],
+            out = min(out, _corner_limit(j[:, lo:hi], bk.d[lo:hi], f[:, lo:hi], self.w00[lo:hi],
                                          self.w01[lo:hi], self.w11[lo:hi], s0))
         return out
 

@@ -98,6 +98,7 @@ class _Run:
         self.v = v0
         self.e, _, ok = self.evaluate(self.z, layout, eps)
         self.g = self.gradient(layout)[:n2] if ok else np.zeros(n2)
+        self.at_v = True  # the energy's last evaluation was at v (its J is v's)
         self.dpre = st.preconditioner(en.precond)
         # memory: (s, y, rho = 1 / s.y, s.y, y.(dpre y)) per pair, oldest first
         self.mem: list[tuple[np.ndarray, np.ndarray, float, float, float]] = []
@@ -161,7 +162,8 @@ class _Run:
             # iteration with some)
             zv[:] = self.v
             self.dz[: self.n2] = q
-            step, skip = skipped_trials(step, self.limit(self.z, self.dz, self.layout[0], step))
+            step, skip = skipped_trials(step, self.limit(self.z, self.dz, self.layout[0], step,
+                                                         self.at_v))
         self.rejected = skip
         for _ in range(TRIALS - skip):
             c0.fill(step)
@@ -176,6 +178,7 @@ class _Run:
                 return True
             step *= 0.5
             self.rejected += 1
+        self.at_v = False  # the last evaluation was a rejected trial
         return False
 
     def accept(self) -> bool:
@@ -197,6 +200,7 @@ class _Run:
             if len(self.mem) > LBFGS_MEMORY:
                 del self.mem[0]
         self.v, self.e, self.g = vt, self.et, gt
+        self.at_v = True
         return self.dmin_t > 0.0
 
     def stalled(self, rel_tol: float) -> bool:

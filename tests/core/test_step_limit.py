@@ -36,6 +36,13 @@ def dets_along(c, f, w00, w01, w11, t):
     return j00 * j11 - j01 * j10
 
 
+def jac_at(c, w00, w01, w11):
+    """([j00, j10, j01, j11], det J) of corners at positions c, as `_jac` computes them."""
+    e1x, e1y, e2x, e2y = c[0] - c[4], c[1] - c[5], c[2] - c[4], c[3] - c[5]
+    j = np.stack([e1x * w00, e1y * w00, e1x * w01 + e2x * w11, e1y * w01 + e2y * w11])
+    return j, j[0] * j[3] - j[2] * j[1]
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_every_skipped_step_has_a_non_positive_det(seed):
     """Random valid corners and directions: at each step the limit skips, some corner's det
@@ -52,7 +59,7 @@ def test_every_skipped_step_has_a_non_positive_det(seed):
     w00, w01, w11 = (np.full(m, 1.0), np.full(m, -0.577), np.full(m, 1.155))
     assert np.all(dets_along(c, f, w00, w01, w11, 0.0) > 0)
     s0 = 1.0
-    limit = _corner_limit(c, f, w00, w01, w11, s0)
+    limit = _corner_limit(*jac_at(c, w00, w01, w11), f, w00, w01, w11, s0)
     _, skip = skipped_trials(s0, limit)
     assert skip > 0  # the case is built to need it
     for k in range(skip):
@@ -110,3 +117,26 @@ def test_lift_stage_result_unchanged_without_the_limit(monkeypatch):
     without, info2 = lift_min_quality(p, groups, free, opts)
     assert np.array_equal(with_limit, without)
     assert info["iterations"] == info2["iterations"]
+
+
+@pytest.mark.parametrize("cls", [LiftEnergy, FoldoverEnergy])
+def test_step_limit_from_the_last_evaluation_is_the_limit_from_positions(cls):
+    """After `evaluate` and `gradient` at z, the blocks' J is z's: the limit read from it
+    is the limit computed from the positions, bit for bit."""
+    p, f = load2d("tri_two_holes")
+    fs = as_faceset(f, len(p))
+    groups, free = fs.by_arity(), free_nodes(len(p), fs)
+    start, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
+    en = cls(start, groups, free)
+    en.qc = 0.5
+    st = State(start, free)
+    layout, fixed = en.packed(st)
+    z = np.concatenate([st.pack(st.x, st.y), fixed])
+    rng = np.random.default_rng(2)
+    dz = np.zeros_like(z)
+    dz[: st.size] = rng.normal(0, 0.05, st.size)
+    en.evaluate(z, layout, EPS_MIN)
+    en.gradient(layout)
+    fresh = en.step_limit(z, dz, layout[0], 1.0, at_point=True)
+    computed = en.step_limit(z, dz, layout[0], 1.0)
+    assert fresh == computed and 0.0 < fresh < 1.0  # the random direction folds a corner
