@@ -143,6 +143,8 @@ class _Blocks:
         self.two_theta = np.full(m, 2.0 * THETA)
         self.pieces = [self._piece(slice(lo, min(m, lo + PIECE)), m, w00, w01, w11)
                        for lo in range(0, m, PIECE)]
+        self.scatter_pieces = [self._scatter_piece(slice(lo, min(m, lo + PIECE)), m)
+                               for lo in range(0, m, PIECE)]
 
     def _piece(self, k: slice, m: int, w00, w01, w11) -> tuple[np.ndarray, ...]:
         """Views of one piece of corners k: its rows of c (6), e1, e2 (2 each), J (4), J
@@ -152,6 +154,15 @@ class _Blocks:
         e1, e2 = self.e1.reshape(2, m)[:, k], self.e2.reshape(2, m)[:, k]
         return (k, c, c[0:2], c[2:4], c[4:6], e1, e2, j, j[0:2], j[2:4], sq, self.d[k], self.t[k],
                 self.tmp[k], w00[k], w01[k], w11[k])
+
+
+    def _scatter_piece(self, k: slice, m: int) -> tuple[np.ndarray, ...]:
+        """Views of one piece of corners k for `_scatter`: a, b, J (4 rows), dF/dJ (4 rows),
+        dF/dE (6 rows), tmp and the W^-1 entries (two rows each, for x and y)."""
+        g, ge = self.g.reshape(4, m)[:, k], self.ge.reshape(6, m)[:, k]
+        w00, w01, w11 = (w.reshape(2, m)[:, k] for w in (self.w00, self.w01, self.w11))
+        return (self.a[k], self.b[k], self.j.reshape(4, m)[:, k], g, g[0:2], g[2:4],
+                ge[0:2], ge[2:4], ge[4:6], self.tmp[k], w00, w01, w11)
 
 
 class FoldoverEnergy:
@@ -349,19 +360,21 @@ class FoldoverEnergy:
             add(t, sq[1], t)
             add(t, sq[3], t)
 
-    def _scatter(self, a: np.ndarray, b: np.ndarray, n_bins: int, index: np.ndarray):
+    def _scatter(self, n_bins: int, index: np.ndarray):
         """Node gradient (flat, layout order) of dF/dJ = a J + b cof(J), cof(J) = [[j11, -j10],
-        [-j01, j00]], through dF/dE = dF/dJ W^-T with E = [e1, e2]."""
+        [-j01, j00]] (a, b: the blocks' `a` and `b`), through dF/dE = dF/dJ W^-T with
+        E = [e1, e2]; the per-corner part runs in pieces like `_jac`."""
         bk = self._bk
-        mul, tmp = np.multiply, bk.tmp
-        np.add(mul(a, bk.j00, bk.g00), mul(b, bk.j11, tmp), bk.g00)  # g00 = a j00 + b j11
-        np.subtract(mul(a, bk.j10, bk.g10), mul(b, bk.j01, tmp), bk.g10)  # g10 = a j10 - b j01
-        np.subtract(mul(a, bk.j01, bk.g01), mul(b, bk.j10, tmp), bk.g01)  # g01 = a j01 - b j10
-        np.add(mul(a, bk.j11, bk.g11), mul(b, bk.j00, tmp), bk.g11)  # g11 = a j11 + b j00
-        mul(bk.ga, bk.w00, bk.ge1)
-        np.add(bk.ge1, mul(bk.gb, bk.w01, bk.ga), bk.ge1)  # ge1x = g00 w00 + g01 w01, ge1y
-        mul(bk.gb, bk.w11, bk.ge2)  # ge2x = g01 w11, ge2y = g11 w11
-        np.negative(np.add(bk.ge1, bk.ge2, bk.ge0), bk.ge0)  # -(ge1 + ge2)
+        mul, add, sub = np.multiply, np.add, np.subtract
+        for pa, pb, j, g, ga, gb, ge1, ge2, ge0, tmp, w00, w01, w11 in bk.scatter_pieces:
+            add(mul(pa, j[0], g[0]), mul(pb, j[3], tmp), g[0])  # g00 = a j00 + b j11
+            sub(mul(pa, j[1], g[1]), mul(pb, j[2], tmp), g[1])  # g10 = a j10 - b j01
+            sub(mul(pa, j[2], g[2]), mul(pb, j[1], tmp), g[2])  # g01 = a j01 - b j10
+            add(mul(pa, j[3], g[3]), mul(pb, j[0], tmp), g[3])  # g11 = a j11 + b j00
+            mul(ga, w00, ge1)
+            add(ge1, mul(gb, w01, ga), ge1)  # ge1x = g00 w00 + g01 w01, ge1y
+            mul(gb, w11, ge2)  # ge2x = g01 w11, ge2y = g11 w11
+            np.negative(add(ge1, ge2, ge0), ge0)  # -(ge1 + ge2)
         return np.bincount(index, bk.ge, n_bins)
 
     def _xy(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -414,10 +427,10 @@ class FoldoverEnergy:
         """dF/dz at the point `evaluate` saw last."""
         bk = self._bk
         # dF/dJ = a J + b cof(J); dchi/dD = chi / root
-        a = np.multiply(bk.two_one_theta, bk.inv_chi, bk.a)  # 2 (1 - theta) inv_chi
+        np.multiply(bk.two_one_theta, bk.inv_chi, bk.a)  # a = 2 (1 - theta) inv_chi
         b = np.multiply(bk.two_theta, bk.d, bk.b)  # inv_chi (2 theta d - num / root)
         np.multiply(bk.inv_chi, np.subtract(b, np.divide(bk.num, bk.root, bk.tmp), b), b)
-        return self._scatter(a, b, layout[1], layout[0])
+        return self._scatter(layout[1], layout[0])
 
     def n_inverted(self, x: np.ndarray, y: np.ndarray) -> int:
         """Elements with a corner det <= 0 (docs/method.md 3)."""
@@ -538,9 +551,9 @@ class LiftEnergy(FoldoverEnergy):
         k.fill(2.0 * LIFT_PENALTY / self.qc)
         de_dq = np.subtract(self._m1_e, np.multiply(k, self._gap, k), k)  # -1 - k gap = dF/dq_e
         # dq_e / du_k = -1 / (n_e u_k^2); u_k = t / (2 d): du/dJ = J / d - u cof(J) / d
-        de_du = np.multiply(de_dq[self.eid], self._neg_inv_nc, bk.a)
+        de_du = np.multiply(de_dq.take(self.eid, out=bk.a), self._neg_inv_nc, bk.a)
         np.divide(de_du, np.multiply(u, u, tmp), de_du)
         np.add(de_du, self._barrier_w, de_du)
-        b = np.divide(np.multiply(np.negative(de_du, bk.b), u, bk.b), d, bk.b)  # -de_du u / d
-        a = np.divide(de_du, d, bk.a)
-        return self._scatter(a, b, layout[1], layout[0])
+        np.divide(np.multiply(np.negative(de_du, bk.b), u, bk.b), d, bk.b)  # b = -de_du u / d
+        np.divide(de_du, d, bk.a)  # a = de_du / d
+        return self._scatter(layout[1], layout[0])
