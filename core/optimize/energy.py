@@ -201,13 +201,19 @@ class FoldoverEnergy:
         # validity check: every corner of every element (triangles: one is enough), except
         # frozen ones: made of fixed nodes only and not positive, so no move can change them
         v0, v1, v2, veid = corner_triangles(faces, all_corners=False)
-        x, y = points[:, 0], points[:, 1]
-        det = (x[v1] - x[v0]) * (y[v2] - y[v0]) - (y[v1] - y[v0]) * (x[v2] - x[v0])
-        keep = free[v0] | free[v1] | free[v2] | (det > 0.0)
-        self.v0, self.v1, self.v2, self.veid = v0[keep], v1[keep], v2[keep], veid[keep]
+        keep = free[v0] | free[v1] | free[v2]
+        fixed = np.flatnonzero(~keep)  # corners of fixed nodes only: kept when positive
+        if fixed.size:
+            x, y = points[:, 0], points[:, 1]
+            a, b, c = v0[fixed], v1[fixed], v2[fixed]
+            keep[fixed] = (x[b] - x[a]) * (y[c] - y[a]) - (y[b] - y[a]) * (x[c] - x[a]) > 0.0
+        every = bool(keep.all())  # the usual case: no copies
+        self.v0, self.v1, self.v2, self.veid = (
+            (v0, v1, v2, veid) if every else (v0[keep], v1[keep], v2[keep], veid[keep]))
         self.vu = None  # per validity corner (u00, u01, u11) of its target; None: regular
         if factors is not None:
-            self.vu = tuple(a[keep] for a in corner_factor_values(groups, factors, False))
+            self.vu = tuple(a if every else a[keep]
+                            for a in corner_factor_values(groups, factors, False))
         self.power = 1.0
         self._full = None  # the layout of z = [x, y], built on first use
         self._pack = None  # (state, layout, fixed coordinates) of the last lbfgs call
