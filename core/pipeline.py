@@ -13,6 +13,7 @@ from .backends import make_engine
 from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .faces import FaceSet, as_faceset
 from .fpmath import add_reduce
+from .harmonic import harmonic_positions
 from .mean_ratio import group_quality
 from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
@@ -444,6 +445,10 @@ class _Run:
                 current = self.untangle_local()
             if self.tangled(self.best) and mode != "eegt":
                 current = self.global_stage(polish=prm.polish_iterations, from_input=True)
+            if self.tangled(self.best) and mode != "eegt":  # a fold that outlasts the budget:
+                # once more from the interior's harmonic map (docs/global_untangle.md)
+                current = self.global_stage(polish=prm.polish_iterations,
+                                            start=harmonic_positions(self.p, self.fs, self.free))
             if self.tangled(self.best):
                 return "failed", (
                     f"failed: {self.best.n_inverted - self.n_frozen} inverted faces remain "
@@ -575,10 +580,12 @@ class _Run:
         self.polished = True
         return self._adopt(pts, start)
 
-    def global_stage(self, polish: int, from_input: bool = False) -> Stats:
-        """Foldover-free optimization of the whole mesh (from the input, or from the best
-        iterate), then the lift; EEGT continues from its result."""
-        start = self.p if from_input and self.mode == "eegt+local" else self.best_points()
+    def global_stage(self, polish: int, from_input: bool = False,
+                     start: np.ndarray | None = None) -> Stats:
+        """Foldover-free optimization of the whole mesh (from `start`, else from the input or
+        from the best iterate), then the lift; EEGT continues from its result."""
+        if start is None:
+            start = self.p if from_input and self.mode == "eegt+local" else self.best_points()
         groups, factors = self._global_groups()
         base = self.n_untangle + self.n_global
 

@@ -101,3 +101,20 @@ def mesquite_fixed_flags() -> np.ndarray:
     n = int(tokens[tokens.index("POINT_DATA") + 1])
     start = i + 2 + (tokens[i + 2] == "LOOKUP_TABLE") * 2  # "fixed TYPE [LOOKUP_TABLE default]"
     return np.array(tokens[start : start + n], dtype=float) != 0.0
+
+
+def spun_hole(rings: int, around: int, degrees: float, triangles: bool):
+    """An annulus (hole radius 1, outer radius 2) whose hole boundary alone is spun by
+    `degrees`: every face of the innermost ring folds, the rest of the mesh is at rest."""
+    r = np.linspace(1.0, 2.0, rings + 1)
+    t = np.linspace(0.0, 2 * np.pi, around, endpoint=False)
+    rr, tt = np.meshgrid(r, t, indexing="ij")
+    tt = tt + np.where(rr == 1.0, np.radians(degrees), 0.0)
+    pts = np.column_stack([(rr * np.cos(tt)).ravel(), (rr * np.sin(tt)).ravel()])
+    i, j = np.meshgrid(np.arange(rings), np.arange(around), indexing="ij")
+    a = (i * around + j).ravel()
+    b = (i * around + (j + 1) % around).ravel()
+    c, d = b + around, a + around
+    if triangles:
+        return pts, {3: np.concatenate([np.column_stack([a, c, b]), np.column_stack([a, d, c])])}
+    return pts, {4: np.column_stack([a, d, c, b])}

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from meshdata import load_groups
+from meshdata import load_groups, spun_hole
 
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 
@@ -323,23 +323,6 @@ def test_lift_rings_must_not_be_negative() -> None:
         GlobalOptions(lift_rings=-1)
 
 
-def spun_hole(rings: int, around: int, degrees: float, triangles: bool):
-    """An annulus (hole radius 1, outer radius 2) whose hole boundary alone is spun by
-    `degrees`: every face of the innermost ring folds, the rest of the mesh is at rest."""
-    r = np.linspace(1.0, 2.0, rings + 1)
-    t = np.linspace(0.0, 2 * np.pi, around, endpoint=False)
-    rr, tt = np.meshgrid(r, t, indexing="ij")
-    tt = tt + np.where(rr == 1.0, np.radians(degrees), 0.0)
-    pts = np.column_stack([(rr * np.cos(tt)).ravel(), (rr * np.sin(tt)).ravel()])
-    i, j = np.meshgrid(np.arange(rings), np.arange(around), indexing="ij")
-    a = (i * around + j).ravel()
-    b = (i * around + (j + 1) % around).ravel()
-    c, d = b + around, a + around
-    if triangles:
-        return pts, {3: np.concatenate([np.column_stack([a, c, b]), np.column_stack([a, d, c])])}
-    return pts, {4: np.column_stack([a, d, c, b])}
-
-
 @pytest.mark.parametrize(("degrees", "triangles"), [(120, False), (120, True), (100, False)])
 def test_spun_hole_untangles_regression_inner_runs_too_short(degrees, triangles) -> None:
     """Regression: with 60 L-BFGS iterations per eps round the interior could not turn far
@@ -359,7 +342,9 @@ def test_spun_hole_untangles_regression_inner_runs_too_short(degrees, triangles)
 def test_spun_hole_180_degrees_untangles_and_the_stage_cap_is_respected() -> None:
     """The pipeline's global stage may use max_untangle_iterations + polish iterations: a
     hole spun half a turn (either way round is valid) untangles with the defaults (some
-    2700-4000 iterations, depending on the trajectory), and a cap far below that is obeyed."""
+    2700-4000 iterations, depending on the trajectory), and a cap far below that is obeyed
+    by each of the two stages a failing run makes (from the input, then from the harmonic
+    start)."""
     from core import EEGTParams, untangle_and_smooth
 
     pts, groups = spun_hole(6, 32, 180, False)
@@ -369,7 +354,7 @@ def test_spun_hole_180_degrees_untangles_and_the_stage_cap_is_respected() -> Non
     capped = untangle_and_smooth(
         pts, groups[4], params=EEGTParams(max_untangle_iterations=200, polish_iterations=50)
     )
-    assert capped.status == "failed" and capped.global_iterations <= 250
+    assert capped.status == "failed" and 250 < capped.global_iterations <= 2 * 250
     assert 0 < capped.after.n_inverted <= capped.before.n_inverted  # best iterate, never worse
 
 

@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
-from meshdata import load2d
+from meshdata import load2d, spun_hole
 
 from core.faces import as_faceset
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
@@ -258,3 +258,14 @@ def test_target_factors_bit_identical_to_host(solver):
     (uh, lh, ih, jh), (ud, ld, idv, jd) = outs
     assert info["status"] == "untangled" and jh > 0
     assert np.array_equal(uh, ud) and np.array_equal(lh, ld) and (ih, jh) == (idv, jd)
+
+
+def test_harmonic_restart_bit_identical_to_host(solver):
+    """The restart from the harmonic start (core.harmonic, host) runs its global stage on
+    the device solver: the same points as the NumPy run."""
+    pts, groups = spun_hole(8, 48, 270, True)
+    prm = EEGTParams(max_untangle_iterations=200, polish_iterations=50)
+    ref = untangle_and_smooth(pts, groups[3], params=prm, backend="numpy")
+    got = untangle_and_smooth(pts, groups[3], params=prm, backend="opencl")
+    assert ref.status == "untangled" and ref.global_iterations > 250
+    assert np.array_equal(got.points, ref.points)

@@ -1,0 +1,75 @@
+"""The global stage's harmonic start (core.harmonic) and the pipeline's restart from it:
+interior nodes at the mean of their neighbours, everything else bit-identical, and a
+half-turn fold that outlasts the budget from the input untangles from the harmonic map."""
+
+from __future__ import annotations
+
+import numpy as np
+from meshdata import spun_hole
+
+from core import EEGTParams, pipeline, untangle_and_smooth
+from core.faces import as_faceset
+from core.harmonic import harmonic_positions
+
+
+def tri_grid(k: int) -> tuple[np.ndarray, np.ndarray]:
+    """A (k+1) x (k+1) node grid of the unit square, each cell cut along one diagonal."""
+    x, y = np.meshgrid(np.linspace(0.0, 1.0, k + 1), np.linspace(0.0, 1.0, k + 1))
+    pts = np.column_stack([x.ravel(), y.ravel()])
+    i, j = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+    a = (i * (k + 1) + j).ravel()
+    b, c, d = a + 1, a + k + 2, a + k + 1
+    return pts, np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def test_harmonic_start_puts_a_shaken_grid_back_on_the_grid():
+    """On a diagonal-cut grid every interior node is the mean of its six neighbours, so the
+    harmonic map of the square's boundary is the grid itself."""
+    pts, faces = tri_grid(12)
+    fs = as_faceset(faces, len(pts))
+    interior = (pts > 0.0).all(axis=1) & (pts < 1.0).all(axis=1)
+    shaken = pts.copy()
+    shaken[interior] += np.random.default_rng(0).normal(0.0, 0.05, (interior.sum(), 2))
+    shaken[0] = [-0.0, -0.0]  # held rows keep their bits, signed zeros included
+    out = harmonic_positions(shaken, fs, np.ones(len(pts), dtype=bool))
+    assert np.abs(out[interior] - pts[interior]).max() < 1e-8
+    assert np.array_equal(out[~interior].view(np.int64), shaken[~interior].view(np.int64))
+
+
+def test_harmonic_start_holds_pinned_and_boundary_nodes_and_moves_only_the_movable():
+    pts, faces = tri_grid(8)
+    fs = as_faceset(faces, len(pts))
+    movable = np.ones(len(pts), dtype=bool)
+    pinned = 40  # an interior node held by the caller
+    movable[pinned] = False
+    shaken = pts + np.random.default_rng(1).normal(0.0, 0.03, pts.shape)
+    out = harmonic_positions(shaken, fs, movable)
+    boundary = ~((pts > 0.0).all(axis=1) & (pts < 1.0).all(axis=1))
+    held = boundary.copy()
+    held[pinned] = True
+    assert np.array_equal(out[held], shaken[held])
+    # every moved node is the mean of its edge neighbours
+    edges = {tuple(sorted((int(f[k]), int(f[(k + 1) % 3])))) for f in faces for k in range(3)}
+    nbrs: dict[int, list[int]] = {}
+    for u, v in edges:
+        nbrs.setdefault(u, []).append(v)
+        nbrs.setdefault(v, []).append(u)
+    for node in np.flatnonzero(~held):
+        assert np.abs(out[node] - out[nbrs[int(node)]].mean(axis=0)).max() < 1e-8
+    assert np.abs(out[~held] - shaken[~held]).max() > 1e-3  # they did move
+    nothing = harmonic_positions(shaken, fs, np.zeros(len(pts), dtype=bool))
+    assert np.array_equal(nothing, shaken) and nothing is not shaken
+
+
+def test_half_turn_that_outlasts_the_budget_untangles_from_the_harmonic_start(monkeypatch):
+    """A hole spun three quarters of a turn: with 200 untangling iterations the run from the
+    input stays folded; the restart from the harmonic map of the interior untangles."""
+    pts, groups = spun_hole(8, 48, 270, True)
+    prm = EEGTParams(max_untangle_iterations=200, polish_iterations=50)
+    res = untangle_and_smooth(pts, groups[3], params=prm)
+    assert res.status == "untangled" and res.after.n_inverted == 0 < res.before.n_inverted
+    assert res.after.q_min > 0.05
+    assert res.global_iterations > 250  # the input's stage ran out, then the restart
+    monkeypatch.setattr(pipeline, "harmonic_positions", lambda p, fs, free: p.copy())
+    again = untangle_and_smooth(pts, groups[3], params=prm)  # restarted from the input
+    assert again.status == "failed" and again.after.n_inverted > 0
