@@ -471,6 +471,9 @@ class LiftEnergy(FoldoverEnergy):
         self.eid = self.veid
         self._set_corners(self.v0, self.v1, self.v2, arity[self.eid], size[self.eid], self.vu)
         self.n_corners = np.bincount(self.eid, minlength=self.n_elem).astype(np.float64)
+        # triangles only: corner k is element k, so per-element sums and gathers are copies
+        self._one_each = self.eid.size == self.n_elem and bool(
+            np.array_equal(self.eid, np.arange(self.n_elem)))
         self._neg_inv_nc = -1.0 / self.n_corners[self.eid]  # dq_e / du_k = this / u_k^2
         self._barrier_w = LIFT_BARRIER * self.weight
         self._gap = np.empty(0)  # the last `evaluate`'s (qc - q_e)_+ / qc
@@ -495,6 +498,8 @@ class LiftEnergy(FoldoverEnergy):
     def _element_mean(self, u: np.ndarray, tmp: np.ndarray) -> np.ndarray:
         """(E,) mean over each element's corners of q_k = 1 / u_k (u_k = 0: inf)."""
         with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
+            if self._one_each:  # the same bits: 0 + q and q / 1 are q (q >= 0, never -0)
+                return np.divide(1.0, u)
             return np.bincount(self.eid, np.divide(1.0, u, tmp), self.n_elem) / self.n_corners
 
     def _quality_of(self, q: np.ndarray, bad_corner: np.ndarray) -> np.ndarray:
@@ -557,7 +562,8 @@ class LiftEnergy(FoldoverEnergy):
         k.fill(2.0 * LIFT_PENALTY / self.qc)
         de_dq = np.subtract(self._m1_e, np.multiply(k, self._gap, k), k)  # -1 - k gap = dF/dq_e
         # dq_e / du_k = -1 / (n_e u_k^2); u_k = t / (2 d): du/dJ = J / d - u cof(J) / d
-        de_du = np.multiply(de_dq.take(self.eid, out=bk.a), self._neg_inv_nc, bk.a)
+        per_corner = de_dq if self._one_each else de_dq.take(self.eid, out=bk.a)
+        de_du = np.multiply(per_corner, self._neg_inv_nc, bk.a)
         np.divide(de_du, np.multiply(u, u, tmp), de_du)
         np.add(de_du, self._barrier_w, de_du)
         np.divide(np.multiply(np.negative(de_du, bk.b), u, bk.b), d, bk.b)  # b = -de_du u / d

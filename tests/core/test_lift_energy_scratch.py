@@ -13,6 +13,7 @@ from bench.meshgen import holed_quads, holed_square
 from core.faces import as_faceset
 from core.optimize import energy as energy_mod
 from core.optimize.energy import LiftEnergy
+from core.optimize.slide import make_state
 from core.pipeline import free_nodes
 
 
@@ -65,3 +66,27 @@ def test_value_is_infinite_where_a_corner_folds():
     x[node] += 10.0 * float(np.ptp(p[:, 0]))
     assert en.value(x, y, 1e-9) == np.inf
     assert (en.element_quality(x, y) == 0.0).sum() >= 2
+
+
+def test_triangle_lift_skips_per_element_sums_with_the_same_bits():
+    """On triangles corner k is element k: the element means and the gradient's gather are
+    copies, and the general per-element path gives the same bits."""
+    p, fs = naca()
+    free = free_nodes(len(p), fs)
+    en = LiftEnergy(p, fs.by_arity(), free)
+    assert en._one_each
+    en.qc = 0.5
+    rng = np.random.default_rng(4)
+    x, y = p[:, 0] + rng.normal(0, 1e-4, len(p)), p[:, 1] + rng.normal(0, 1e-4, len(p))
+    st = make_state(np.column_stack([x, y]), free, None)
+    layout, fixed = en.packed(st)
+    z = np.concatenate([st.pack(st.x, st.y), fixed])
+    fast = (en.value_and_quality(x, y), en.evaluate(z, layout, 0.0), en.gradient(layout).copy())
+    en._one_each = False
+    slow = (en.value_and_quality(x, y), en.evaluate(z, layout, 0.0), en.gradient(layout).copy())
+    assert fast[0][0] == slow[0][0] and np.array_equal(fast[0][1], slow[0][1])
+    assert fast[1] == slow[1] and np.array_equal(fast[2], slow[2])
+    mixed_p, mixed_f = load2d("mixed_quad_tri")
+    mixed_fs = as_faceset(mixed_f, len(mixed_p))
+    mixed = LiftEnergy(mixed_p, mixed_fs.by_arity(), free_nodes(len(mixed_p), mixed_fs))
+    assert not mixed._one_each
