@@ -25,7 +25,7 @@ from .quality import Stats, mesh_stats
 from .reference_shapes import reference_targets
 from .reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
-from .topology import EdgeInfo, checked_edges, free_nodes
+from .topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -445,8 +445,9 @@ class _Run:
                 current = self.untangle_local()
             if self.tangled(self.best) and mode != "eegt":
                 current = self.global_stage(polish=prm.polish_iterations, from_input=True)
-            if self.tangled(self.best) and mode != "eegt":  # a fold that outlasts the budget:
-                # once more from the interior's harmonic map (docs/global_untangle.md)
+            if self.tangled(self.best) and mode != "eegt" and self._restart_may_help():
+                # a fold that outlasts the budget: once more from the interior's harmonic
+                # map (docs/global_untangle.md)
                 current = self.global_stage(polish=prm.polish_iterations,
                                             start=harmonic_positions(self.p, self.fs, self.free))
             if self.tangled(self.best):
@@ -473,6 +474,17 @@ class _Run:
         if b.n_inverted:  # only frozen faces are left: the run cannot claim a valid mesh
             return "failed", f"failed: {self.stuck_why()}; {text}"
         return ("untangled" if tangled else "valid"), text + frozen
+
+    def _restart_may_help(self) -> bool:
+        """Whether an inverted face of the best iterate is neither frozen nor pinched
+        (`pinched_faces`: a pair that keeps an inverted face whatever moves)."""
+        pts = self.best_points()
+        pinched = pinched_faces(self.fs, pts.shape[0])
+        for g in self.fs.groups:
+            q = group_quality(pts[g.nodes, 0], pts[g.nodes, 1])
+            if ((q == 0.0) & ~self.frozen[g.ids] & ~pinched[g.ids]).any():
+                return True
+        return False
 
     def stuck_why(self) -> str:
         """Why the inverted faces left are there: the frozen ones, by their face ids."""

@@ -33,7 +33,7 @@ from .faces import FaceSet
 from .params import EEGTParams
 from .pipeline import untangle_and_smooth
 from .quality import Stats, quality, stats_of
-from .topology import boundary_nodes, free_nodes
+from .topology import boundary_nodes, free_nodes, pinched_faces
 from .uv_layout import UVLayout, island_faces, signed_face_areas
 from .uv_overlap import overlapping_faces
 
@@ -358,10 +358,7 @@ def _settle(layout: UVLayout, points: np.ndarray, selected: np.ndarray, side: np
     face_of = np.repeat(np.arange(sub.n_faces), sub.counts)
     loose = np.zeros(sub.n_faces, dtype=bool)  # a corner that could move
     np.logical_or.at(loose, face_of, ~(keep | border)[corner])
-    pair = np.zeros(sub.n_faces, dtype=bool)  # an inner corner of two faces only
-    np.logical_or.at(pair, face_of, (np.bincount(layout.faces.indices,
-                                                 minlength=layout.n_nodes) == 2)[corner]
-                     & ~border[corner])
+    pair = pinched_faces(layout.faces, layout.n_nodes)[ids]  # an inner corner of two faces
     stuck = bad & ~loose
     pair &= bad & ~stuck
     isl = layout.island[ids]

@@ -10,6 +10,7 @@ from meshdata import spun_hole
 from core import EEGTParams, pipeline, untangle_and_smooth
 from core.faces import as_faceset
 from core.harmonic import harmonic_positions
+from core.topology import pinched_faces
 
 
 def tri_grid(k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -73,3 +74,28 @@ def test_half_turn_that_outlasts_the_budget_untangles_from_the_harmonic_start(mo
     monkeypatch.setattr(pipeline, "harmonic_positions", lambda p, fs, free: p.copy())
     again = untangle_and_smooth(pts, groups[3], params=prm)  # restarted from the input
     assert again.status == "failed" and again.after.n_inverted > 0
+
+
+def pinched_square():
+    """A unit square cut into two quads through its centre node E, which only they use:
+    their angles at E add up to a full turn, so one of them is always inverted."""
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [0.45, 0.55]])
+    return pts, np.array([[0, 1, 2, 4], [2, 3, 0, 4]])
+
+
+def test_pinched_faces_are_the_faces_at_an_inner_node_of_two_faces():
+    _, quads = pinched_square()
+    assert pinched_faces(as_faceset(quads, 5), 5).tolist() == [True, True]
+    grid_pts, tris = tri_grid(3)
+    assert not pinched_faces(as_faceset(tris, len(grid_pts)), len(grid_pts)).any()
+
+
+def test_no_harmonic_restart_when_only_pinched_faces_stay_inverted(monkeypatch):
+    """The restart cannot undo a pinched pair: a run left with only those skips it."""
+    def never(*_a):
+        raise AssertionError("harmonic restart for a pinched pair")
+
+    monkeypatch.setattr(pipeline, "harmonic_positions", never)
+    pts, quads = pinched_square()
+    res = untangle_and_smooth(pts, quads, params=EEGTParams(max_untangle_iterations=100))
+    assert res.status == "failed" and res.after.n_inverted == 1
