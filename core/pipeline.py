@@ -596,8 +596,10 @@ class _Run:
                      start: np.ndarray | None = None) -> Stats:
         """Foldover-free optimization of the whole mesh (from `start`, else from the input or
         from the best iterate), then the lift; EEGT continues from its result."""
+        best = None  # the best iterate's host copy, when that is the start
         if start is None:
-            start = self.p if from_input and self.mode == "eegt+local" else self.best_points()
+            use_input = from_input and self.mode == "eegt+local"
+            start = self.p if use_input else (best := self.best_points())
         groups, factors = self._global_groups()
         base = self.n_untangle + self.n_global
 
@@ -630,19 +632,21 @@ class _Run:
             if self.lbfgs is not None:  # the device solver outlives the run: not its tables
                 self.lbfgs.release()
         self.polished = True
-        return self._adopt(pts, start)
+        return self._adopt(pts, best)
 
     def _solver(self):
         """The global stage's device solver, or None for the host's (always with sliding
         nodes: their parameters are variables the device solvers do not have)."""
         return solver_for(self.backend_name, sliding=self.slide is not None)
 
-    def _adopt(self, pts: np.ndarray, start: np.ndarray) -> Stats:
+    def _adopt(self, pts: np.ndarray, best: np.ndarray | None) -> Stats:
         """Continue the EEGT engine from `pts` (fixed rows reset to the input's bits); the
-        best iterate stays the better of it and the earlier best."""
+        best iterate stays the better of it and the earlier best. `best`: the earlier best's
+        host copy when the caller has it (it started there), else None (read from the
+        engine)."""
         pts[~self.free] = self.p[~self.free]  # fixed rows bit-identical, whatever happened
         if self.best_pts is None:  # keep the earlier best as a host copy
-            self.best_pts = self.engine.best_points() if start is self.p else start
+            self.best_pts = self.engine.best_points() if best is None else best
         self.engine = self.engine.restarted(pts)  # same mesh, same fixed nodes: reuse set-up
         current = self.engine.stats()
         if current.better_than(self.best):

@@ -99,3 +99,39 @@ def test_no_harmonic_restart_when_only_pinched_faces_stay_inverted(monkeypatch):
     pts, quads = pinched_square()
     res = untangle_and_smooth(pts, quads, params=EEGTParams(max_untangle_iterations=100))
     assert res.status == "failed" and res.after.n_inverted == 1
+
+
+def test_restart_that_does_not_help_keeps_the_first_stages_best(monkeypatch):
+    """A restart that ends worse than the stage before it leaves that stage's result: the
+    same points as a run without the restart, never the restart's start or end. Here the
+    first stage improves on the input without finishing, and the restart is made to fail:
+    it starts from the free nodes shuffled among themselves and its optimizer returns the
+    start as it is."""
+    pts, groups = spun_hole(12, 64, 100, False)
+    prm = EEGTParams(max_untangle_iterations=600, polish_iterations=20)
+    monkeypatch.setattr(pipeline._Run, "_restart_may_help", lambda self: False)
+    without = untangle_and_smooth(pts, groups[4], params=prm)
+    assert without.status == "failed" and 0 < without.after.n_inverted < 64  # improved
+
+    def shuffled(p, _fs, free):
+        out = p.copy()
+        ids = np.flatnonzero(free)
+        out[ids] = p[np.random.default_rng(0).permutation(ids)]
+        return out
+
+    real = pipeline.untangle_global
+    calls = []
+
+    def first_only(start, *a, **k):
+        calls.append(1)
+        if len(calls) == 1:
+            return real(start, *a, **k)
+        return start.copy(), {"iterations": 5, "status": "failed"}
+
+    monkeypatch.setattr(pipeline._Run, "_restart_may_help", lambda self: True)
+    monkeypatch.setattr(pipeline, "harmonic_positions", shuffled)
+    monkeypatch.setattr(pipeline, "untangle_global", first_only)
+    with_restart = untangle_and_smooth(pts, groups[4], params=prm)
+    assert len(calls) == 2 and with_restart.global_iterations == without.global_iterations + 5
+    assert with_restart.after == without.after
+    assert np.array_equal(with_restart.points, without.points)
