@@ -12,24 +12,29 @@ solved by Jacobi-preconditioned conjugate gradients. NumPy only; its sums are
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from .faces import FaceSet
 from .fpmath import add_reduce
 
-__all__ = ["HARMONIC_MAX_ITER", "HARMONIC_TOL", "harmonic_positions"]
+__all__ = ["HARMONIC_MAX_ITER", "HARMONIC_TICK", "HARMONIC_TOL", "harmonic_positions"]
 
 HARMONIC_TOL = 1e-9  # conjugate gradients stop at this residual, relative to the first one
 HARMONIC_MAX_ITER = 5000  # ... or after this many iterations per coordinate
+HARMONIC_TICK = 50  # `tick` is called every this many iterations
 
 
-def harmonic_positions(points: np.ndarray, faces: FaceSet, movable: np.ndarray) -> np.ndarray:
+def harmonic_positions(points: np.ndarray, faces: FaceSet, movable: np.ndarray,
+                       tick: Callable[[], object] | None = None) -> np.ndarray:
     """`points` (N, 2) with the movable interior nodes moved to the harmonic map of the rest.
 
     Interior: every edge at the node is shared by exactly two faces (boundary and
     non-manifold nodes stay), so every movable node of a planar mesh is tied to held ones.
     Returns a new array; the held rows are bit-identical (all rows are when the solve does
-    not end finite)."""
+    not end finite). `tick()` is called every HARMONIC_TICK iterations (a progress report
+    that may raise to cancel: a million nodes take thousands of iterations)."""
     n = points.shape[0]
     a, b, shared = _edges(faces, n)
     held = ~movable.copy()
@@ -42,7 +47,7 @@ def harmonic_positions(points: np.ndarray, faces: FaceSet, movable: np.ndarray) 
         return out
     free = ~held
     degf = deg.astype(np.float64)
-    moved = [_solve(out[:, c], a, b, degf, free)[free] for c in range(2)]
+    moved = [_solve(out[:, c], a, b, degf, free, tick)[free] for c in range(2)]
     if all(np.isfinite(m).all() for m in moved):
         out[free, 0], out[free, 1] = moved
     return out
@@ -67,7 +72,7 @@ def _laplace(v: np.ndarray, a: np.ndarray, b: np.ndarray, deg: np.ndarray) -> np
 
 
 def _solve(v: np.ndarray, a: np.ndarray, b: np.ndarray, deg: np.ndarray,
-           free: np.ndarray) -> np.ndarray:
+           free: np.ndarray, tick: Callable[[], object] | None) -> np.ndarray:
     """v with its free entries solving (D - W) v = 0 there (the held ones fixed)."""
     v = v.copy()
     r = -_laplace(v, a, b, deg)
@@ -77,9 +82,11 @@ def _solve(v: np.ndarray, a: np.ndarray, b: np.ndarray, deg: np.ndarray,
     p = z.copy()
     rz = add_reduce(r * z)
     stop = HARMONIC_TOL * HARMONIC_TOL * rz
-    for _ in range(HARMONIC_MAX_ITER):
+    for it in range(HARMONIC_MAX_ITER):
         if not rz > stop:  # converged (or nothing to do)
             break
+        if tick is not None and it % HARMONIC_TICK == HARMONIC_TICK - 1:
+            tick()
         ap = _laplace(p, a, b, deg)
         ap[~free] = 0.0
         pap = add_reduce(p * ap)

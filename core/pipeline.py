@@ -448,8 +448,8 @@ class _Run:
             if self.tangled(self.best) and mode != "eegt" and self._restart_may_help():
                 # a fold that outlasts the budget: once more from the interior's harmonic
                 # map (docs/global_untangle.md)
-                current = self.global_stage(polish=prm.polish_iterations,
-                                            start=harmonic_positions(self.p, self.fs, self.free))
+                start = harmonic_positions(self.p, self.fs, self.free, tick=self._harmonic_tick)
+                current = self.global_stage(polish=prm.polish_iterations, start=start)
             if self.tangled(self.best):
                 return "failed", (
                     f"failed: {self.best.n_inverted - self.n_frozen} inverted faces remain "
@@ -474,6 +474,11 @@ class _Run:
         if b.n_inverted:  # only frozen faces are left: the run cannot claim a valid mesh
             return "failed", f"failed: {self.stuck_why()}; {text}"
         return ("untangled" if tangled else "valid"), text + frozen
+
+    def _harmonic_tick(self) -> None:
+        """Progress during the harmonic start's solve (the best iterate's numbers); a stop
+        cancels the run."""
+        self.report(self.n_untangle + self.n_global, "global", self.best)
 
     def _restart_may_help(self) -> bool:
         """Whether an inverted face of the best iterate is neither frozen nor pinched

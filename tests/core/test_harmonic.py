@@ -71,7 +71,7 @@ def test_half_turn_that_outlasts_the_budget_untangles_from_the_harmonic_start(mo
     assert res.status == "untangled" and res.after.n_inverted == 0 < res.before.n_inverted
     assert res.after.q_min > 0.05
     assert res.global_iterations > 250  # the input's stage ran out, then the restart
-    monkeypatch.setattr(pipeline, "harmonic_positions", lambda p, fs, free: p.copy())
+    monkeypatch.setattr(pipeline, "harmonic_positions", lambda p, fs, free, tick=None: p.copy())
     again = untangle_and_smooth(pts, groups[3], params=prm)  # restarted from the input
     assert again.status == "failed" and again.after.n_inverted > 0
 
@@ -92,7 +92,7 @@ def test_pinched_faces_are_the_faces_at_an_inner_node_of_two_faces():
 
 def test_no_harmonic_restart_when_only_pinched_faces_stay_inverted(monkeypatch):
     """The restart cannot undo a pinched pair: a run left with only those skips it."""
-    def never(*_a):
+    def never(*_a, **_k):
         raise AssertionError("harmonic restart for a pinched pair")
 
     monkeypatch.setattr(pipeline, "harmonic_positions", never)
@@ -113,7 +113,7 @@ def test_restart_that_does_not_help_keeps_the_first_stages_best(monkeypatch):
     without = untangle_and_smooth(pts, groups[4], params=prm)
     assert without.status == "failed" and 0 < without.after.n_inverted < 64  # improved
 
-    def shuffled(p, _fs, free):
+    def shuffled(p, _fs, free, tick=None):
         out = p.copy()
         ids = np.flatnonzero(free)
         out[ids] = p[np.random.default_rng(0).permutation(ids)]
@@ -135,3 +135,34 @@ def test_restart_that_does_not_help_keeps_the_first_stages_best(monkeypatch):
     assert len(calls) == 2 and with_restart.global_iterations == without.global_iterations + 5
     assert with_restart.after == without.after
     assert np.array_equal(with_restart.points, without.points)
+
+
+def test_harmonic_solve_ticks_and_a_stop_there_cancels_the_run(monkeypatch):
+    """The solve reports progress (a million nodes take thousands of iterations) and a stop
+    answered there cancels the run: the input comes back unchanged."""
+    import core.harmonic as harmonic
+
+    monkeypatch.setattr(harmonic, "HARMONIC_TICK", 2)
+    pts, faces = tri_grid(12)
+    shaken = pts + np.random.default_rng(3).normal(0.0, 0.02, pts.shape)
+    ticks = []
+    harmonic_positions(shaken, as_faceset(faces, len(pts)), np.ones(len(pts), dtype=bool),
+                       tick=lambda: ticks.append(1))
+    assert len(ticks) >= 2
+
+    in_solve = []
+    real_tick = pipeline._Run._harmonic_tick
+
+    def marked(self):
+        in_solve.append(1)
+        real_tick(self)
+
+    def progress(_it, _phase, _stats):
+        return not in_solve  # False (stop) once the harmonic solve reports
+
+    monkeypatch.setattr(pipeline._Run, "_harmonic_tick", marked)
+    spun, groups = spun_hole(8, 48, 270, True)
+    res = untangle_and_smooth(spun, groups[3], progress=progress,
+                              params=EEGTParams(max_untangle_iterations=200, polish_iterations=50))
+    assert in_solve and res.status == "cancelled"
+    assert np.array_equal(res.points, spun)
