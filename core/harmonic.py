@@ -18,6 +18,7 @@ import numpy as np
 
 from .faces import FaceSet
 from .fpmath import add_reduce
+from .topology import boundary_nodes
 
 __all__ = ["HARMONIC_MAX_ITER", "HARMONIC_TICK", "HARMONIC_TOL", "harmonic_positions"]
 
@@ -36,12 +37,9 @@ def harmonic_positions(points: np.ndarray, faces: FaceSet, movable: np.ndarray,
     not end finite). `tick()` is called every HARMONIC_TICK iterations (a progress report
     that may raise to cancel: a million nodes take thousands of iterations)."""
     n = points.shape[0]
-    a, b, shared = _edges(faces, n)
-    held = ~movable.copy()
-    held[a[shared != 2]] = True
-    held[b[shared != 2]] = True
+    a, b = _edges(faces, n)
     deg = np.bincount(a, minlength=n) + np.bincount(b, minlength=n)
-    held |= deg == 0
+    held = ~movable | boundary_nodes(n, faces) | (deg == 0)
     out = np.array(points, dtype=np.float64, copy=True)
     if held.all():
         return out
@@ -53,16 +51,16 @@ def harmonic_positions(points: np.ndarray, faces: FaceSet, movable: np.ndarray,
     return out
 
 
-def _edges(faces: FaceSet, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The faces' distinct undirected edges (a < b) and how many faces share each."""
+def _edges(faces: FaceSet, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The faces' distinct undirected edges (a < b)."""
     keys = []
     for g in faces.groups:
         nodes = g.nodes  # (arity, F)
         nxt = np.roll(nodes, -1, axis=0)
         lo, hi = np.minimum(nodes, nxt).ravel(), np.maximum(nodes, nxt).ravel()
         keys.append(lo * n + hi)
-    key, shared = np.unique(np.concatenate(keys), return_counts=True)
-    return key // n, key % n, shared
+    key = np.unique(np.concatenate(keys))
+    return key // n, key % n
 
 
 def _laplace(v: np.ndarray, a: np.ndarray, b: np.ndarray, deg: np.ndarray) -> np.ndarray:

@@ -483,13 +483,10 @@ class _Run:
     def _restart_may_help(self) -> bool:
         """Whether an inverted face of the best iterate is neither frozen nor pinched
         (`pinched_faces`: a pair that keeps an inverted face whatever moves)."""
-        pts = self.best_points()
-        pinched = pinched_faces(self.fs, pts.shape[0])
-        for g in self.fs.groups:
-            q = group_quality(pts[g.nodes, 0], pts[g.nodes, 1])
-            if ((q == 0.0) & ~self.frozen[g.ids] & ~pinched[g.ids]).any():
-                return True
-        return False
+        pinched = pinched_faces(self.fs, self.p.shape[0])
+        return any((bad & ~pinched[g.ids]).any()
+                   for g, bad in zip(self.fs.groups, self._inverted(self.best_points()),
+                                     strict=True))
 
     def stuck_why(self) -> str:
         """Why the inverted faces left are there: the frozen ones, by their face ids."""
@@ -563,14 +560,16 @@ class _Run:
                 break
         return current
 
+    def _inverted(self, pts: np.ndarray) -> list[np.ndarray]:
+        """Per face group: its inverted faces at `pts` that are not frozen."""
+        return [(group_quality(pts[g.nodes, 0], pts[g.nodes, 1]) == 0.0) & ~self.frozen[g.ids]
+                for g in self.fs.groups]
+
     def _inverted_movable(self, pts: np.ndarray) -> np.ndarray:
         """(E,) bool in `_global_groups` order: inverted faces that are not frozen."""
-        out = []
-        for g in self.fs.groups:
-            inert = self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0)
-            q = group_quality(pts[g.nodes, 0], pts[g.nodes, 1])
-            out.append(((q == 0.0) & ~self.frozen[g.ids])[~inert])
-        return np.concatenate(out)
+        return np.concatenate([
+            bad[~(self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0))]  # inert faces out
+            for g, bad in zip(self.fs.groups, self._inverted(pts), strict=True)])
 
     def _best_q(self) -> tuple[float, float]:
         return self.best.q_min, self.best.q_avg

@@ -117,23 +117,17 @@ class _Blocks:
     """
 
     def __init__(self, m: int, w00: np.ndarray, w01: np.ndarray, w11: np.ndarray):
-        def blocks(k: int) -> tuple[np.ndarray, ...]:
-            a = np.empty(k * m)
-            return a, *(a[i * m : (i + 1) * m] for i in range(k))
-
         self.m = m
         two = [np.concatenate([w, w]) for w in (w00, w01, w11)]
         self.w00, self.w01, self.w11 = two  # W^-1 entries for [x, y] pairs of blocks
         # z[gather] = [x1, y1, x2, y2, x0, y0]; e1 = [e1x, e1y], e2 = [e2x, e2y]
-        self.c, *_ = blocks(6)
-        self.j, self.j00, self.j10, self.j01, self.j11 = blocks(4)
-        self.g, self.g00, self.g10, self.g01, self.g11 = blocks(4)  # dF/dJ
-        self.ga, self.gb = self.g[: 2 * m], self.g[2 * m :]
+        self.c = np.empty(6 * m)
+        self.j = np.empty(4 * m)  # [j00, j10, j01, j11]
+        self.g = np.empty(4 * m)  # dF/dJ, the same order
         self.sq = self.g  # J squared, entry by entry
         # dF/dE per corner node: [ge1x, ge1y, ge2x, ge2y, -(ge1x + ge2x), -(ge1y + ge2y)]
-        self.ge, *_ = blocks(6)
-        self.ge1, self.ge2, self.ge0 = self.ge[: 2 * m], self.ge[2 * m : 4 * m], self.ge[4 * m :]
-        self.e1, self.e2 = self.ge1, self.ge2  # edge vectors (only while J is computed)
+        self.ge = np.empty(6 * m)
+        self.e1, self.e2 = self.ge[: 2 * m], self.ge[2 * m : 4 * m]  # edges (while J is made)
         for name in ("d", "t", "dd", "root", "chi", "num", "inv_chi", "u", "a", "b", "tmp"):
             setattr(self, name, np.empty(m))
         for name, value in (("half", 0.5), ("one", 1.0), ("theta", THETA)):
@@ -154,7 +148,6 @@ class _Blocks:
         e1, e2 = self.e1.reshape(2, m)[:, k], self.e2.reshape(2, m)[:, k]
         return (k, c, c[0:2], c[2:4], c[4:6], e1, e2, j, j[0:2], j[2:4], sq, self.d[k], self.t[k],
                 self.tmp[k], w00[k], w01[k], w11[k])
-
 
     def _scatter_piece(self, k: slice, m: int) -> tuple[np.ndarray, ...]:
         """Views of one piece of corners k for `_scatter`: a, b, J (4 rows), dF/dJ (4 rows),
