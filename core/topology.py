@@ -169,11 +169,13 @@ def boundary_nodes(n_nodes: int, faces) -> np.ndarray:
     return edge_info(faces, n_nodes).boundary_mask()
 
 
-def pinched_faces(faces: FaceSet, n_nodes: int) -> np.ndarray:
+def pinched_faces(faces: FaceSet, n_nodes: int, border: np.ndarray | None = None) -> np.ndarray:
     """(F,) bool: faces with a corner at an inner node (not boundary or non-manifold) that
     only two faces use. Their angles there add up to a full turn, so the two are never both
-    convex: such a pair always keeps an inverted face, whatever moves."""
-    border = boundary_nodes(n_nodes, faces)
+    convex: such a pair always keeps an inverted face, whatever moves. `border`: the faces'
+    `boundary_nodes` when the caller has them (None: computed here)."""
+    if border is None:
+        border = boundary_nodes(n_nodes, faces)
     inner_pair = (np.bincount(faces.indices, minlength=n_nodes) == 2) & ~border
     face_of = np.repeat(np.arange(faces.n_faces), faces.counts)
     return np.bincount(face_of, inner_pair[faces.indices], faces.n_faces) > 0

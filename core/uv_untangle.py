@@ -358,7 +358,7 @@ def _settle(layout: UVLayout, points: np.ndarray, selected: np.ndarray, side: np
     face_of = np.repeat(np.arange(sub.n_faces), sub.counts)
     loose = np.zeros(sub.n_faces, dtype=bool)  # a corner that could move
     np.logical_or.at(loose, face_of, ~(keep | border)[corner])
-    pair = pinched_faces(layout.faces, layout.n_nodes)[ids]  # an inner corner of two faces
+    pair = pinched_faces(layout.faces, layout.n_nodes, border)[ids]  # inner corner of two faces
     stuck = bad & ~loose
     pair &= bad & ~stuck
     isl = layout.island[ids]
