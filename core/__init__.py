@@ -48,6 +48,7 @@ The method is docs/method.md, the backends' contract docs/opencl.md.
 
 from .faces import FaceSet, as_faceset, faces_from_csr
 from .measures import MEASURE_NAMES, MEASURES, Measure, MeasureSummary, summaries, summarize
+from .page_advice import prefer_ordinary_pages
 from .params import EEGTParams
 from .pipeline import Cancelled, EEGTResult, free_nodes, untangle_and_smooth
 from .pipeline_3d import untangle_and_smooth_3d
@@ -56,6 +57,8 @@ from .quality import Stats, mesh_stats, quality
 from .topology import boundary_nodes
 
 __version__ = "0.1.0"
+
+prefer_ordinary_pages()  # before any mesh array exists (core/page_advice.py)
 
 __all__ = [
     "MEASURES",

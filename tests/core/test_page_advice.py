@@ -1,0 +1,64 @@
+"""Importing core maps the process's large NumPy arrays with ordinary pages
+(core/page_advice.py, docs/scale.md) unless EEGT_HUGE_PAGES=1, and a run gives the same bits
+with either mapping."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from core.page_advice import HUGE_PAGES_ENV, huge_page_advice
+
+ROOT = Path(__file__).resolve().parents[2]
+
+pytestmark = pytest.mark.skipif(huge_page_advice() is None,
+                                reason="this NumPy has no huge-page switch")
+
+# a fresh process: NumPy's advice before and after importing core, then a run's digest
+CHILD = r"""
+import hashlib, json, sys
+sys.path[:0] = [sys.argv[1], sys.argv[1] + "/tests"]
+import numpy
+try:
+    from numpy._core.multiarray import _set_madvise_hugepage as switch
+except ImportError:
+    from numpy.core.multiarray import _set_madvise_hugepage as switch
+switch(True)
+import core
+from core.page_advice import huge_page_advice
+after = huge_page_advice()
+from meshdata import load2d
+p, fs = load2d("two_holes_twist")
+r = core.untangle_and_smooth(p, fs)
+print(json.dumps({"after_import": after, "inverted": r.after.n_inverted,
+                  "digest": hashlib.sha256(r.points.tobytes()).hexdigest()}))
+"""
+
+
+def _child(env_extra: dict[str, str]) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != HUGE_PAGES_ENV}
+    env.update(env_extra)
+    done = subprocess.run([sys.executable, "-c", CHILD, str(ROOT)], env=env,
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_import_turns_huge_pages_off_and_the_environment_keeps_them():
+    plain = _child({})
+    kept = _child({HUGE_PAGES_ENV: "1"})
+    assert plain["after_import"] is False
+    assert kept["after_import"] is True
+    assert plain["inverted"] == kept["inverted"] == 0
+    assert plain["digest"] == kept["digest"]  # the mapping never changes a value
+
+
+def test_this_process_runs_with_ordinary_pages():
+    # the test session imported core (conftest, the modules under test) without the variable
+    if os.environ.get(HUGE_PAGES_ENV, "").strip() != "1":
+        assert huge_page_advice() is False
