@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .csr import point_morton, ragged_arange
+from .csr import point_morton, ragged_arange, stable_order
 from .faces import FaceSet
 
 __all__ = ["REORDER_MIN_FACES", "Renumbering", "scattered", "z_order"]
@@ -60,13 +60,13 @@ class Renumbering:
 
 def z_order(points: np.ndarray, fs: FaceSet) -> tuple[Renumbering, FaceSet]:
     """The renumbering and the renumbered faces (each face keeps its corner order)."""
-    nodes = np.argsort(point_morton(points), kind="stable")
+    nodes = stable_order(point_morton(points), 1 << 32)  # 16 bits per axis
     new = np.empty(nodes.size, dtype=np.int64)
     new[nodes] = np.arange(nodes.size)
     lowest = np.empty(fs.n_faces, dtype=np.int64)
     for g in fs.groups:
         lowest[g.ids] = new[g.nodes].min(axis=0)
-    faces = np.argsort(lowest, kind="stable")
+    faces = stable_order(lowest, nodes.size)
     counts = fs.counts[faces]
     offsets = np.zeros(faces.size + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
