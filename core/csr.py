@@ -28,10 +28,10 @@ def stable_order(keys: np.ndarray, n: int) -> np.ndarray:
     if keys.size < 2 or n <= 1:
         return np.arange(keys.size, dtype=np.int64)
     kind = keys.dtype.type
-    mask = kind((1 << DIGIT_BITS) - 1)
     order = None
     for d in range(-(-int(n - 1).bit_length() // DIGIT_BITS)):
-        digit = np.bitwise_and(np.right_shift(keys, kind(d * DIGIT_BITS)), mask).astype(np.uint16)
+        # the cast to uint16 keeps the low 16 bits (an integer cast wraps)
+        digit = (np.right_shift(keys, kind(d * DIGIT_BITS)) if d else keys).astype(np.uint16)
         if order is not None:
             digit = digit.take(order)
         step = np.argsort(digit, kind="stable")
