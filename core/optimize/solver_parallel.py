@@ -148,26 +148,29 @@ def reduction_plan(n: int) -> tuple[np.ndarray, np.ndarray]:
 RUN_BREAK = 30.0  # a run of the sweep ends where a corner lies this many median steps away
 
 
-def _sweep_order(xy: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
+def _sweep_order(x: np.ndarray, y: np.ndarray, *corner_nodes: np.ndarray) -> np.ndarray:
     """A permutation of the corners that keeps neighbours in space near each other in the
     sequence and keeps the mesh's own order where it is already local: the corners are cut
     into runs where consecutive corners lie near each other (a jump of more than RUN_BREAK
     median steps between centroids starts a new run) and the runs are ordered along a
     Z-order curve through their first corners. Neighbouring corners of a run also sit
     together in the sums, so their terms are written together."""
-    c = sum(xy[i] for i in corner_nodes)
-    if c.shape[0] < 2:
-        return np.arange(c.shape[0])
-    dx, dy = np.diff(c, axis=0).T
+    cx, cy = x.take(corner_nodes[0]), y.take(corner_nodes[0])  # corner sums (x2: the
+    for i in corner_nodes[1:]:  # same order as their centroids)
+        cx += x.take(i)
+        cy += y.take(i)
+    if cx.size < 2:
+        return np.arange(cx.size)
+    dx, dy = np.diff(cx), np.diff(cy)
     step2 = dx * dx + dy * dy  # squared steps (any order would give the same results)
     far = RUN_BREAK * RUN_BREAK * np.median(step2)
     breaks = np.flatnonzero(~(step2 <= far)) + 1  # NaN: a break
     first = np.concatenate([[0], breaks])
-    length = np.diff(np.append(first, c.shape[0]))
-    by_key = np.argsort(point_morton(c[first]), kind="stable")
+    length = np.diff(np.append(first, cx.size))
+    by_key = np.argsort(point_morton(np.stack([cx[first], cy[first]], axis=1)), kind="stable")
     start, length = first[by_key], length[by_key]
     to = np.cumsum(length) - length  # where each run goes
-    return np.arange(c.shape[0]) + np.repeat(start - to, length)  # runs in their own order
+    return np.arange(cx.size) + np.repeat(start - to, length)  # runs in their own order
 
 
 def _first_touch(nodes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -210,8 +213,8 @@ class _Tables:
         # coordinates live in Z in the order the sweep first touches them, and the gradient
         # rows of the free nodes follow Z: neighbouring work-items touch neighbouring memory
         # whatever the mesh's numbering (see the kernel source).
-        sweep = _sweep_order(np.stack([st.x, st.y], axis=1), en.i0, en.i1, en.i2)
-        i1, i2, i0 = en.i1[sweep], en.i2[sweep], en.i0[sweep]
+        sweep = _sweep_order(st.x, st.y, en.i0, en.i1, en.i2)
+        i1, i2, i0 = en.i1.take(sweep), en.i2.take(sweep), en.i0.take(sweep)
         zpos, order = _first_touch(np.stack([i1, i2, i0], axis=1).ravel(), nn)
         self.zpos = zpos
         vpos = np.full(nn, -1, dtype=np.int64)
@@ -229,8 +232,9 @@ class _Tables:
         self.n_slots = int(rows[-1])
         del ptr, by_node, take, nodes, order
         ints = [
-            np.stack([zpos[i1], zpos[i2], zpos[i0], sweep], axis=1).ravel(),
-            slot.reshape(3, nc).T[sweep].ravel(),  # per corner: its three gather slots
+            np.stack([zpos.take(i1), zpos.take(i2), zpos.take(i0), sweep], axis=1).ravel(),
+            np.stack([r.take(sweep) for r in slot.reshape(3, nc)], axis=1).ravel(),  # per
+            # corner: its three gather slots
             np.concatenate([rows, rowf]),  # row starts, each row's free node
             zpos[st.fidx],  # each free node's place in Z
         ]
@@ -256,7 +260,8 @@ class _Tables:
             self.DQ = empty(8 * nc)  # per corner of the sweep
         self.PI = [buf(p.ints) for p in self.plans]
         self.PD = [empty(8 * p.pd_len) for p in self.plans]
-        self.W = buf(np.stack([en.w00, en.w01, en.w11, en.weight], axis=1)[sweep].ravel())
+        self.W = buf(np.stack([w.take(sweep) for w in (en.w00, en.w01, en.w11, en.weight)],
+                              axis=1).ravel())
         self.rec = 3 if lift else 2  # per corner, in the sum's order: (term, det[, 1 / u])
         self.TD = empty(8 * self.rec * nc)
         self.dpre = buf(np.tile(en.precond[st.fidx], 2))

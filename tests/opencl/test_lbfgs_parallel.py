@@ -223,8 +223,9 @@ def test_sweep_and_first_touch_are_permutations():
         xy = rng.random((n, 2))
         xy[0] = np.nan
         corners = [rng.integers(0, n, 2 * n) for _ in range(3)]
-        assert np.array_equal(np.sort(lp._sweep_order(xy, *corners)), np.arange(2 * n))
-    assert lp._sweep_order(np.zeros((3, 2)), *(np.array([1]),) * 3).tolist() == [0]
+        assert np.array_equal(np.sort(lp._sweep_order(xy[:, 0], xy[:, 1], *corners)),
+                              np.arange(2 * n))
+    assert lp._sweep_order(np.zeros(3), np.zeros(3), *(np.array([1]),) * 3).tolist() == [0]
 
 
 # ---- solver paths --------------------------------------------------------------------------
