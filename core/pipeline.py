@@ -14,6 +14,7 @@ from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .faces import FaceSet, as_faceset
 from .fpmath import add_reduce
 from .harmonic import harmonic_positions
+from .heap import with_freed_memory_kept
 from .mean_ratio import group_quality
 from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
@@ -80,6 +81,7 @@ class EEGTResult:
         }
 
 
+@with_freed_memory_kept
 def untangle_and_smooth(
     points,
     faces,
