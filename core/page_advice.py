@@ -11,6 +11,13 @@ Triangle mesh's `auto` run spent 2.9 s of system time with the advice and 1.1 s 
 the mesh's arrays exist: importing `core` turns the advice off for the process, unless the
 environment sets EEGT_HUGE_PAGES=1. Only the mapping changes: every result is the same bits
 either way (tested).
+
+Large runs are the exception. From HUGE_PAGES_FROM_FACES faces on, a run's arrays are tens
+of MB each and their page tables no longer fit the caches, so with ordinary pages every
+random gather also walks the page tables: the 4M-triangle `auto` run took 38.5-39.7 s with
+ordinary pages and 31.2-32.6 s with the advice on while it worked (the 1.06M mesh: 9.1-9.3 s
+ordinary, 9.5-11.3 s advised). Such a run turns the advice on for its duration
+(`pages_for_run`) and restores the process's setting after.
 """
 
 from __future__ import annotations
@@ -18,11 +25,14 @@ from __future__ import annotations
 import importlib
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
-__all__ = ["HUGE_PAGES_ENV", "huge_page_advice", "prefer_ordinary_pages", "set_huge_page_advice"]
+__all__ = ["HUGE_PAGES_ENV", "HUGE_PAGES_FROM_FACES", "huge_page_advice", "pages_for_run",
+           "prefer_ordinary_pages", "set_huge_page_advice"]
 
 HUGE_PAGES_ENV = "EEGT_HUGE_PAGES"  # "1": keep NumPy's huge-page advice as it is
+HUGE_PAGES_FROM_FACES = 2_000_000  # runs this large work with the advice on
 
 
 def _find_setter() -> Callable[[bool], bool] | None:
@@ -41,6 +51,8 @@ def _find_setter() -> Callable[[bool], bool] | None:
 
 _SETTER = _find_setter()
 _lock = threading.Lock()
+_large = 0  # large runs inside `pages_for_run` now
+_saved = False  # the process's setting when the first of them began
 
 
 def set_huge_page_advice(on: bool) -> bool | None:
@@ -67,3 +79,25 @@ def prefer_ordinary_pages() -> bool | None:
         return huge_page_advice()
     set_huge_page_advice(False)
     return huge_page_advice()
+
+
+@contextmanager
+def pages_for_run(n_faces: int) -> Iterator[None]:
+    """The advice on inside the block for a run of at least HUGE_PAGES_FROM_FACES faces (the
+    process's setting back when the last such run ends, also on an exception); smaller runs
+    leave it as it is."""
+    global _large, _saved
+    if _SETTER is None or n_faces < HUGE_PAGES_FROM_FACES:
+        yield
+        return
+    with _lock:
+        if _large == 0:
+            _saved = bool(_SETTER(True))
+        _large += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _large -= 1
+            if _large == 0:
+                _SETTER(_saved)

@@ -20,6 +20,7 @@ from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
 from .optimize.mesh_tables import Factors
 from .optimize.submesh import Neighbourhood
+from .page_advice import pages_for_run
 from .params import EEGTParams
 from .points import check_points
 from .quality import Stats, mesh_stats
@@ -129,16 +130,17 @@ def untangle_and_smooth(
     params = params if params is not None else EEGTParams()
     if not isinstance(params, EEGTParams):
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
-    mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges)
-    run, order = _start(mesh, params, backend, progress)
-    try:
-        status, message = run.execute()
-    except _CancelRun:
-        status, message = "cancelled", "cancelled: mesh left unchanged"
-    tg = mesh.targets
-    if tg is not None and tg.n_fallback:
-        message += f"; {target_fallback_note(tg.n_fallback)}"
-    out, before, after, status, message = _never_worse(mesh, run, order, status, message)
+    with pages_for_run(_face_count(faces)):
+        mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges)
+        run, order = _start(mesh, params, backend, progress)
+        try:
+            status, message = run.execute()
+        except _CancelRun:
+            status, message = "cancelled", "cancelled: mesh left unchanged"
+        tg = mesh.targets
+        if tg is not None and tg.n_fallback:
+            message += f"; {target_fallback_note(tg.n_fallback)}"
+        out, before, after, status, message = _never_worse(mesh, run, order, status, message)
     return EEGTResult(
         out,
         status,
@@ -171,6 +173,17 @@ class _Mesh:
     work: np.ndarray
     motion: BoundaryMotion | None
     frozen: np.ndarray
+
+
+def _face_count(faces) -> int:
+    """How many faces the caller gave, before any check (0 when it cannot be told): the
+    run's page advice depends on it (core/page_advice.py)."""
+    if isinstance(faces, FaceSet):
+        return faces.n_faces
+    try:
+        return len(faces)
+    except TypeError:
+        return 0
 
 
 def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points,

@@ -1,6 +1,7 @@
 """Importing core maps the process's large NumPy arrays with ordinary pages
-(core/page_advice.py, docs/scale.md) unless EEGT_HUGE_PAGES=1, and a run gives the same bits
-with either mapping."""
+(core/page_advice.py, docs/scale.md) unless EEGT_HUGE_PAGES=1, a run of
+HUGE_PAGES_FROM_FACES faces or more advises huge pages while it works, and a run gives the
+same bits with either mapping."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from core.page_advice import HUGE_PAGES_ENV, huge_page_advice
+from core import page_advice
+from core.page_advice import HUGE_PAGES_ENV, huge_page_advice, set_huge_page_advice
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -62,3 +64,42 @@ def test_this_process_runs_with_ordinary_pages():
     # the test session imported core (conftest, the modules under test) without the variable
     if os.environ.get(HUGE_PAGES_ENV, "").strip() != "1":
         assert huge_page_advice() is False
+
+
+def _advice_seen_by_a_run() -> list[bool | None]:
+    from meshdata import load2d
+
+    from core import untangle_and_smooth
+
+    p, fs = load2d("tri_two_holes")
+    seen: list[bool | None] = []
+    untangle_and_smooth(p, fs, progress=lambda it, phase, stats: seen.append(huge_page_advice()))
+    return seen
+
+
+def test_a_run_below_the_size_keeps_ordinary_pages():
+    set_huge_page_advice(False)
+    seen = _advice_seen_by_a_run()
+    assert len(seen) > 3 and not any(seen)
+    assert huge_page_advice() is False
+
+
+def test_a_large_run_advises_huge_pages_while_it_works_and_restores_after(monkeypatch):
+    set_huge_page_advice(False)
+    monkeypatch.setattr(page_advice, "HUGE_PAGES_FROM_FACES", 10)  # the shared mesh is large
+    seen = _advice_seen_by_a_run()
+    assert len(seen) > 3 and all(seen)
+    assert huge_page_advice() is False
+
+
+def test_nested_large_runs_restore_once_when_the_outer_one_ends():
+    set_huge_page_advice(False)
+    n = page_advice.HUGE_PAGES_FROM_FACES
+    with page_advice.pages_for_run(n):
+        with page_advice.pages_for_run(n):
+            assert huge_page_advice() is True
+        assert huge_page_advice() is True
+    assert huge_page_advice() is False
+    with pytest.raises(RuntimeError), page_advice.pages_for_run(n):
+        raise RuntimeError("stop")
+    assert huge_page_advice() is False
