@@ -14,15 +14,17 @@ at for arrays of this size. Only addresses change: every result is the same bits
 from __future__ import annotations
 
 import ctypes
-import functools
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import TypeVar
 
-__all__ = ["GLIBC", "KEPT", "SETTLED", "available", "keep_freed_memory", "with_freed_memory_kept"]
+__all__ = ["GLIBC", "KEEP_FROM_FACES", "KEPT", "SETTLED", "available", "engaged",
+           "keep_freed_memory"]
 
-F = TypeVar("F", bound=Callable)
+# Runs from this many faces on keep their freed memory; smaller runs (a live drag's, one UV
+# island's) work in arrays of a few MB and leave the allocator alone, so they never pay a
+# `malloc_trim` of the host application's heap.
+KEEP_FROM_FACES = 100_000
 
 # mallopt parameters (malloc.h)
 M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3
@@ -63,12 +65,19 @@ def _set(values: dict[int, int]) -> None:
         mallopt(param, value)
 
 
+def engaged() -> bool:
+    """Whether some run keeps its freed memory now."""
+    with _lock:
+        return _depth > 0
+
+
 @contextmanager
-def keep_freed_memory() -> Iterator[None]:
-    """Freed memory stays in the process inside the block; handed back when the last such
-    block ends (also on an exception)."""
+def keep_freed_memory(n_faces: int) -> Iterator[None]:
+    """For a run of at least KEEP_FROM_FACES faces: freed memory stays in the process inside
+    the block, handed back when the last such block ends (also on an exception). Smaller
+    runs: nothing changes."""
     global _depth
-    if GLIBC is None:
+    if GLIBC is None or n_faces < KEEP_FROM_FACES:
         yield
         return
     with _lock:
@@ -84,13 +93,3 @@ def keep_freed_memory() -> Iterator[None]:
                 _set(SETTLED)
                 GLIBC[1](0)
 
-
-def with_freed_memory_kept(fn: F) -> F:
-    """`fn` run inside `keep_freed_memory`."""
-
-    @functools.wraps(fn)
-    def run(*args, **kwargs):
-        with keep_freed_memory():
-            return fn(*args, **kwargs)
-
-    return run  # type: ignore[return-value]

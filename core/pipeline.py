@@ -14,7 +14,7 @@ from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .faces import FaceSet, as_faceset
 from .fpmath import add_reduce
 from .harmonic import harmonic_positions
-from .heap import with_freed_memory_kept
+from .heap import keep_freed_memory
 from .mean_ratio import group_quality
 from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
@@ -82,7 +82,6 @@ class EEGTResult:
         }
 
 
-@with_freed_memory_kept
 def untangle_and_smooth(
     points,
     faces,
@@ -130,7 +129,8 @@ def untangle_and_smooth(
     params = params if params is not None else EEGTParams()
     if not isinstance(params, EEGTParams):
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
-    with pages_for_run(_face_count(faces)):
+    n_faces = _face_count(faces)
+    with pages_for_run(n_faces), keep_freed_memory(n_faces):
         mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges)
         run, order = _start(mesh, params, backend, progress)
         try:
@@ -177,7 +177,7 @@ class _Mesh:
 
 def _face_count(faces) -> int:
     """How many faces the caller gave, before any check (0 when it cannot be told): the
-    run's page advice depends on it (core/page_advice.py)."""
+    run's page advice and its freed memory depend on it (core/page_advice.py, core/heap.py)."""
     if isinstance(faces, FaceSet):
         return faces.n_faces
     try:

@@ -30,7 +30,7 @@ def _churn(total_mb: int = 96, each_mb: int = 24) -> None:
 def test_freed_memory_stays_inside_the_block_and_goes_back_after():
     heap.GLIBC[1](0)
     base = _resident_mb()
-    with heap.keep_freed_memory():
+    with heap.keep_freed_memory(heap.KEEP_FROM_FACES):
         _churn()
         kept = _resident_mb()
     after = _resident_mb()
@@ -41,8 +41,8 @@ def test_freed_memory_stays_inside_the_block_and_goes_back_after():
 def test_nested_blocks_hand_back_once_when_the_outer_one_ends():
     heap.GLIBC[1](0)
     base = _resident_mb()
-    with heap.keep_freed_memory():
-        with heap.keep_freed_memory():
+    with heap.keep_freed_memory(heap.KEEP_FROM_FACES):
+        with heap.keep_freed_memory(heap.KEEP_FROM_FACES):
             _churn()
         assert _resident_mb() - base > 80  # the inner block's end handed nothing back
     assert _resident_mb() - base < 20
@@ -51,14 +51,31 @@ def test_nested_blocks_hand_back_once_when_the_outer_one_ends():
 def test_memory_handed_back_when_the_block_raises():
     heap.GLIBC[1](0)
     base = _resident_mb()
-    with pytest.raises(RuntimeError), heap.keep_freed_memory():
+    with pytest.raises(RuntimeError), heap.keep_freed_memory(heap.KEEP_FROM_FACES):
         _churn()
         raise RuntimeError("stop")
     assert _resident_mb() - base < 20
 
 
+def _engaged_during_a_run(p, fs) -> list[bool]:
+    seen: list[bool] = []
+    untangle_and_smooth(p, fs, progress=lambda it, phase, stats: seen.append(heap.engaged()))
+    return seen
+
+
+def test_small_runs_leave_the_allocator_alone_and_large_ones_keep_memory(monkeypatch):
+    p, fs = load2d("tri_two_holes")
+    seen = _engaged_during_a_run(p, fs)
+    assert len(seen) > 3 and not any(seen)
+    monkeypatch.setattr(heap, "KEEP_FROM_FACES", 10)  # the shared mesh counts as large
+    seen = _engaged_during_a_run(p, fs)
+    assert len(seen) > 3 and all(seen)
+    assert not heap.engaged()
+
+
 def test_run_gives_the_same_bits_with_the_allocator_left_alone(monkeypatch):
     p, fs = load2d("two_holes_twist")
+    monkeypatch.setattr(heap, "KEEP_FROM_FACES", 10)
     kept = untangle_and_smooth(p, fs, params=EEGTParams())
     monkeypatch.setattr(heap, "GLIBC", None)  # keep_freed_memory does nothing
     plain = untangle_and_smooth(p, fs, params=EEGTParams())
