@@ -7,6 +7,8 @@ the global stage on the device: the result is bit-identical either way.
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from .boundary import BoundaryMotion
@@ -23,7 +25,7 @@ from .params import EEGTParams
 from .targets import Targets
 
 __all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine",
-           "warm_up"]
+           "start_warm_up", "uses_device_engine", "warm_up"]
 
 BACKENDS = ids(BACKEND)
 AUTO_ENGINE_MIN_FACES = 4000  # 'auto': the OpenCL engine from this many faces on
@@ -71,6 +73,23 @@ def warm_up(backend: str, max_face_size: int = 4) -> str | None:
     return None
 
 
+def uses_device_engine(backend: str, n_faces: int) -> bool:
+    """Whether a run of `backend` on `n_faces` faces asks for the OpenCL engine (it gets the
+    NumPy engine anyway when there is no device)."""
+    return backend == "opencl" or (backend == "auto" and n_faces >= AUTO_ENGINE_MIN_FACES)
+
+
+def start_warm_up(backend: str, n_faces: int) -> threading.Thread | None:
+    """`warm_up` in a thread for a run that will ask for the OpenCL engine, so that the
+    device gets ready while the run checks and renumbers its input (a run that reaches the
+    device first waits for it); None when the run would not use the engine."""
+    if not uses_device_engine(backend, n_faces):
+        return None
+    thread = threading.Thread(target=warm_up, args=(backend,), name="eegt-warm-up")
+    thread.start()
+    return thread
+
+
 def make_engine(
     backend: str,
     points: np.ndarray,
@@ -87,7 +106,7 @@ def make_engine(
         raise ValueError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend in ("opencl", "auto"):
         cls, why = _opencl_engine_class()
-        if cls is not None and backend == "auto" and faces.n_faces < AUTO_ENGINE_MIN_FACES:
+        if cls is not None and not uses_device_engine(backend, faces.n_faces):
             # the global stage's device solver runs on CPU devices only (one work-item)
             name = HYBRID if _device_is_cpu() else SMALL_ON_GPU
             return NumpyEngine(points, faces, free, params, targets, motion), name

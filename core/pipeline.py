@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .backends import make_engine
+from .backends import make_engine, start_warm_up
 from .boundary import BoundaryMotion, SlideView, boundary_motion
 from .faces import FaceSet, as_faceset
 from .fpmath import add_reduce
@@ -130,6 +130,7 @@ def untangle_and_smooth(
     if not isinstance(params, EEGTParams):
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
     n_faces = _face_count(faces)
+    start_warm_up(backend, n_faces)  # the device gets ready while the input is checked
     with pages_for_run(n_faces), keep_freed_memory(n_faces):
         mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges)
         run, order = _start(mesh, params, backend, progress)

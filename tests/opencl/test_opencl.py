@@ -751,6 +751,50 @@ def test_warm_up_in_a_thread_while_a_run_starts_gives_the_same_run(device, monke
     assert res.points.tobytes() == ref.points.tobytes()
 
 
+def test_start_warm_up_only_for_runs_that_ask_for_the_device_engine(device):
+    n = backends.AUTO_ENGINE_MIN_FACES
+    assert backends.start_warm_up("numpy", 10**7) is None
+    assert backends.start_warm_up("auto", n - 1) is None  # NumPy engine, device solver
+    for backend, faces in (("auto", n), ("opencl", 10)):
+        thread = backends.start_warm_up(backend, faces)
+        assert thread is not None and thread.name == "eegt-warm-up"
+        thread.join()
+
+
+def test_large_auto_run_gets_the_device_ready_in_a_thread_with_the_same_bits(device,
+                                                                            monkeypatch):
+    """A fresh process's 'auto' run of 10k faces starts the warm-up in a thread of its own
+    (before it checks its input), builds each program once and gives the bits of a run on a
+    warm device."""
+    import threading
+
+    import core.optimize.solver_parallel as sp
+
+    p, f = load2d("tri_two_holes")
+    assert f.n_faces >= backends.AUTO_ENGINE_MIN_FACES
+    ref = untangle_and_smooth(p, f, backend="auto")
+    monkeypatch.setattr(ort, "runtimes", {})
+    monkeypatch.setattr(sp, "_solvers", {})
+    callers, builds = [], []
+    warm_up, program = backends.warm_up, ort.import_cl().Program
+
+    def recording_warm_up(*args):
+        callers.append(threading.current_thread().name)
+        return warm_up(*args)
+
+    def counting_program(ctx, source):
+        builds.append(source)
+        return program(ctx, source)
+
+    monkeypatch.setattr(backends, "warm_up", recording_warm_up)
+    monkeypatch.setattr(ort.import_cl(), "Program", counting_program)
+    res = untangle_and_smooth(p, f, backend="auto")
+    (rt,) = ort.runtimes.values()
+    assert callers == ["eegt-warm-up"] and len(sp._solvers) == 1
+    assert len(builds) == len(rt.programs) == (3 if rt.is_cpu else 2)
+    assert res.points.tobytes() == ref.points.tobytes() and res.after == ref.after
+
+
 def test_warm_up_says_why_without_raising(monkeypatch):
     monkeypatch.setenv(eo.ENV_DEVICE, "no-such-device-xyz")
     assert "no-such-device-xyz" in backends.warm_up("opencl")
