@@ -6,6 +6,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from .points import check_points
 from .quality import Stats, mesh_stats
 from .reference_shapes import reference_targets
 from .reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
+from .side_by_side import side_by_side
 from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
 from .topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
 
@@ -163,7 +165,8 @@ def untangle_and_smooth(
 class _Mesh:
     """A run's checked input: the caller's points `p` and faces, the targets, which nodes
     move (and how, `motion`), the normalisation (centre, scale) with the normalised points
-    `work`, and the frozen faces."""
+    `work`, the frozen faces, and the Z-order renumbering a large run works in (None: the
+    caller's numbering)."""
 
     p: np.ndarray
     fs: FaceSet
@@ -174,6 +177,7 @@ class _Mesh:
     work: np.ndarray
     motion: BoundaryMotion | None
     frozen: np.ndarray
+    renumbered: tuple[Renumbering, FaceSet] | None
 
 
 def _face_count(faces) -> int:
@@ -201,12 +205,17 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
         raise ValueError("reference_points given but target is 'regular': set "
                          "target='reference' to use them")
     tg = prepare_targets(targets, fs)
-    edges = checked_edges(edges, fs, p.shape[0])
+    center, scale = normalisation(p, fs)
+    work = (p - center) / scale
+    # the edge analysis and the renumbering (two sorts) side by side
+    renumber = tg is None and params.boundary == "fixed" and _renumbers(fs, p.shape[0])
+    edges, renumbered = side_by_side(
+        partial(checked_edges, edges, fs, p.shape[0]),
+        partial(z_order, work, fs) if renumber else lambda: None,
+        fs.n_corners if renumber else 0)
     free = free_nodes(p.shape[0], fs, fixed, edges=edges)
     if params.boundary == "fixed" and not free.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
-    center, scale = normalisation(p, fs)
-    work = (p - center) / scale
     _check_orientation(work, fs)
     motion = None  # "fixed": the engines' own path (free_nodes above checked the pins)
     if params.boundary != "fixed":
@@ -217,17 +226,22 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
     frozen = frozen_faces(as_given(p, fs, center, scale), fs, free)
-    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen)
+    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered)
+
+
+def _renumbers(fs: FaceSet, n_nodes: int) -> bool:
+    """Whether a run with regular targets and a fixed boundary works renumbered in Z order
+    (core.reorder: memory locality): a large mesh numbered without locality."""
+    return fs.n_faces >= REORDER_MIN_FACES and scattered(fs, n_nodes)
 
 
 def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | None
            ) -> tuple[_Run, Renumbering | None]:
-    """The run over the normalised points; large meshes run renumbered in Z order
-    (core.reorder: memory locality), returned with the renumbering (None: as given)."""
+    """The run over the normalised points, in the renumbering of `_prepare` if it made one
+    (returned with it; None: as given)."""
     fs, free, frozen = mesh.fs, mesh.free, mesh.frozen
-    if fs.n_faces >= REORDER_MIN_FACES and mesh.targets is None and mesh.motion is None and \
-            scattered(fs, mesh.p.shape[0]):
-        order, run_fs = z_order(mesh.work, fs)
+    if mesh.renumbered is not None:
+        order, run_fs = mesh.renumbered
         work = mesh.work[order.nodes]  # the run's numbering from here on (one copy, not two)
         run = _Run(work, run_fs, free[order.nodes], params, backend, progress,
                    frozen[order.faces], frozen_ids=np.flatnonzero(frozen))

@@ -1,11 +1,14 @@
 """Z-order renumbering of large meshes (core.reorder): the same faces, memory locality, and
 a pipeline run that is exactly the run of the renumbered mesh, mapped back."""
 
+import threading
+
 import numpy as np
 import pytest
 from meshdata import load2d
 
 import core.pipeline as pipeline
+import core.side_by_side
 from core import EEGTParams, mesh_stats, untangle_and_smooth
 from core.faces import FaceSet
 from core.reorder import scattered, z_order
@@ -58,14 +61,23 @@ def test_z_order_brings_the_nodes_of_a_face_close_in_memory():
     assert np.mean(spread(out)) < 0.12 * n and np.median(spread(out)) < 0.04 * n
 
 
-@pytest.mark.parametrize("backend", ["numpy", "auto"])
-def test_large_mesh_runs_as_its_z_ordered_renumbering_bit_for_bit(monkeypatch, backend):
+@pytest.mark.parametrize("backend,side_by_side", [("numpy", False), ("auto", False),
+                                                  ("numpy", True)])
+def test_large_mesh_runs_as_its_z_ordered_renumbering_bit_for_bit(monkeypatch, backend,
+                                                                  side_by_side):
     """Above the size limit the run works on the renumbered mesh: its points are that run's,
-    mapped back, bit for bit, and its statistics are measured in the caller's numbering."""
+    mapped back, bit for bit, and its statistics are measured in the caller's numbering;
+    also with the renumbering made beside the edge analysis (as a large run does)."""
     p, fs = _shuffled(*load2d("tri_two_holes"), seed=1)
     params = EEGTParams(untangle="eegt+local")
     monkeypatch.setattr(pipeline, "REORDER_MIN_FACES", 1_000)
+    if side_by_side:
+        monkeypatch.setattr(core.side_by_side, "SIDE_BY_SIDE_FROM", 1_000)
+    threads = []
+    monkeypatch.setattr(pipeline, "z_order", lambda *a: threads.append(
+        threading.current_thread().name) or z_order(*a))
     res = untangle_and_smooth(p, fs, params=params, backend=backend)
+    assert threads == ["eegt-side-by-side" if side_by_side else "MainThread"]
     order, out = z_order(p, fs)  # the renumbered mesh is its own Z order: it is not renumbered
     ref = untangle_and_smooth(p[order.nodes], out, params=params, backend=backend)
     assert res.status == ref.status == "untangled" and res.after.n_inverted == 0
