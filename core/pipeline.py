@@ -257,16 +257,21 @@ def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
     only where it moved, and only when it is no worse than the input judged in the caller's
     coordinates (else the input, status and message saying so)."""
     p, fs, center, scale, tg = mesh.p, mesh.fs, mesh.center, mesh.scale, mesh.targets
-    before = stats_as_given(p, fs, center, scale, tg)
-    out, after = p.copy(), before
+    out = p.copy()
     if status == "cancelled":
-        return out, before, after, status, message
+        before = stats_as_given(p, fs, center, scale, tg)
+        return out, before, before, status, message
     best = run.best_pts if run.best_pts is not None else run.engine.best_points()
     changed = np.any(best != run.p, axis=1) & run.free  # fixed rows stay the input's
     if order is not None:
         best, changed = order.back(best), order.back(changed)
     out[changed] = best[changed] * scale + center
-    after = stats_as_given(out, fs, center, scale, tg) if changed.any() else before
+    if changed.any():  # the input's and the result's stats side by side
+        before, after = side_by_side(partial(stats_as_given, p, fs, center, scale, tg),
+                                     partial(stats_as_given, out, fs, center, scale, tg),
+                                     fs.n_corners)
+    else:
+        before = after = stats_as_given(p, fs, center, scale, tg)
     if not (after == before or after.better_than(before)):  # judged in the caller's units
         out, after = p.copy(), before
         status = "failed" if before.n_inverted else "valid"

@@ -67,7 +67,8 @@ def test_large_mesh_runs_as_its_z_ordered_renumbering_bit_for_bit(monkeypatch, b
                                                                   side_by_side):
     """Above the size limit the run works on the renumbered mesh: its points are that run's,
     mapped back, bit for bit, and its statistics are measured in the caller's numbering;
-    also with the renumbering made beside the edge analysis (as a large run does)."""
+    also with the renumbering made beside the edge analysis and the input's and result's
+    statistics side by side (as a large run does)."""
     p, fs = _shuffled(*load2d("tri_two_holes"), seed=1)
     params = EEGTParams(untangle="eegt+local")
     monkeypatch.setattr(pipeline, "REORDER_MIN_FACES", 1_000)
