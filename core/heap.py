@@ -14,9 +14,10 @@ at for arrays of this size. Only addresses change: every result is the same bits
 from __future__ import annotations
 
 import ctypes
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+
+from .run_scoped import RunScoped
 
 __all__ = ["GLIBC", "KEEP_FROM_FACES", "KEPT", "SETTLED", "available", "engaged",
            "keep_freed_memory"]
@@ -50,8 +51,6 @@ def _glibc():
 
 
 GLIBC = _glibc()  # (mallopt, malloc_trim) of the process, None under another C library
-_lock = threading.Lock()
-_depth = 0  # runs inside `keep_freed_memory` now
 
 
 def available() -> bool:
@@ -65,10 +64,21 @@ def _set(values: dict[int, int]) -> None:
         mallopt(param, value)
 
 
+def _keep() -> None:
+    _set(KEPT)
+
+
+def _hand_back() -> None:
+    _set(SETTLED)
+    GLIBC[1](0)
+
+
+_large_runs = RunScoped(_keep, _hand_back)
+
+
 def engaged() -> bool:
     """Whether some run keeps its freed memory now."""
-    with _lock:
-        return _depth > 0
+    return _large_runs.inside > 0
 
 
 @contextmanager
@@ -76,20 +86,9 @@ def keep_freed_memory(n_faces: int) -> Iterator[None]:
     """For a run of at least KEEP_FROM_FACES faces: freed memory stays in the process inside
     the block, handed back when the last such block ends (also on an exception). Smaller
     runs: nothing changes."""
-    global _depth
     if GLIBC is None or n_faces < KEEP_FROM_FACES:
         yield
         return
-    with _lock:
-        if _depth == 0:
-            _set(KEPT)
-        _depth += 1
-    try:
+    with _large_runs.held():
         yield
-    finally:
-        with _lock:
-            _depth -= 1
-            if _depth == 0:
-                _set(SETTLED)
-                GLIBC[1](0)
 

@@ -28,6 +28,8 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
+from .run_scoped import RunScoped
+
 __all__ = ["HUGE_PAGES_ENV", "HUGE_PAGES_FROM_FACES", "huge_page_advice", "pages_for_run",
            "prefer_ordinary_pages", "set_huge_page_advice"]
 
@@ -51,8 +53,18 @@ def _find_setter() -> Callable[[bool], bool] | None:
 
 _SETTER = _find_setter()
 _lock = threading.Lock()
-_large = 0  # large runs inside `pages_for_run` now
-_saved = False  # the process's setting when the first of them began
+_saved = [False]  # the process's setting when the first large run began
+
+
+def _advise() -> None:
+    _saved[0] = bool(_SETTER(True))
+
+
+def _restore() -> None:
+    _SETTER(_saved[0])
+
+
+_large_runs = RunScoped(_advise, _restore, _lock)
 
 
 def set_huge_page_advice(on: bool) -> bool | None:
@@ -86,18 +98,8 @@ def pages_for_run(n_faces: int) -> Iterator[None]:
     """The advice on inside the block for a run of at least HUGE_PAGES_FROM_FACES faces (the
     process's setting back when the last such run ends, also on an exception); smaller runs
     leave it as it is."""
-    global _large, _saved
     if _SETTER is None or n_faces < HUGE_PAGES_FROM_FACES:
         yield
         return
-    with _lock:
-        if _large == 0:
-            _saved = bool(_SETTER(True))
-        _large += 1
-    try:
+    with _large_runs.held():
         yield
-    finally:
-        with _lock:
-            _large -= 1
-            if _large == 0:
-                _SETTER(_saved)
