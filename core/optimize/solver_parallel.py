@@ -233,8 +233,8 @@ class _Tables:
         del ptr, by_node, take, nodes, order
         ints = [
             np.stack([zpos.take(i1), zpos.take(i2), zpos.take(i0), sweep], axis=1).ravel(),
-            np.stack([r.take(sweep) for r in slot.reshape(3, nc)], axis=1).ravel(),  # per
-            # corner: its three gather slots
+            # per corner of the sweep: its three gather slots
+            np.stack([r.take(sweep) for r in slot.reshape(3, nc)], axis=1).ravel(),
             np.concatenate([rows, rowf]),  # row starts, each row's free node
             zpos[st.fidx],  # each free node's place in Z
         ]
