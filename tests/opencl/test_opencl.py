@@ -773,6 +773,9 @@ def test_large_auto_run_gets_the_device_ready_in_a_thread_with_the_same_bits(dev
     p, f = load2d("tri_two_holes")
     assert f.n_faces >= backends.AUTO_ENGINE_MIN_FACES
     ref = untangle_and_smooth(p, f, backend="auto")
+    for thread in threading.enumerate():  # no earlier warm-up may still be building
+        if thread.name == "eegt-warm-up":
+            thread.join()
     monkeypatch.setattr(ort, "runtimes", {})
     monkeypatch.setattr(sp, "_solvers", {})
     callers, builds = [], []
