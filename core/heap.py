@@ -16,6 +16,7 @@ from __future__ import annotations
 import ctypes
 from collections.abc import Iterator
 from contextlib import contextmanager
+from functools import partial
 
 from .run_scoped import RunScoped
 
@@ -64,16 +65,12 @@ def _set(values: dict[int, int]) -> None:
         mallopt(param, value)
 
 
-def _keep() -> None:
-    _set(KEPT)
-
-
-def _hand_back() -> None:
+def _hand_back(_: None) -> None:
     _set(SETTLED)
     GLIBC[1](0)
 
 
-_large_runs = RunScoped(_keep, _hand_back)
+_large_runs = RunScoped(partial(_set, KEPT), _hand_back)
 
 
 def engaged() -> bool:

@@ -53,18 +53,8 @@ def _find_setter() -> Callable[[bool], bool] | None:
 
 _SETTER = _find_setter()
 _lock = threading.Lock()
-_saved = [False]  # the process's setting when the first large run began
-
-
-def _advise() -> None:
-    _saved[0] = bool(_SETTER(True))
-
-
-def _restore() -> None:
-    _SETTER(_saved[0])
-
-
-_large_runs = RunScoped(_advise, _restore, _lock)
+# the advice on while large runs work; the process's setting from before the first back after
+_large_runs = RunScoped(lambda: bool(_SETTER(True)), lambda saved: _SETTER(saved), _lock)
 
 
 def set_huge_page_advice(on: bool) -> bool | None:

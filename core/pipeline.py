@@ -256,10 +256,11 @@ def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
     """(points, before, after, status, message): the best iterate in the caller's units,
     only where it moved, and only when it is no worse than the input judged in the caller's
     coordinates (else the input, status and message saying so)."""
-    p, fs, center, scale, tg = mesh.p, mesh.fs, mesh.center, mesh.scale, mesh.targets
+    p, fs, center, scale = mesh.p, mesh.fs, mesh.center, mesh.scale
+    measured = partial(stats_as_given, fs=fs, center=center, scale=scale, targets=mesh.targets)
     out = p.copy()
     if status == "cancelled":
-        before = stats_as_given(p, fs, center, scale, tg)
+        before = measured(p)
         return out, before, before, status, message
     best = run.best_pts if run.best_pts is not None else run.engine.best_points()
     changed = np.any(best != run.p, axis=1) & run.free  # fixed rows stay the input's
@@ -267,11 +268,10 @@ def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
         best, changed = order.back(best), order.back(changed)
     out[changed] = best[changed] * scale + center
     if changed.any():  # the input's and the result's stats side by side
-        before, after = side_by_side(partial(stats_as_given, p, fs, center, scale, tg),
-                                     partial(stats_as_given, out, fs, center, scale, tg),
+        before, after = side_by_side(partial(measured, p), partial(measured, out),
                                      fs.n_corners)
     else:
-        before = after = stats_as_given(p, fs, center, scale, tg)
+        before = after = measured(p)
     if not (after == before or after.better_than(before)):  # judged in the caller's units
         out, after = p.copy(), before
         status = "failed" if before.n_inverted else "valid"

@@ -11,19 +11,24 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Generic, TypeVar
 
 __all__ = ["RunScoped"]
 
+T = TypeVar("T")
 
-class RunScoped:
-    """`enter()` when the first run enters `held()`, `leave()` when the last one leaves;
-    both under `lock` (a caller that also reads or flips the setting passes its own)."""
 
-    def __init__(self, enter: Callable[[], None], leave: Callable[[], None],
+class RunScoped(Generic[T]):
+    """`enter()` when the first run enters `held()`, `leave(token)` with what that `enter`
+    returned (the setting to put back) when the last one leaves; both under `lock` (a caller
+    that also reads or flips the setting passes its own)."""
+
+    def __init__(self, enter: Callable[[], T], leave: Callable[[T], None],
                  lock: threading.Lock | None = None):
         self._enter, self._leave = enter, leave
         self._lock = lock if lock is not None else threading.Lock()
         self._inside = 0
+        self._token: T | None = None
 
     @property
     def inside(self) -> int:
@@ -35,7 +40,7 @@ class RunScoped:
     def held(self) -> Iterator[None]:
         with self._lock:
             if self._inside == 0:
-                self._enter()
+                self._token = self._enter()
             self._inside += 1
         try:
             yield
@@ -43,4 +48,5 @@ class RunScoped:
             with self._lock:
                 self._inside -= 1
                 if self._inside == 0:
-                    self._leave()
+                    self._leave(self._token)  # type: ignore[arg-type]
+                    self._token = None

@@ -10,7 +10,7 @@ from core.run_scoped import RunScoped
 
 def _recorder():
     calls = []
-    return calls, RunScoped(lambda: calls.append("enter"), lambda: calls.append("leave"))
+    return calls, RunScoped(lambda: calls.append("enter"), lambda _: calls.append("leave"))
 
 
 def test_nested_runs_switch_once_and_restore_when_the_outer_one_leaves():
@@ -23,6 +23,20 @@ def test_nested_runs_switch_once_and_restore_when_the_outer_one_leaves():
     with scoped.held():
         pass
     assert calls == ["enter", "leave", "enter", "leave"]
+
+
+def test_leave_gets_back_what_the_first_enter_returned():
+    """The setting from before the first run (enter's token) is what the last one restores,
+    once per outermost run."""
+    given, restored = iter([True, False]), []
+    scoped = RunScoped(lambda: next(given), restored.append)
+    with scoped.held():
+        with scoped.held():
+            pass
+    assert restored == [True]
+    with scoped.held():
+        pass
+    assert restored == [True, False]
 
 
 def test_a_run_that_raises_still_restores():
