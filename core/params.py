@@ -46,7 +46,8 @@ class EEGTParams:
     max_untangle_iterations: int = field(
         default=20000, metadata={"help": "Untangling gives up after this many iterations "
                                  "(the optimizer: per attempt; a run still tangled is tried "
-                                 "once more from a harmonic start)."}
+                                 "once more from its other start, the input or the harmonic "
+                                 "map)."}
     )
     max_smooth_iterations: int = field(
         default=1000, metadata={"help": "Smoothing stops after this many iterations."}

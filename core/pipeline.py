@@ -443,6 +443,7 @@ class _Run:
         self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
         self._near: Neighbourhood | None = None  # made by the local untangle, if it runs
         self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
+        self._harmonic: np.ndarray | None = None  # `_harmonic_map`, made when a stage needs it
 
     def report(self, it: int, phase: str, s: Stats) -> None:
         if self.progress is None:
@@ -479,12 +480,7 @@ class _Run:
             if self.tangled(self.best) and mode == "eegt+local":
                 current = self.untangle_local()
             if self.tangled(self.best) and mode != "eegt":
-                current = self.global_stage(polish=prm.polish_iterations, from_input=True)
-            if self.tangled(self.best) and mode != "eegt" and self._restart_may_help():
-                # a fold that outlasts the budget: once more from the interior's harmonic
-                # map (docs/global_untangle.md)
-                start = harmonic_positions(self.p, self.fs, self.free, tick=self._harmonic_tick)
-                current = self.global_stage(polish=prm.polish_iterations, start=start)
+                current = self.untangle_whole()
             if self.tangled(self.best):
                 return "failed", (
                     f"failed: {self.best.n_inverted - self.n_frozen} inverted faces remain "
@@ -509,6 +505,37 @@ class _Run:
         if b.n_inverted:  # only frozen faces are left: the run cannot claim a valid mesh
             return "failed", f"failed: {self.stuck_why()}; {text}"
         return ("untangled" if tangled else "valid"), text + frozen
+
+    def untangle_whole(self) -> Stats:
+        """The whole-mesh stage from two starts in turn: the input (EEGT's best iterate for
+        'eegt+global') and the harmonic map of the interior, the second only when the first
+        ends tangled and a move can still help (docs/global_untangle.md, "Harmonic start").
+        The harmonic map goes first when 'eegt+local' hands the whole mesh over (EEGT could not
+        do the bulk: a moved boundary, not scattered folds) and it has fewer inverted faces
+        than the input."""
+        harmonic_first = self.mode == "eegt+local" and self._harmonic_has_fewer()
+        current = self._whole_from(harmonic=harmonic_first)
+        if self.tangled(self.best) and self._restart_may_help():
+            current = self._whole_from(harmonic=not harmonic_first)
+        return current
+
+    def _whole_from(self, harmonic: bool) -> Stats:
+        polish = self.params.polish_iterations
+        if harmonic:
+            return self.global_stage(polish=polish, start=self._harmonic_map())
+        return self.global_stage(polish=polish, from_input=True)
+
+    def _harmonic_map(self) -> np.ndarray:
+        """The input with its free interior nodes at their harmonic map (made once a run)."""
+        if self._harmonic is None:
+            self._harmonic = harmonic_positions(self.p, self.fs, self.free,
+                                                tick=self._harmonic_tick)
+        return self._harmonic
+
+    def _harmonic_has_fewer(self) -> bool:
+        """The harmonic map leaves fewer movable inverted faces than the input has."""
+        left = sum(int(bad.sum()) for bad in self._inverted(self._harmonic_map()))
+        return left < self.before.n_inverted - self.n_frozen
 
     def _harmonic_tick(self) -> None:
         """Progress during the harmonic start's solve (the best iterate's numbers); a stop

@@ -166,3 +166,96 @@ def test_harmonic_solve_ticks_and_a_stop_there_cancels_the_run(monkeypatch):
                               params=EEGTParams(max_untangle_iterations=200, polish_iterations=50))
     assert in_solve and res.status == "cancelled"
     assert np.array_equal(res.points, spun)
+
+
+def scrambled_grid() -> tuple[np.ndarray, np.ndarray]:
+    """A 16 x 16 diagonal-cut grid whose interior nodes were thrown up to a quarter of the
+    square away (224 of 512 faces inverted): EEGT cannot do the bulk of it, and the harmonic
+    map of its boundary is the grid itself."""
+    pts, faces = tri_grid(16)
+    interior = (pts > 0.0).all(axis=1) & (pts < 1.0).all(axis=1)
+    p = pts.copy()
+    p[interior] += np.random.default_rng(2).uniform(-0.25, 0.25, (interior.sum(), 2))
+    p[interior] = np.clip(p[interior], 0.01, 0.99)
+    return p, faces
+
+
+def whole_mesh_starts(monkeypatch) -> list[bool]:
+    """Records, in order, whether each whole-mesh stage of a run started from the harmonic
+    map (True) or from the input (False)."""
+    starts: list[bool] = []
+    real = pipeline._Run._whole_from
+
+    def spy(self, harmonic: bool):
+        starts.append(harmonic)
+        return real(self, harmonic)
+
+    monkeypatch.setattr(pipeline._Run, "_whole_from", spy)
+    return starts
+
+
+def test_eegt_local_hands_a_fold_eegt_cannot_do_to_the_harmonic_start_first(monkeypatch):
+    """'eegt+local' whose EEGT leaves the bulk (a moved boundary, not scattered folds) starts
+    the whole-mesh stage from the harmonic map when that has fewer inverted faces than the
+    input, and untangles in far fewer iterations than the stage from the input."""
+    pts, faces = scrambled_grid()
+    starts = whole_mesh_starts(monkeypatch)
+    first = untangle_and_smooth(pts, faces, params=EEGTParams(untangle="eegt+local"))
+    assert starts == [True]
+    assert first.status == "untangled" and first.before.n_inverted == 224
+    assert first.after.q_min > 0.85
+    starts.clear()
+    monkeypatch.setattr(pipeline._Run, "_harmonic_has_fewer", lambda self: False)
+    from_input = untangle_and_smooth(pts, faces, params=EEGTParams(untangle="eegt+local"))
+    assert starts == [False] and from_input.status == "untangled"
+    assert 2 * first.global_iterations < from_input.global_iterations
+
+
+def test_harmonic_first_falls_back_to_the_input_when_it_stays_tangled(monkeypatch):
+    """The stage from the harmonic map made to fail (it hands back its start with the free
+    nodes shuffled among themselves): the input's stage runs next and untangles."""
+    pts, faces = scrambled_grid()
+    real = pipeline.untangle_global
+    calls = []
+
+    def first_fails(start, groups, free, *a, **k):
+        calls.append(1)
+        if len(calls) == 1:
+            out = start.copy()
+            ids = np.flatnonzero(free)
+            out[ids] = start[np.random.default_rng(0).permutation(ids)]
+            return out, {"iterations": 5, "status": "failed"}
+        return real(start, groups, free, *a, **k)
+
+    starts = whole_mesh_starts(monkeypatch)
+    monkeypatch.setattr(pipeline, "untangle_global", first_fails)
+    res = untangle_and_smooth(pts, faces, params=EEGTParams(untangle="eegt+local"))
+    assert starts == [True, False] and res.status == "untangled"
+
+
+def test_input_goes_first_unless_eegt_local_and_the_harmonic_map_has_fewer(monkeypatch):
+    """'global' never makes the harmonic map before its stage from the input has failed;
+    'eegt+local' keeps the input first when the harmonic map has no fewer inverted faces (a
+    spun hole: 48 inverted, 240 in the harmonic map), and never makes it when EEGT untangles."""
+    starts = whole_mesh_starts(monkeypatch)
+    pts, faces = scrambled_grid()
+
+    def never(*_a, **_k):
+        raise AssertionError("harmonic map made")
+
+    real_harmonic = pipeline.harmonic_positions
+    monkeypatch.setattr(pipeline, "harmonic_positions", never)
+    res = untangle_and_smooth(pts, faces, params=EEGTParams(untangle="global"))
+    assert starts == [False] and res.status == "untangled"
+
+    starts.clear()
+    light = tri_grid(16)[0]
+    inner = (light > 0.0).all(axis=1) & (light < 1.0).all(axis=1)
+    light[inner] += np.random.default_rng(0).uniform(-0.05, 0.05, (inner.sum(), 2))
+    res = untangle_and_smooth(light, faces, params=EEGTParams(untangle="eegt+local"))
+    assert res.before.n_inverted > 0 and res.status == "untangled" and starts == []
+
+    monkeypatch.setattr(pipeline, "harmonic_positions", real_harmonic)
+    spun, groups = spun_hole(8, 48, 270, True)
+    res = untangle_and_smooth(spun, groups[3], params=EEGTParams(untangle="eegt+local"))
+    assert starts == [False] and res.status == "untangled" and res.before.n_inverted == 48
