@@ -20,6 +20,7 @@ from .mean_ratio import group_quality
 from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
 from .optimize.device import solver_for
 from .optimize.mesh_tables import Factors
+from .optimize.sampled import Sampled
 from .optimize.submesh import Neighbourhood
 from .page_advice import pages_for_run
 from .params import EEGTParams
@@ -600,7 +601,8 @@ class _Run:
                 break
             base = self.n_untangle + self.n_global
 
-            def relay(iterations: int, _max_iter: int, n_inv: int, base: int = base) -> None:
+            def relay(iterations: int, _max_iter: int, n_inv: int, _current,
+                      base: int = base) -> None:  # the sub-mesh's: the best iterate's numbers
                 self.report(base + iterations, "global", Stats(n_inv, *self._best_q()))
 
             polish = self.params.polish_iterations  # the sub-mesh leaves the stage well shaped
@@ -668,9 +670,12 @@ class _Run:
             start = self.p if use_input else (best := self.best_points())
         groups, factors = self._global_groups()
         base = self.n_untangle + self.n_global
+        live: Sampled[Stats] = Sampled()  # the current iterate's numbers, now and then
 
-        def relay(iterations: int, _max_iter: int, n_inv: int) -> None:
-            self.report(base + iterations, "global", Stats(n_inv, *self._best_q()))
+        def relay(iterations: int, _max_iter: int, _n_inv: int,
+                  current: Callable[[], np.ndarray]) -> None:
+            shown = live.update(lambda: mesh_stats(current(), self.fs, self.targets))
+            self.report(base + iterations, "global", shown)
 
         self.lbfgs = self._solver()  # built here: not for runs without one
         options = GlobalOptions(

@@ -4,7 +4,6 @@ energies; `solver_opencl` is its device twin (same arguments, same bits)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -22,6 +21,7 @@ from .state import (
 )
 
 if TYPE_CHECKING:
+    from .dispatch import Tick
     from .energy import FoldoverEnergy
 
 __all__ = ["lbfgs"]
@@ -36,14 +36,15 @@ def lbfgs(
     max_it: int,
     guard: bool,
     rel_tol: float = REL_TOL,
-    tick: Callable[[int], bool] | None = None,
+    tick: Tick | None = None,
 ) -> tuple[np.ndarray, int]:
     """L-BFGS with a diagonal preconditioner and Armijo backtracking from v0.
 
     guard: reject trial points with a corner det <= 0 (used once the mesh is valid); without
     it, stop as soon as every corner is positive.
     Stops after max_it iterations, when 5 iterations lower F by less than rel_tol (relative),
-    or when tick(iterations so far), called every `en.tick_every` iterations, cancels.
+    or when tick(iterations so far, point), called every `en.tick_every` iterations,
+    cancels (`dispatch.Tick`).
     Returns the last accepted point and the number of iterations done.
 
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
@@ -72,7 +73,7 @@ def lbfgs(
             break
         if run.stalled(rel_tol):
             break
-        if tick is not None and it % en.tick_every == 0 and stops(tick(it)):
+        if tick is not None and it % en.tick_every == 0 and stops(tick(it, run.v.copy)):
             break
     return run.v, it
 

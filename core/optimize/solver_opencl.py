@@ -11,14 +11,12 @@ a GPU would run it on one thread.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from ..csr import bincount_csr
 from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
 from ..opencl.runtime import LOCK, runtime
-from .dispatch import TooLarge, on_host, single_kernel_corners
+from .dispatch import Tick, TooLarge, on_host, single_kernel_corners
 from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
 from .state import LBFGS_MEMORY, REL_TOL, State, line_search_defines, stops
@@ -141,7 +139,7 @@ class OpenCLLbfgs:
         max_it: int,
         guard: bool,
         rel_tol: float = REL_TOL,
-        tick: Callable[[int], bool] | None = None,
+        tick: Tick | None = None,
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
         if on_host(en, st):  # not in the kernel: the host's
@@ -166,11 +164,15 @@ class OpenCLLbfgs:
         T = self._buffer(flags)
         for i, buf in enumerate((tb.ints, tb.dbls, S, T, tb.work)):
             self.kernel.set_arg(i, buf)
+        def point() -> np.ndarray:
+            v = np.empty(tb.n2, dtype=np.float64)
+            cl.enqueue_copy(queue, v, S, src_offset=8 * tb.v_at)
+            return v
+
         while True:
             cl.enqueue_nd_range_kernel(queue, self.kernel, (1,), (1,))
             cl.enqueue_copy(queue, flags, T)
-            if flags[_T["T_STATUS"]] != _ST["ST_TICK"] or stops(tick(int(flags[_T["T_IT"]]))):
+            if flags[_T["T_STATUS"]] != _ST["ST_TICK"] or stops(
+                    tick(int(flags[_T["T_IT"]]), point)):
                 break
-        v = np.empty(tb.n2, dtype=np.float64)
-        cl.enqueue_copy(queue, v, S, src_offset=8 * tb.v_at)
-        return v, int(flags[_T["T_IT"]])
+        return point(), int(flags[_T["T_IT"]])

@@ -15,15 +15,13 @@ kernels and the measurements.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from ..csr import bincount_csr, point_morton
 from ..fpmath import PAIRWISE_BLOCK, REDUCE_CHUNK
 from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
 from ..opencl.runtime import LOCK, runtime
-from .dispatch import SMALL_CORNERS, Solver, TooLarge, route, single_kernel_corners
+from .dispatch import SMALL_CORNERS, Solver, Tick, TooLarge, route, single_kernel_corners
 from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
 from .state import (
@@ -505,7 +503,7 @@ class ParallelLbfgs:
         max_it: int,
         guard: bool,
         rel_tol: float = REL_TOL,
-        tick: Callable[[int], bool] | None = None,
+        tick: Tick | None = None,
     ) -> tuple[np.ndarray, int]:
         kw = {"max_it": max_it, "guard": guard, "rel_tol": rel_tol, "tick": tick}
         where = route(en, st, self.small_corners)
@@ -546,7 +544,8 @@ class ParallelLbfgs:
             e_hist.append(e)
             if len(e_hist) > 5 and e_hist[-6] - e <= rel_tol * abs(e_hist[-6]):
                 break
-            if tick is not None and it % en.tick_every == 0 and stops(tick(it)):
+            if tick is not None and it % en.tick_every == 0 and stops(
+                    tick(it, lambda: self._solution(tb, en, st, True))):
                 break
             if it < max_it:
                 self._accept(tb, grad)

@@ -7,16 +7,18 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
 
 from ..boundary import SlideView
 from ..fpmath import add_reduce
-from .dispatch import Solver
+from .dispatch import Solver, Tick
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
 from .mesh_tables import Factors
 from .options import GlobalOptions
+from .sampled import Sampled
 from .slide import make_state
 from .state import State, stops
 from .submesh import Neighbourhood
@@ -106,7 +108,7 @@ def untangle_global(
     groups: Mapping[int, np.ndarray],
     free: np.ndarray,
     options: GlobalOptions | None = None,
-    progress: Callable[[int, int, int], Any] | None = None,
+    progress: Callable[[int, int, int, Callable[[], np.ndarray]], Any] | None = None,
     factors: Factors | None = None,
     slide: SlideView | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
@@ -117,9 +119,11 @@ def untangle_global(
     polish_power, time_limit) and the solver (`GlobalOptions`; None: the defaults); factors:
     per-face target shapes (`reference.Factors`, aligned with groups; None: regular polygons);
     slide: the free nodes that slide along their boundary curves (core.optimize.slide; the
-    host solver then runs). progress(iterations, max_iter, n_inverted) is called after each
-    round and every `tick_every` L-BFGS iterations inside it (a few tenths of a second of
-    work on any mesh size); a falsy answer other than None cancels (`stops`).
+    host solver then runs). progress(iterations, max_iter, n_inverted, current) is called
+    after each round and every `tick_every` L-BFGS iterations inside it (a few tenths of a
+    second of work on any mesh size), n_inverted the best iterate's and current() the current
+    iterate's (N, 2) points (made when called: the caller measures them when it wants to);
+    a falsy answer other than None cancels (`stops`).
 
     Returns (new points, info); non-free rows are bit-identical to the input. Once valid, steps
     that would invert a corner are rejected, so a valid iterate stays valid; when no valid one
@@ -180,7 +184,8 @@ class _Continuation:
 
     def __init__(self, en: FoldoverEnergy, st: State, later: bool, free: np.ndarray,
                  slide: SlideView | None, opt: GlobalOptions,
-                 progress: Callable[[int, int, int], Any] | None, run_lbfgs: Solver,
+                 progress: Callable[[int, int, int, Callable[[], np.ndarray]], Any] | None,
+                 run_lbfgs: Solver,
                  n_inv: int, dmin: float):
         self.en, self.st, self.later, self.free, self.slide = en, st, later, free, slide
         self.opt, self.progress, self.run_lbfgs = opt, progress, run_lbfgs
@@ -211,8 +216,8 @@ class _Continuation:
                 break
             its = self._round(cap, guard)
             e_end, dmin, n_inv = self._take_iterate(its, guard)
-            if self.cancel or (self.progress is not None and
-                               stops(self.progress(self.total, opt.max_iter, n_inv))):
+            if self.cancel or (self.progress is not None and stops(self.progress(
+                    self.total, opt.max_iter, n_inv, partial(self._points, self.v)))):
                 self.status = "cancelled"
                 break
             decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
@@ -243,18 +248,25 @@ class _Continuation:
             return max(polish, 0)
         return max(polish, min(self.untangle_its, self.inner))
 
-    def _tick(self) -> Callable[[int], bool] | None:
+    def _tick(self) -> Tick | None:
         """The progress tick of a round (long runs report, and cancel, from inside)."""
         if self.progress is None:
             return None
         progress, max_iter = self.progress, self.opt.max_iter
         done, n_now = self.total, self.best_inv
 
-        def tick(it: int) -> bool:
-            self.cancel = self.cancel or stops(progress(done + it, max_iter, n_now))
+        def tick(it: int, point: Callable[[], np.ndarray]) -> bool:
+            def current() -> np.ndarray:
+                return self._points(point())
+
+            self.cancel = self.cancel or stops(progress(done + it, max_iter, n_now, current))
             return not self.cancel
 
         return tick
+
+    def _points(self, v: np.ndarray) -> np.ndarray:
+        """(N, 2) points of the packed iterate v."""
+        return np.column_stack(self.st.unpack(v))
 
     def _round(self, cap: int, guard: bool) -> int:
         """One L-BFGS run from v; the iterations it took."""
@@ -305,7 +317,7 @@ class _Continuation:
 
 
 def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: GlobalOptions,
-          tick: Callable[[int], bool] | None,
+          tick: Tick | None,
           show: Callable[[np.ndarray], None] | None = None
           ) -> tuple[np.ndarray, int, np.ndarray]:
     """The lift's whole-mesh run: (point, iterations, element qualities there). One L-BFGS
@@ -322,7 +334,7 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
     total = 0
     e0, q = en.value_and_quality(*st.unpack(v))  # the energy and qualities at v
     while total < max_it:
-        sub = None if tick is None else (lambda it, base=total: tick(base + it))
+        sub = None if tick is None else (lambda it, point, base=total: tick(base + it, point))
         v, its = run_lbfgs(
             st.view(en), st, v, EPS_MIN, max_it=min(chunk, max_it - total), guard=True,
             rel_tol=tol,
@@ -333,7 +345,7 @@ def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: Glob
         if tick is not None:
             if show is not None:
                 show(q)
-            if stops(tick(total)):
+            if stops(tick(total, v.copy)):
                 break
         if its < chunk or not e0 - e1 > tol * abs(e0):
             break
@@ -402,6 +414,11 @@ def lift_min_quality(
     return P, info
 
 
+def _numbers(q: np.ndarray) -> tuple[float, float]:
+    """(q_min, q_avg) of element qualities q."""
+    return float(q.min()), add_reduce(q) / q.size
+
+
 @dataclass(frozen=True)
 class _LiftMesh:
     """The mesh a lift works on, as `lift_min_quality` was handed it (its rounds cut
@@ -432,7 +449,8 @@ class _Lift:
         self.total = 0
         self.trail: list[tuple[float, float]] = []  # (q_min, q_avg) after each run
         info["trail"] = self.trail
-        self.live = (self.m0, self.a0)  # the current iterate's (q_min, q_avg): progress
+        self.live: Sampled[tuple[float, float]] = Sampled()  # (q_min, q_avg): progress
+        self.live.set((self.m0, self.a0))
         self.cancel = False
 
     def climb(self) -> bool:
@@ -474,22 +492,26 @@ class _Lift:
         m, a = self.cur_m, self.cur_a
         return min(m * self.opt.lift_grow, m + LIFT_GAP * (a - m))
 
-    def _tick(self, r: int) -> Callable[[int], bool] | None:
-        """Round r's progress tick, with the kept iterate's qualities."""
+    def _tick(self, r: int) -> Tick | None:
+        """Round r's progress tick: the whole-mesh run's current iterate's qualities (measured
+        now and then: `Sampled`), a local round's kept iterate's."""
         if self.progress is None:
             return None
         progress, done = self.progress, self.total
-        self.live = (self.cur_m, self.cur_a)
+        self.live.set((self.cur_m, self.cur_a))
 
-        def tick(it: int) -> bool:
-            self.cancel = self.cancel or stops(progress(done + it, r, *self.live))
+        def tick(it: int, point: Callable[[], np.ndarray]) -> bool:
+            if r == 0:
+                self.live.update(lambda: _numbers(self.en.element_quality(
+                    *self.st.unpack(point()))))
+            self.cancel = self.cancel or stops(progress(done + it, r, *self.live.value))
             return not self.cancel
 
         return tick
 
     def _show(self, q: np.ndarray) -> None:
         """The whole-mesh run's latest end point: its numbers go to the progress ticks."""
-        self.live = (float(q.min()), add_reduce(q) / q.size)
+        self.live.set(_numbers(q))
 
     def _local_round(self, tick) -> tuple[np.ndarray, int, np.ndarray] | None:
         """One L-BFGS run over the free nodes near the elements under the floor: (point,

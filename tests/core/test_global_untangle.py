@@ -145,7 +145,7 @@ def test_progress_can_cancel() -> None:
     pts, groups, free = load_case("quad_hole")
     calls: list[tuple[int, int, int]] = []
 
-    def cb(it: int, total: int, n_inv: int) -> bool:
+    def cb(it: int, total: int, n_inv: int, _current) -> bool:
         calls.append((it, total, n_inv))
         return False
 
@@ -249,11 +249,11 @@ def test_max_iter_bounds_the_work() -> None:
 def test_progress_reported_inside_the_polish_and_cancels_there() -> None:
     pts, groups, free = load_case("two_holes_twist")
     calls: list[int] = []
-    untangle_global(pts, groups, free, progress=lambda it, m, n: calls.append(it))
+    untangle_global(pts, groups, free, progress=lambda it, m, n, _c: calls.append(it))
     assert len(calls) >= 10 and calls == sorted(calls)  # not only once per eps round
     seen: list[int] = []
 
-    def stop_in_polish(it: int, total: int, n_inv: int) -> bool:
+    def stop_in_polish(it: int, total: int, n_inv: int, _current) -> bool:
         seen.append(it)
         return n_inv > 0 or it < 100
 
@@ -419,3 +419,46 @@ def test_long_untangle_gets_a_polish_as_long_as_the_untangling() -> None:
     # polish_iter=0 still returns the first valid iterate, after over 1000 iterations
     _, first = untangle_global(pts, groups, free, GlobalOptions(max_iter=5300, polish_iter=0))
     assert first["status"] == "untangled" and 1000 < first["iterations"] <= cap
+
+
+def measure_every_tick(monkeypatch) -> None:
+    """Progress numbers measured at every tick (`Sampled` otherwise waits between two)."""
+    import core.optimize.sampled as sampled
+
+    monkeypatch.setattr(sampled, "SAMPLE_EVERY", 0.0)
+    monkeypatch.setattr(sampled, "SAMPLE_SHARE", float("inf"))
+
+
+def test_lift_progress_inside_one_long_run_shows_its_current_numbers(monkeypatch) -> None:
+    """Without runs of a fixed length ('global' mode's lift) the whole-mesh run is one solve:
+    its ticks show the current iterate's numbers, rising, not the input's all along."""
+    measure_every_tick(monkeypatch)
+    pts, groups, free = jittered_lattice(60, 0.3, 1)
+    seen: list = []
+    options = GlobalOptions(lift_first_iter=300, lift_rounds=0, lift_rel_tol=1e-7)
+    _, info = lift_min_quality(pts, groups, free, options,
+                               progress=lambda it, r, q_min, q_avg: seen.append((it, q_min, q_avg)))
+    inside = [a for it, _, a in seen[:-1]]  # the last call is the run's end
+    assert len(inside) >= 2 and len(set(inside)) == len(inside)
+    assert inside[0] > info["q_avg_in"] + 0.03 and inside == sorted(inside)
+
+
+def test_pipeline_progress_in_the_global_stage_shows_the_current_iterate(monkeypatch) -> None:
+    """Regression: the global stage reported the input's q_avg (and the best inverted count,
+    the input's until a round ended better) while the iterate moved. Now each report is the
+    current iterate's: on the spun hole the count rises above the input's 64 before it falls
+    to 0, and the valid iterates' q_avg (about 0.33-0.37: the untangled inner ring pulls its
+    neighbours) moves from report to report, far from the input's 0.774."""
+    from core import EEGTParams, untangle_and_smooth
+
+    measure_every_tick(monkeypatch)
+    pts, groups = spun_hole(12, 64, 100, False)
+    rows: list = []
+    res = untangle_and_smooth(pts, groups[4], params=EEGTParams(untangle="global"),
+                              progress=lambda it, phase, s: rows.append((phase, s)))
+    inside = [s for phase, s in rows if phase == "global"]
+    counts = [s.n_inverted for s in inside]
+    assert res.before.n_inverted == 64 and max(counts) > 64 and counts[-1] == 0
+    valid = [s.q_avg for s in inside if s.n_inverted == 0]
+    assert len(set(valid)) >= 5 and max(valid) < res.before.q_avg - 0.3
+    assert abs(valid[-1] - res.after.q_avg) < 0.02

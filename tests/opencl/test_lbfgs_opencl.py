@@ -67,24 +67,30 @@ def test_untangle_and_lift_bit_identical_to_host_call_by_call(solver, name):
 
 
 def test_ticks_pause_and_cancel_like_the_host(solver):
-    """A tick every TICK_EVERY iterations; False stops at that iteration with its point."""
+    """A tick every TICK_EVERY iterations, showing the host's current point; False stops at
+    that iteration with its point."""
     p, _fs, groups, free = mesh("quad_hole")
     u, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
     en, st = LiftEnergy(u, groups, free), State(u, free)
     en.qc = 0.5
     v0 = st.pack(st.x, st.y)
     seen = {"host": [], "dev": []}
+    points = {"host": [], "dev": []}
     res = {}
     for key, run in (("host", lbfgs), ("dev", solver)):
 
-        def tick(it, key=key):
+        def tick(it, point, key=key):
             seen[key].append(it)
+            points[key].append(point())
             return it < 2 * TICK_EVERY
 
         res[key] = run(en, st, v0, EPS_MIN, max_it=150, guard=True, rel_tol=0.0, tick=tick)
     assert seen["host"] == seen["dev"] == [TICK_EVERY, 2 * TICK_EVERY]
     assert res["host"][1] == res["dev"][1] == 2 * TICK_EVERY
     assert np.array_equal(res["host"][0], res["dev"][0])
+    assert all(np.array_equal(a, b) for a, b in zip(points["host"], points["dev"], strict=True))
+    assert np.array_equal(points["dev"][-1], res["dev"][0])  # the point it stopped at
+    assert not np.array_equal(points["dev"][0], points["dev"][1])  # the iterate moved
 
 
 def test_powered_energy_falls_back_to_the_host_solver(solver):

@@ -240,11 +240,13 @@ def test_ticks_pause_and_cancel_like_the_host(solver):
         en.qc = 0.5
         v0 = st.pack(st.x, st.y)
         seen: dict[str, list[int]] = {"host": [], "dev": []}
+        points: dict[str, list[np.ndarray]] = {"host": [], "dev": []}
         res = {}
         for key, run in (("host", lbfgs), ("dev", solver)):
 
-            def tick(it, calls=seen[key], stop=2 * en.tick_every):
+            def tick(it, point, calls=seen[key], at=points[key], stop=2 * en.tick_every):
                 calls.append(it)
+                at.append(point())
                 return it < stop
 
             res[key] = run(en, st, v0, EPS_MIN, max_it=150, guard=True, rel_tol=0.0,
@@ -252,6 +254,11 @@ def test_ticks_pause_and_cancel_like_the_host(solver):
         assert seen["host"] == seen["dev"] == [en.tick_every, 2 * en.tick_every]
         assert res["host"][1] == res["dev"][1] == 2 * en.tick_every
         assert np.array_equal(res["host"][0], res["dev"][0])
+        # the ticks show the current point, the host's bits, the last one the point returned
+        assert all(np.array_equal(a, b) for a, b in zip(points["host"], points["dev"],
+                                                         strict=True))
+        assert np.array_equal(points["dev"][-1], res["dev"][0])
+        assert not np.array_equal(points["dev"][0], points["dev"][1])
 
 
 def test_untangle_progress_cancel_bit_identical(solver):
@@ -262,8 +269,8 @@ def test_untangle_progress_cancel_bit_identical(solver):
     for run in (None, solver):
         calls = []
 
-        def progress(it, total, n_inv, calls=calls):
-            calls.append((it, n_inv))
+        def progress(it, total, n_inv, current, calls=calls):
+            calls.append((it, n_inv, current().tobytes()))
             return it < 90
 
         res = untangle_global(p, groups, free, GlobalOptions(solver=run), progress=progress)
