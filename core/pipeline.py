@@ -17,7 +17,7 @@ from .fpmath import add_reduce
 from .harmonic import harmonic_positions
 from .heap import keep_freed_memory
 from .mean_ratio import group_quality
-from .optimize import GlobalOptions, lift_min_quality, stops, untangle_global
+from .optimize import GlobalOptions, lift_min_quality, stops, untangle_budget, untangle_global
 from .optimize.device import solver_for
 from .optimize.mesh_tables import Factors
 from .optimize.sampled import Sampled
@@ -678,8 +678,9 @@ class _Run:
             self.report(base + iterations, "global", shown)
 
         self.lbfgs = self._solver()  # built here: not for runs without one
+        budget = untangle_budget(self.params.max_untangle_iterations, int(self.free.sum()))
         options = GlobalOptions(
-            max_iter=self.params.max_untangle_iterations + polish,
+            max_iter=budget + polish,
             polish_iter=polish,
             lift_rounds=self.params.lift_rounds,
             solver=self.lbfgs,

@@ -4,6 +4,7 @@ without lowering the mean). Details and measurements: docs/global_untangle.md.""
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -23,11 +24,13 @@ from .slide import make_state
 from .state import State, stops
 from .submesh import Neighbourhood
 
-__all__ = ["lift_min_quality", "untangle_global"]
+__all__ = ["BUDGET_NODES", "lift_min_quality", "untangle_budget", "untangle_global"]
 
 INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on spun holes: docs)
 INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses a larger mesh
 # in more iterations, and eps shrinking before it has moved stalls it (docs: "Long eps rounds")
+BUDGET_NODES = 10_000  # an untangling budget holds up to this many free nodes; a wider mesh
+# gets it scaled by sqrt(free nodes / BUDGET_NODES), as its rounds are (`untangle_budget`)
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -101,6 +104,17 @@ def _held_stuck(P: np.ndarray, free: np.ndarray, rest: np.ndarray, en: FoldoverE
     for v in (v0, v1, v2):
         out[v[stuck]] = True
     return out & free & ~rest
+
+
+def untangle_budget(iterations: int, n_free: int) -> int:
+    """The optimizer's untangling iterations per attempt for a budget of `iterations`: that
+    many up to BUDGET_NODES free nodes, beyond in proportion to the mesh's width (the square
+    root of its free nodes), as its eps rounds grow (docs/global_untangle.md, "Budget")."""
+    if n_free <= BUDGET_NODES:
+        return iterations
+    need = iterations * iterations * n_free  # the least m with m^2 BUDGET_NODES >= need
+    m = math.isqrt(-(-need // BUDGET_NODES))
+    return m if m * m * BUDGET_NODES >= need else m + 1
 
 
 def untangle_global(
