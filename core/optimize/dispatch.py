@@ -18,29 +18,24 @@ work-item runs the whole solve; CPU devices). The rule, all of it here:
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 
 from ..choices import global_stage_on_device
-from .state import REL_TOL
+from .state import REL_TOL, Tick
 
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
     from .state import State
 
-__all__ = ["SMALL_CORNERS", "Solver", "Tick", "TooLarge", "on_host", "route",
-           "single_kernel_corners", "solver_to_run", "uses_device"]
+__all__ = ["SMALL_CORNERS", "Solver", "TooLarge", "on_host", "route", "single_kernel_corners",
+           "solver_to_run", "uses_device"]
 
 # Below this many energy corners the single-work-item kernel beats the parallel kernels on
 # a CPU device (~35 launches and a read per iteration cost the parallel kernels ~0.15 ms;
 # bench/lbfgs_parallel_bench.py, docs/opencl.md)
 SMALL_CORNERS = 20_000
-
-# A solver's progress tick: tick(iterations so far, point) with point() the current iterate
-# (packed, a fresh array; a device solver reads it back only when called). False cancels.
-Tick = Callable[[int, Callable[[], np.ndarray]], bool]
 
 
 class Solver(Protocol):
@@ -48,7 +43,7 @@ class Solver(Protocol):
     accepted point and the iterations done. guard: reject trial points with a corner det
     <= 0 (else stop once every det is positive); stops after max_it iterations, when 5
     iterations lower the energy by less than rel_tol (relative), or when tick(iterations,
-    point), called every `en.tick_every` iterations, cancels (`Tick`)."""
+    point), called every `en.tick_every` iterations, cancels (`state.Tick`)."""
 
     def __call__(
         self,

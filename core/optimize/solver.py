@@ -16,12 +16,12 @@ from .state import (
     REL_TOL,
     TRIALS,
     State,
+    Tick,
     skipped_trials,
     stops,
 )
 
 if TYPE_CHECKING:
-    from .dispatch import Tick
     from .energy import FoldoverEnergy
 
 __all__ = ["lbfgs"]

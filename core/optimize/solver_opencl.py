@@ -16,10 +16,10 @@ import numpy as np
 from ..csr import bincount_csr
 from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
 from ..opencl.runtime import LOCK, runtime
-from .dispatch import Tick, TooLarge, on_host, single_kernel_corners
+from .dispatch import TooLarge, on_host, single_kernel_corners
 from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
-from .state import LBFGS_MEMORY, REL_TOL, State, line_search_defines, stops
+from .state import LBFGS_MEMORY, REL_TOL, State, Tick, line_search_defines, stops
 
 __all__ = ["KERNEL_FILE", "OpenCLLbfgs", "build_options", "device_solver", "kernel_source"]
 

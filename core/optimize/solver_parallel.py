@@ -21,7 +21,7 @@ from ..csr import bincount_csr, point_morton
 from ..fpmath import PAIRWISE_BLOCK, REDUCE_CHUNK
 from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
 from ..opencl.runtime import LOCK, runtime
-from .dispatch import SMALL_CORNERS, Solver, Tick, TooLarge, route, single_kernel_corners
+from .dispatch import SMALL_CORNERS, Solver, TooLarge, route, single_kernel_corners
 from .energy import FoldoverEnergy, LiftEnergy, energy_defines
 from .solver import lbfgs
 from .state import (
@@ -30,6 +30,7 @@ from .state import (
     REL_TOL,
     TRIALS,
     State,
+    Tick,
     line_search_defines,
     stops,
 )

@@ -15,13 +15,13 @@ import numpy as np
 
 from ..boundary import SlideView
 from ..fpmath import add_reduce
-from .dispatch import Solver, Tick
+from .dispatch import Solver
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar
 from .mesh_tables import Factors
 from .options import GlobalOptions
 from .sampled import Sampled
 from .slide import make_state
-from .state import State, stops
+from .state import State, Tick, stops
 from .submesh import Neighbourhood
 
 __all__ = ["BUDGET_NODES", "lift_min_quality", "untangle_budget", "untangle_global"]

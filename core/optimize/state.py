@@ -5,6 +5,7 @@ so none of them imports another for them."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,7 @@ __all__ = [
     "TICK_EVERY",
     "TRIALS",
     "State",
+    "Tick",
     "line_search_defines",
     "skipped_trials",
     "stops",
@@ -26,6 +28,9 @@ __all__ = [
 LBFGS_MEMORY = 4  # L-BFGS (s, y) pairs kept (8 was 15-20% slower, same iterations: docs)
 TICK_EVERY = 20  # progress is reported at most this many L-BFGS iterations apart ...
 TICK_CORNERS = 500_000  # ... and every TICK_CORNERS / corners iterations (big meshes: often)
+# A solver's progress tick: tick(iterations so far, point) with point() the current iterate
+# (packed, a fresh array; a device solver reads it back only when called). False cancels.
+Tick = Callable[[int, Callable[[], np.ndarray]], bool]
 
 
 LIMIT_MARGIN = 1e-6  # trial steps within this (relative) of a det root are evaluated
