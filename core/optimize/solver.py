@@ -44,7 +44,7 @@ def lbfgs(
     it, stop as soon as every corner is positive.
     Stops after max_it iterations, when 5 iterations lower F by less than rel_tol (relative),
     or when tick(iterations so far, point), called every `en.tick_every` iterations,
-    cancels (`dispatch.Tick`).
+    cancels (`state.Tick`).
     Returns the last accepted point and the number of iterations done.
 
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the

@@ -164,6 +164,7 @@ class OpenCLLbfgs:
         T = self._buffer(flags)
         for i, buf in enumerate((tb.ints, tb.dbls, S, T, tb.work)):
             self.kernel.set_arg(i, buf)
+
         def point() -> np.ndarray:
             v = np.empty(tb.n2, dtype=np.float64)
             cl.enqueue_copy(queue, v, S, src_offset=8 * tb.v_at)

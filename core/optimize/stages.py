@@ -481,7 +481,7 @@ class _Lift:
                     break
                 vt, its, qt = found
             self.total += its
-            qm, qa = float(qt.min()), add_reduce(qt) / qt.size
+            qm, qa = _numbers(qt)
             self.trail.append((qm, qa))
             kept = r == 0 or self._keeps(qm, qa)
             shown = (qm, qa) if kept else (self.cur_m, self.cur_a)  # the iterate going on
