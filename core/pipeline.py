@@ -25,7 +25,7 @@ from .optimize.submesh import Neighbourhood
 from .page_advice import pages_for_run
 from .params import EEGTParams
 from .points import check_points
-from .quality import Stats, mesh_stats
+from .quality import Stats, folded_area, mesh_stats
 from .reference_shapes import reference_targets
 from .reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from .side_by_side import side_by_side
@@ -512,9 +512,9 @@ class _Run:
         'eegt+global') and the harmonic map of the interior, the second only when the first
         ends tangled and a move can still help (docs/global_untangle.md, "Harmonic start").
         The harmonic map goes first when 'eegt+local' hands the whole mesh over (EEGT could not
-        do the bulk: a moved boundary, not scattered folds) and it has fewer inverted faces
-        than the input."""
-        harmonic_first = self.mode == "eegt+local" and self._harmonic_has_fewer()
+        do the bulk: a moved boundary, not scattered folds) and it leaves less fold to undo
+        than the input (`_harmonic_folds_less`)."""
+        harmonic_first = self.mode == "eegt+local" and self._harmonic_folds_less()
         current = self._whole_from(harmonic=harmonic_first)
         if self.tangled(self.best) and self._restart_may_help():
             current = self._whole_from(harmonic=not harmonic_first)
@@ -533,10 +533,15 @@ class _Run:
                                                 tick=self._harmonic_tick)
         return self._harmonic
 
-    def _harmonic_has_fewer(self) -> bool:
-        """The harmonic map leaves fewer movable inverted faces than the input has."""
-        left = sum(int(bad.sum()) for bad in self._inverted(self._harmonic_map()))
-        return left < self.before.n_inverted - self.n_frozen
+    def _harmonic_folds_less(self) -> bool:
+        """The harmonic map leaves less fold to undo than the input: a smaller folded area
+        (`quality.folded_area`) over the faces that are not frozen."""
+        return self._folded(self._harmonic_map()) < self._folded(self.p)
+
+    def _folded(self, pts: np.ndarray) -> float:
+        """The folded area of the faces at `pts` that are not frozen."""
+        area = folded_area(pts, self.fs)
+        return add_reduce(area[~self.frozen])
 
     def _harmonic_tick(self) -> None:
         """Progress during the harmonic start's solve (the best iterate's numbers); a stop

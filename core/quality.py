@@ -18,6 +18,7 @@ from .targets import prepare_targets
 
 __all__ = [
     "Stats",
+    "folded_area",
     "mesh_stats",
     "quality",
     "stats_of",
@@ -78,3 +79,22 @@ def mesh_stats(points, faces, targets=None) -> Stats:
     """n_inverted, q_min, q_avg of a mesh (quality against `targets`, as in `quality`)."""
     q = quality(points, faces, targets=targets)
     return stats_of([q])
+
+
+def folded_area(points: np.ndarray, faces) -> np.ndarray:
+    """(F,) how far each face is folded over: half the sum of its corners' negative
+    determinants (a corner's det: the cross product of its two edges, > 0 when the face turns
+    counterclockwise there); 0 for a face with no inverted corner, three times its area for
+    an inverted triangle. A measure of how much fold a start leaves to undo, which
+    a count of inverted faces is not: a sliver barely turned counts as much as a face turned
+    over (docs/global_untangle.md, "Which start first")."""
+    p = check_points(points)
+    fs = as_faceset(faces, p.shape[0])
+    out = np.zeros(fs.n_faces)
+    for g in fs.groups:
+        X, Y = p[g.nodes, 0], p[g.nodes, 1]
+        ax, ay = np.roll(X, -1, axis=0) - X, np.roll(Y, -1, axis=0) - Y  # to the next corner
+        bx, by = np.roll(X, 1, axis=0) - X, np.roll(Y, 1, axis=0) - Y  # to the one before
+        det = ax * by - ay * bx
+        out[g.ids] = 0.5 * np.maximum(-det, 0.0).sum(axis=0)
+    return out

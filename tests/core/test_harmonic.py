@@ -10,6 +10,7 @@ from meshdata import spun_hole
 from core import EEGTParams, pipeline, untangle_and_smooth
 from core.faces import as_faceset
 from core.harmonic import harmonic_positions
+from core.quality import folded_area
 from core.topology import pinched_faces
 
 
@@ -196,7 +197,7 @@ def whole_mesh_starts(monkeypatch) -> list[bool]:
 
 def test_eegt_local_hands_a_fold_eegt_cannot_do_to_the_harmonic_start_first(monkeypatch):
     """'eegt+local' whose EEGT leaves the bulk (a moved boundary, not scattered folds) starts
-    the whole-mesh stage from the harmonic map when that has fewer inverted faces than the
+    the whole-mesh stage from the harmonic map when that leaves less fold to undo than the
     input, and untangles in far fewer iterations than the stage from the input."""
     pts, faces = scrambled_grid()
     starts = whole_mesh_starts(monkeypatch)
@@ -205,7 +206,7 @@ def test_eegt_local_hands_a_fold_eegt_cannot_do_to_the_harmonic_start_first(monk
     assert first.status == "untangled" and first.before.n_inverted == 224
     assert first.after.q_min > 0.85
     starts.clear()
-    monkeypatch.setattr(pipeline._Run, "_harmonic_has_fewer", lambda self: False)
+    monkeypatch.setattr(pipeline._Run, "_harmonic_folds_less", lambda self: False)
     from_input = untangle_and_smooth(pts, faces, params=EEGTParams(untangle="eegt+local"))
     assert starts == [False] and from_input.status == "untangled"
     assert 2 * first.global_iterations < from_input.global_iterations
@@ -233,10 +234,11 @@ def test_harmonic_first_falls_back_to_the_input_when_it_stays_tangled(monkeypatc
     assert starts == [True, False] and res.status == "untangled"
 
 
-def test_input_goes_first_unless_eegt_local_and_the_harmonic_map_has_fewer(monkeypatch):
+def test_input_goes_first_unless_eegt_local_and_the_harmonic_map_folds_less(monkeypatch):
     """'global' never makes the harmonic map before its stage from the input has failed;
-    'eegt+local' keeps the input first when the harmonic map has no fewer inverted faces (a
-    spun hole: 48 inverted, 240 in the harmonic map), and never makes it when EEGT untangles."""
+    'eegt+local' never makes it when EEGT untangles, and keeps the input first when the
+    harmonic map leaves more folded area (here a harmonic map made to fold the grid: its
+    free nodes shuffled among themselves)."""
     starts = whole_mesh_starts(monkeypatch)
     pts, faces = scrambled_grid()
 
@@ -255,7 +257,38 @@ def test_input_goes_first_unless_eegt_local_and_the_harmonic_map_has_fewer(monke
     res = untangle_and_smooth(light, faces, params=EEGTParams(untangle="eegt+local"))
     assert res.before.n_inverted > 0 and res.status == "untangled" and starts == []
 
-    monkeypatch.setattr(pipeline, "harmonic_positions", real_harmonic)
+    def folding(points, fs, free, **kw):
+        out = real_harmonic(points, fs, free, **kw)
+        ids = np.flatnonzero(free)
+        out[ids] = out[np.random.default_rng(1).permutation(ids)]
+        return out
+
+    monkeypatch.setattr(pipeline, "harmonic_positions", folding)
+    shuffled = folding(pts, as_faceset(faces, len(pts)), (pts > 0.0).all(1) & (pts < 1.0).all(1))
+    assert folded_area(shuffled, faces).sum() > folded_area(pts, faces).sum()
+    res = untangle_and_smooth(pts, faces, params=EEGTParams(untangle="eegt+local"))
+    assert starts == [False] and res.status == "untangled"
+
+
+def test_harmonic_map_with_more_inverted_faces_but_less_fold_goes_first(monkeypatch):
+    """A hole spun three quarters of a turn folds its innermost ring over (48 faces, each
+    turned far); the harmonic map spreads the turn (240 faces inverted, each barely): less
+    fold to undo, so 'eegt+local' starts there, and untangles in under half the iterations
+    of the start from the input. (A count of inverted faces would pick the input: on graded
+    meshes, whose harmonic map inverts many slivers by a hair, that cost 40x the time.)"""
     spun, groups = spun_hole(8, 48, 270, True)
-    res = untangle_and_smooth(spun, groups[3], params=EEGTParams(untangle="eegt+local"))
-    assert starts == [False] and res.status == "untangled" and res.before.n_inverted == 48
+    fs = as_faceset(groups[3], len(spun))
+    free = np.hypot(*spun.T) > 1.0 + 1e-9
+    free &= np.hypot(*spun.T) < 2.0 - 1e-9
+    harmonic = harmonic_positions(spun, fs, free)
+    in_input, in_harmonic = folded_area(spun, fs), folded_area(harmonic, fs)
+    assert np.count_nonzero(in_input) == 48 and np.count_nonzero(in_harmonic) == 240
+    assert in_harmonic.sum() < 0.8 * in_input.sum()
+    starts = whole_mesh_starts(monkeypatch)
+    first = untangle_and_smooth(spun, groups[3], params=EEGTParams(untangle="eegt+local"))
+    assert starts == [True] and first.status == "untangled" and first.before.n_inverted == 48
+    starts.clear()
+    monkeypatch.setattr(pipeline._Run, "_harmonic_folds_less", lambda self: False)
+    from_input = untangle_and_smooth(spun, groups[3], params=EEGTParams(untangle="eegt+local"))
+    assert starts == [False] and from_input.status == "untangled"
+    assert 2 * first.global_iterations < from_input.global_iterations

@@ -9,6 +9,7 @@ import pytest
 from core import mesh_stats, quality, summaries
 from core.faces import as_faceset
 from core.mean_ratio import group_quality
+from core.quality import folded_area
 
 
 def tri_closed_form(p: np.ndarray) -> float:
@@ -198,3 +199,19 @@ def test_mean_ratio_in_pieces_is_the_whole_group_bit_for_bit(monkeypatch, n):
     for (qa, sa), (qb, sb) in zip(whole, pieces, strict=True):
         assert np.array_equal(qa, qb) and np.array_equal(sa, sb)
     assert 0.0 < whole[0][0].max() <= 1.0 and (whole[0][0] == 0.0).any()
+
+
+def test_folded_area_is_three_areas_of_an_inverted_triangle_and_zero_for_valid_faces():
+    """A clockwise triangle of area 2 has folded area 6 (each corner's det is -4); a
+    counterclockwise one and a convex quad have none; a bowtie quad (signed area 0) is
+    folded at its two inverted corners; a dart (one reflex corner, det -1) by half of it."""
+    pts = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0],  # 0-3
+                    [0.5, 0.5]])  # 4: inside the square
+    faces = [[0, 2, 1], [0, 1, 2], [0, 1, 3, 2], [0, 1, 2, 3], [0, 1, 3, 4]]
+    got = folded_area(pts, faces)
+    # bowtie 0-1-2-3: corners 1 and 2 turn clockwise, det -4 each; reflex corner 4 of
+    # 0-1-3-4: edges on to 0 (-0.5, -0.5) and back to 3 (1.5, 1.5): det 0, not folded
+    assert got.tolist() == [6.0, 0.0, 0.0, 4.0, 0.0]
+    dart = np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 0.5], [0.0, 2.0]])
+    # reflex corner 2: edges on to 3 (-1, 1.5) and back to 1 (1, -0.5): det 0.5 - 1.5 = -1
+    assert folded_area(dart, [[0, 1, 2, 3]]).tolist() == [0.5]
