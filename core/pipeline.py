@@ -604,11 +604,7 @@ class _Run:
             (sub, nodes, sfree, sub_f), _ = near.submesh(bad, rings)
             if not sfree.any() or sum(f.shape[0] for f in sub.values()) > LOCAL_SHARE * bad.size:
                 break
-            base = self.n_untangle + self.n_global
-
-            def relay(iterations: int, _max_iter: int, n_inv: int, _current,
-                      base: int = base) -> None:  # the sub-mesh's: the best iterate's numbers
-                self.report(base + iterations, "global", Stats(n_inv, *self._best_q()))
+            relay = self._local_relay(start, nodes, sfree)
 
             polish = self.params.polish_iterations  # the sub-mesh leaves the stage well shaped
             budget = min(self.params.max_untangle_iterations, LOCAL_MAX_ITER)
@@ -629,6 +625,24 @@ class _Run:
                 break
         return current
 
+    def _local_relay(self, start: np.ndarray, nodes: np.ndarray, sfree: np.ndarray):
+        """The progress relay of a sub-mesh solve: the whole mesh's numbers with the
+        sub-mesh's free nodes at the solve's current iterate (measured now and then)."""
+        base = self.n_untangle + self.n_global
+        live: Sampled[Stats] = Sampled()
+        moved = nodes[sfree]
+
+        def measure(current: Callable[[], np.ndarray]) -> Stats:
+            pts = start.copy()
+            pts[moved] = current()[sfree]
+            return mesh_stats(pts, self.fs, self.targets)
+
+        def relay(iterations: int, _max_iter: int, _n_inv: int,
+                  current: Callable[[], np.ndarray]) -> None:
+            self.report(base + iterations, "global", live.update(partial(measure, current)))
+
+        return relay
+
     def _inverted(self, pts: np.ndarray) -> list[np.ndarray]:
         """Per face group: its inverted faces at `pts` that are not frozen."""
         return [(group_quality(pts[g.nodes, 0], pts[g.nodes, 1]) == 0.0) & ~self.frozen[g.ids]
@@ -639,9 +653,6 @@ class _Run:
         return np.concatenate([
             bad[~(self.frozen[g.ids] & ~self.free[g.nodes].any(axis=0))]  # inert faces out
             for g, bad in zip(self.fs.groups, self._inverted(pts), strict=True)])
-
-    def _best_q(self) -> tuple[float, float]:
-        return self.best.q_min, self.best.q_avg
 
     def lift_stage(self) -> Stats:
         """'eegt+local' on a valid mesh: the lift's whole-mesh run maximises the mean quality

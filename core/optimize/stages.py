@@ -390,8 +390,9 @@ def lift_min_quality(
     nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
     q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
     status ("lifted", "unchanged", "cancelled").
-    progress(iterations, rounds_done, q_min, q_avg) after each run and every few tenths of a
-    second inside one, with the kept iterate's qualities; a falsy answer other than None
+    progress(iterations, round, q_min, q_avg) after each run (the kept iterate's qualities)
+    and every few tenths of a second inside one (the whole mesh's, with the run's current
+    point, measured now and then: `Sampled`); a falsy answer other than None
     cancels (`stops`) and the input is returned. options.solver runs the L-BFGS solves;
     factors: per-face target shapes (the qualities are then against them); slide: the free
     nodes that slide along their boundary curves (the host solver then runs); neighbourhood:
@@ -472,11 +473,11 @@ class _Lift:
         en, st, progress = self.en, self.st, self.progress
         for r in range(self.opt.lift_rounds + 1):
             en.qc = self._floor(r)
-            tick = self._tick(r)
             if r == 0:  # the whole mesh: maximise q_avg at the input's floor
+                tick = self._tick(r, lambda v: _numbers(en.element_quality(*st.unpack(v))))
                 vt, its, qt = _runs(self.run_lbfgs, en, st, self.v, self.opt, tick, self._show)
             else:  # only near the elements under the new floor: the rest is at its optimum
-                found = self._local_round(tick)
+                found = self._local_round(r)
                 if found is None:
                     break
                 vt, its, qt = found
@@ -506,18 +507,17 @@ class _Lift:
         m, a = self.cur_m, self.cur_a
         return min(m * self.opt.lift_grow, m + LIFT_GAP * (a - m))
 
-    def _tick(self, r: int) -> Tick | None:
-        """Round r's progress tick: the whole-mesh run's current iterate's qualities (measured
-        now and then: `Sampled`), a local round's kept iterate's."""
+    def _tick(self, r: int, numbers: Callable[[np.ndarray], tuple[float, float]]
+              ) -> Tick | None:
+        """Round r's progress tick: the current iterate's (q_min, q_avg) of the whole mesh,
+        `numbers` of the solve's point, measured now and then (`Sampled`)."""
         if self.progress is None:
             return None
         progress, done = self.progress, self.total
         self.live.set((self.cur_m, self.cur_a))
 
         def tick(it: int, point: Callable[[], np.ndarray]) -> bool:
-            if r == 0:
-                self.live.update(lambda: _numbers(self.en.element_quality(
-                    *self.st.unpack(point()))))
+            self.live.update(lambda: numbers(point()))
             self.cancel = self.cancel or stops(progress(done + it, r, *self.live.value))
             return not self.cancel
 
@@ -527,32 +527,39 @@ class _Lift:
         """The whole-mesh run's latest end point: its numbers go to the progress ticks."""
         self.live.set(_numbers(q))
 
-    def _local_round(self, tick) -> tuple[np.ndarray, int, np.ndarray] | None:
-        """One L-BFGS run over the free nodes near the elements under the floor: (point,
+    def _local_round(self, r: int) -> tuple[np.ndarray, int, np.ndarray] | None:
+        """Round r's L-BFGS run over the free nodes near the elements under the floor: (point,
         iterations, element qualities), or None when no such node is free."""
         en, st, mesh = self.en, self.st, self.mesh
-        x, y = st.unpack(self.v)
         if self.near is None:
             self.near = Neighbourhood(mesh.groups, mesh.free, mesh.factors)
         (sub, nodes, sfree, sub_f), elems = self.near.submesh(self.q < LIFT_ACTIVE * en.qc,
                                                                 self.opt.lift_rings)
         if not sfree.any():
             return None
+        x, y = st.unpack(self.v)
         sp = np.stack([x[nodes], y[nodes]], axis=1)
         sen = LiftEnergy(sp, sub, sfree, sub_f)
         sen.qc = en.qc
         sst = make_state(sp, sfree, None if mesh.slide is None else
                          mesh.slide.sub(nodes, np.column_stack([x, y])))
+
+        def merged(sv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """The whole mesh's point and element qualities with the sub-mesh at sv."""
+            sx, sy = sst.unpack(sv)
+            xt, yt = x.copy(), y.copy()
+            xt[nodes], yt[nodes] = sx, sy
+            qt = self.q.copy()  # only the sub-mesh's elements change
+            qt[elems] = en.element_quality_of(elems, xt, yt)
+            return st.pack(xt, yt), qt
+
         sv, its = self.run_lbfgs(
             sst.view(sen), sst, sst.pack(sst.x, sst.y), EPS_MIN, max_it=LIFT_ITER,
-            guard=True, rel_tol=self.opt.lift_rel_tol, tick=tick,
+            guard=True, rel_tol=self.opt.lift_rel_tol,
+            tick=self._tick(r, lambda v: _numbers(merged(v)[1])),
         )
-        sx, sy = sst.unpack(sv)
-        xt, yt = x.copy(), y.copy()
-        xt[nodes], yt[nodes] = sx, sy
-        qt = self.q.copy()  # only the sub-mesh's elements changed
-        qt[elems] = en.element_quality_of(elems, xt, yt)
-        return st.pack(xt, yt), its, qt
+        vt, qt = merged(sv)
+        return vt, its, qt
 
     def _keeps(self, qm: float, qa: float) -> bool:
         """Whether a round's (q_min, q_avg) is kept: q_min rises, q_avg stays above its

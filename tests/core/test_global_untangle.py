@@ -462,3 +462,69 @@ def test_pipeline_progress_in_the_global_stage_shows_the_current_iterate(monkeyp
     valid = [s.q_avg for s in inside if s.n_inverted == 0]
     assert len(set(valid)) >= 5 and max(valid) < res.before.q_avg - 0.3
     assert abs(valid[-1] - res.after.q_avg) < 0.02
+
+
+def test_pipeline_progress_in_the_local_untangle_shows_the_current_iterate(monkeypatch) -> None:
+    """Regression: the local untangle's sub-mesh solve reported the best iterate's numbers
+    (EEGT's q_min and q_avg, its 4 inverted faces) until it ended. Now each report is the
+    whole mesh with the sub-mesh at the solve's current iterate: the count reaches 0 inside
+    the solve and q_avg moves from report to report as the sub-mesh is polished."""
+    import dataclasses
+
+    from core import EEGTParams, pipeline, untangle_and_smooth
+
+    measure_every_tick(monkeypatch)
+    real_eegt, real_local = pipeline._Run.untangle_eegt, pipeline._Run.untangle_local
+    rows: list = []
+    span: list[int] = []
+
+    def one_eegt_step(self):  # leaves 4 of the 94 inverted faces to the local stage
+        full = self.params
+        self.params = dataclasses.replace(full, max_untangle_iterations=1)
+        try:
+            return real_eegt(self)
+        finally:
+            self.params = full
+
+    def local(self):
+        span.append(len(rows))
+        try:
+            return real_local(self)
+        finally:
+            span.append(len(rows))
+
+    monkeypatch.setattr(pipeline._Run, "untangle_eegt", one_eegt_step)
+    monkeypatch.setattr(pipeline._Run, "untangle_local", local)
+    pts, groups, free = jittered_lattice(30, 0.6, 1)
+    res = untangle_and_smooth(pts, groups[3], fixed=~free, params=EEGTParams(untangle="eegt+local"),
+                              progress=lambda it, phase, s: rows.append((phase, s)))
+    eegt = [s for phase, s in rows[:span[0]] if phase == "untangle"]
+    inside = [s for _, s in rows[span[0]:span[1]]]
+    assert [s.n_inverted for s in eegt] == [94, 4] and res.status == "untangled"
+    assert len(inside) >= 5 and inside[-1].n_inverted == 0
+    assert len({s.q_avg for s in inside}) >= 4  # the best iterate's would be one value
+    assert all(s.q_avg != eegt[-1].q_avg for s in inside)
+
+
+def test_lift_progress_inside_a_local_round_shows_the_whole_mesh_at_its_current_point(
+        monkeypatch) -> None:
+    """Regression: a lift round's sub-mesh solve ticked with the kept iterate's numbers until
+    it ended. Now its ticks show the whole mesh's (q_min, q_avg) with the sub-mesh at the
+    solve's current point: q_min moves inside each round (below the kept iterate's at first:
+    the floor's energy is not q_min itself) and the round's end reports its result."""
+    import core.optimize.energy as energy
+
+    measure_every_tick(monkeypatch)
+    monkeypatch.setattr(energy, "TICK_EVERY", 1)  # a tick every iteration, small meshes too
+    pts, groups, free = jittered_lattice(60, 0.3, 1)
+    seen: list = []
+    options = GlobalOptions(lift_first_iter=300, lift_rounds=3, lift_rel_tol=1e-7,
+                            lift_chunk=10, lift_rings=3)
+    _, info = lift_min_quality(pts, groups, free, options,
+                               progress=lambda it, r, q_min, q_avg: seen.append((r, q_min)))
+    for r in (1, 2, 3):
+        inside = [m for rr, m in seen if rr == r]  # the round's ticks, then its end
+        start, end = info["trail"][r - 1][0], info["trail"][r][0]
+        assert inside[-1] == end > start  # the round's end: its result
+        ticks = inside[:-1]  # measured 10-13 distinct values in each round
+        assert len(set(ticks)) >= 4 and start not in ticks
