@@ -14,7 +14,7 @@ from .fpmath import add_reduce
 from .mean_ratio import scaled_group_quality
 from .measures import face_values
 from .points import check_points
-from .targets import prepare_targets
+from .targets import corner_vectors, prepare_targets
 
 __all__ = [
     "Stats",
@@ -92,9 +92,7 @@ def folded_area(points: np.ndarray, faces) -> np.ndarray:
     fs = as_faceset(faces, p.shape[0])
     out = np.zeros(fs.n_faces)
     for g in fs.groups:
-        X, Y = p[g.nodes, 0], p[g.nodes, 1]
-        ax, ay = np.roll(X, -1, axis=0) - X, np.roll(Y, -1, axis=0) - Y  # to the next corner
-        bx, by = np.roll(X, 1, axis=0) - X, np.roll(Y, 1, axis=0) - Y  # to the one before
+        ax, ay, bx, by = corner_vectors(p[g.nodes, 0], p[g.nodes, 1])
         det = ax * by - ay * bx
         out[g.ids] = 0.5 * np.maximum(-det, 0.0).sum(axis=0)
     return out

@@ -34,6 +34,7 @@ __all__ = [
     "GroupTargets",
     "Targets",
     "corner_factors",
+    "corner_vectors",
     "face_shapes_2d",
     "prepare_targets",
     "regular_polygon",
@@ -130,8 +131,10 @@ def _check_array(targets, n_corners: int) -> np.ndarray:
     return t
 
 
-def _corner_vectors(x: np.ndarray, y: np.ndarray):
-    """(w1x, w1y, w2x, w2y) of every corner: w1 = t_{k+1} - t_k, w2 = t_{k-1} - t_k."""
+def corner_vectors(x: np.ndarray, y: np.ndarray):
+    """(w1x, w1y, w2x, w2y) of every corner of (n, F) corner coordinates: w1 = p_{k+1} - p_k
+    (to the next corner), w2 = p_{k-1} - p_k (to the one before); det[w1, w2] > 0 where the
+    face turns counterclockwise."""
     return (np.roll(x, -1, axis=0) - x, np.roll(y, -1, axis=0) - y,
             np.roll(x, 1, axis=0) - x, np.roll(y, 1, axis=0) - y)
 
@@ -163,7 +166,7 @@ def _normalised(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
 
 def _group_targets(n: int, x: np.ndarray, y: np.ndarray) -> GroupTargets:
     x, y, ok = _normalised(x, y)
-    w1x, w1y, w2x, w2y = _corner_vectors(x, y)
+    w1x, w1y, w2x, w2y = corner_vectors(x, y)
     det = w1x * w2y - w1y * w2x
     l1sq = w1x * w1x + w1y * w1y
     l2sq = w2x * w2x + w2y * w2y
@@ -240,7 +243,7 @@ def corner_factors(
             gt = targets.groups[i]
             keep = ~gt.fallback
             x, y = gt.x[:, keep], gt.y[:, keep]
-            w1x, w1y, w2x, w2y = _corner_vectors(x, y)
+            w1x, w1y, w2x, w2y = corner_vectors(x, y)
             area = 0.5 * (x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y).sum(axis=0)
             sigma = np.sqrt(g.n / (4.0 * fpmath.tan_pi_over(g.n)) / area)
             l1 = np.sqrt(w1x * w1x + w1y * w1y)
