@@ -37,6 +37,9 @@ NO_PLATFORM_HINT = (
 
 _device_override: str | None = None
 runtimes: dict[str, Runtime] = {}  # one per device, made by `runtime()`
+# A kernel every usable device compiles (`_build_fault`), and what each device said.
+PROBE_SOURCE = "__kernel void probe(__global double *a) { a[get_global_id(0)] *= 2.0; }"
+_build_faults: dict[str, str | None] = {}
 # Runtimes, programs and solvers are made once per process; a warm-up thread
 # (backends.warm_up) may be making them while a run asks for them: the run waits.
 LOCK = threading.RLock()
@@ -105,14 +108,41 @@ def pick_device(cl):
                 f"OpenCL device {entry[2].name.strip()} has no float64 (cl_khr_fp64), "
                 "which the backend needs; using NumPy"
             )
-        return entry, None
+        fault = _build_fault(cl, entry)
+        return (None, _cannot_build(entry, fault)) if fault else (entry, None)
     good = [e for e in devs if _has_fp64(e[2])]
     if not good:
         names = ", ".join(d.name.strip() for _, _, d in devs)
         return None, f"no OpenCL device with float64 (cl_khr_fp64) among {names}; using NumPy"
     gpu, cpu = cl.device_type.GPU, cl.device_type.CPU
     good.sort(key=lambda e: (not e[2].type & gpu, not e[2].type & cpu))
-    return good[0], None
+    faults = [(e, _build_fault(cl, e)) for e in good]
+    usable = [e for e, fault in faults if fault is None]
+    return (usable[0], None) if usable else (None, _cannot_build(*faults[0]))
+
+
+def _build_fault(cl, entry) -> str | None:
+    """Why this device's compiler cannot build a small float64 kernel (None: it can), tried
+    once per process and device: a driver whose compiler does not know the CPU it runs on
+    lists a device that builds nothing."""
+    dev_id, plat, dev = entry
+    key = f"{dev_id} {dev.name} {plat.name}"
+    with LOCK:
+        if key not in _build_faults:
+            try:
+                cl.Program(cl.Context([dev]), PROBE_SOURCE).build()
+                _build_faults[key] = None
+            except Exception as exc:
+                _build_faults[key] = build_error(exc)
+    return _build_faults[key]
+
+
+def _cannot_build(entry, fault: str) -> str:
+    """The one-line reason for a device whose compiler fails (`_build_fault`)."""
+    dev = entry[2]
+    hint = ("; the driver's compiler does not know this CPU: a newer OpenCL driver is needed"
+            if "unknown target CPU" in fault else "")
+    return f"OpenCL device {dev.name.strip()} cannot build kernels ({fault}{hint}); using NumPy"
 
 
 def unavailable_reason() -> str | None:

@@ -53,8 +53,9 @@ def cpu_device(device) -> str:
 
 @pytest.fixture(autouse=True)
 def _fresh_warnings(monkeypatch):
-    """Each test sees the 'said once' fallback messages afresh."""
+    """Each test sees the 'said once' fallback messages afresh (and probes devices anew)."""
     monkeypatch.setattr(backends, "_warned", set())
+    monkeypatch.setattr(ort, "_build_faults", {})
 
 
 def assert_close(a: np.ndarray, b: np.ndarray, scale: float, what: str) -> None:
@@ -605,8 +606,8 @@ def test_fallback_when_pyopencl_missing(monkeypatch, backend):
 
 
 class _Dev:
-    def __init__(self, name, kind, fp64=True):
-        self.name, self.type = name, kind
+    def __init__(self, name, kind, fp64=True, fault=None):
+        self.name, self.type, self.fault = name, kind, fault  # fault: its compiler's error
         self.extensions = "cl_khr_byte_addressable_store" + (" cl_khr_fp64" if fp64 else "")
         self.double_fp_config = 63 if fp64 else 0
 
@@ -619,8 +620,9 @@ class _Plat:
         return self._devs
 
 
-def fake_cl(platforms=None, error: Exception | None = None):
-    """A stand-in for pyopencl: just what device discovery touches."""
+def fake_cl(platforms=None, error: Exception | None = None, builds: list | None = None):
+    """A stand-in for pyopencl: just what device discovery touches (a device's probe build
+    fails with its `fault`; each build is appended to `builds`)."""
     kinds = types.SimpleNamespace(CPU=2, GPU=4, to_string=lambda t: {2: "CPU", 4: "GPU"}[t])
 
     def get_platforms():
@@ -628,7 +630,16 @@ def fake_cl(platforms=None, error: Exception | None = None):
             raise error
         return platforms or []
 
-    return types.SimpleNamespace(get_platforms=get_platforms, device_type=kinds, Error=Exception)
+    def program(ctx, source):
+        def build(options=None):
+            (builds if builds is not None else []).append(ctx[0].name)
+            if ctx[0].fault:
+                raise RuntimeError(f"clBuildProgram failed: BUILD_PROGRAM_FAILURE\n{ctx[0].fault}")
+
+        return types.SimpleNamespace(build=build)
+
+    return types.SimpleNamespace(get_platforms=get_platforms, device_type=kinds, Error=Exception,
+                                 Context=lambda devs: list(devs), Program=program)
 
 
 def test_fallback_when_no_platform(monkeypatch):
@@ -680,6 +691,44 @@ def test_auto_prefers_gpu_then_cpu_and_user_choice(monkeypatch):
         assert ort.pick_device(cl)[0][2] is cpu
     finally:
         eo.select_device(None)
+
+
+def test_device_whose_compiler_fails_is_passed_over_and_named(monkeypatch):
+    """pocl built with an LLVM older than the CPU lists a device that compiles nothing
+    ("unknown target CPU 'generic'"): auto takes the next device, each probed once a process;
+    with no other device, or that device asked for by name, the reason says why."""
+    bad = "error: unknown target CPU 'generic'"
+    cpu, gpu = _Dev("New CPU", 2, fault=bad), _Dev("Some GPU", 4)
+    builds: list[str] = []
+    cl = fake_cl([_Plat("P0", [cpu, gpu])], builds=builds)
+    monkeypatch.delenv(eo.ENV_DEVICE, raising=False)
+    assert ort.pick_device(cl)[0][2] is gpu
+    gpu.type = 2  # now both CPUs: the first, which fails, is tried and passed over
+    monkeypatch.setattr(ort, "_build_faults", {})
+    builds.clear()
+    assert ort.pick_device(cl)[0][2] is gpu and ort.pick_device(cl)[0][2] is gpu
+    assert builds == ["New CPU", "Some GPU"]  # probed once each, not again
+    monkeypatch.setenv(eo.ENV_DEVICE, "new cpu")
+    entry, why = ort.pick_device(cl)
+    assert entry is None and why == (
+        "OpenCL device New CPU cannot build kernels (error: unknown target CPU 'generic'; the "
+        "driver's compiler does not know this CPU: a newer OpenCL driver is needed); using NumPy")
+    monkeypatch.delenv(eo.ENV_DEVICE)
+    only = fake_cl([_Plat("P0", [_Dev("Odd GPU", 4, fault="error: no backend")])])
+    entry, why = ort.pick_device(only)
+    assert entry is None and why == "OpenCL device Odd GPU cannot build kernels (error: no " \
+        "backend); using NumPy"
+
+
+def test_fallback_when_no_device_can_build(monkeypatch):
+    p, f, ref = numpy_result("mixed_quad_tri")
+    plats = [_Plat("P0", [_Dev("New CPU", 2, fault="error: unknown target CPU 'generic'")])]
+    monkeypatch.setattr(ort, "import_cl", lambda: fake_cl(plats))
+    cls, why = eo.available()
+    assert cls is None and "cannot build kernels" in why and "New CPU" in why
+    assert_fallback_once(p, f, ref, "opencl", "cannot build kernels")
+    monkeypatch.setattr(backends, "_warned", set())
+    assert_fallback_once(p, f, ref, "auto", "cannot build kernels")
 
 
 def test_fallback_when_kernel_build_fails(device, monkeypatch):
