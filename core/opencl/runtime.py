@@ -116,21 +116,24 @@ def pick_device(cl):
         return None, f"no OpenCL device with float64 (cl_khr_fp64) among {names}; using NumPy"
     gpu, cpu = cl.device_type.GPU, cl.device_type.CPU
     good.sort(key=lambda e: (not e[2].type & gpu, not e[2].type & cpu))
-    faults = [(e, _build_fault(cl, e)) for e in good]
-    usable = [e for e, fault in faults if fault is None]
-    return (usable[0], None) if usable else (None, _cannot_build(*faults[0]))
+    first = None  # the first device's fault, when none builds
+    for entry in good:  # in that order, up to the first whose compiler works
+        fault = _build_fault(cl, entry)
+        if fault is None:
+            return entry, None
+        first = first or (entry, fault)
+    return None, _cannot_build(*first)
 
 
 def _build_fault(cl, entry) -> str | None:
     """Why this device's compiler cannot build a small float64 kernel (None: it can), tried
-    once per process and device: a driver whose compiler does not know the CPU it runs on
-    lists a device that builds nothing."""
-    dev_id, plat, dev = entry
-    key = f"{dev_id} {dev.name} {plat.name}"
+    once per process and device, in the device's runtime (`_runtime_of`): a driver whose
+    compiler does not know the CPU it runs on lists a device that builds nothing."""
+    key = _key(entry)
     with LOCK:
         if key not in _build_faults:
             try:
-                cl.Program(cl.Context([dev]), PROBE_SOURCE).build()
+                cl.Program(_runtime_of(cl, entry).ctx, PROBE_SOURCE).build()
                 _build_faults[key] = None
             except Exception as exc:
                 _build_faults[key] = build_error(exc)
@@ -204,12 +207,22 @@ def runtime() -> Runtime:
         raise RuntimeError(f"no OpenCL platform ({exc})") from exc
     if entry is None:
         raise RuntimeError(why)
+    return _runtime_of(cl, entry)
+
+
+def _key(entry) -> str:
+    """A device's key in `runtimes` and `_build_faults`."""
     dev_id, plat, dev = entry
-    key = f"{dev_id} {dev.name} {plat.name}"
+    return f"{dev_id} {dev.name} {plat.name}"
+
+
+def _runtime_of(cl, entry) -> Runtime:
+    """The device's runtime, made on first use."""
+    dev_id, _, dev = entry
     with LOCK:
-        rt = runtimes.get(key)
+        rt = runtimes.get(_key(entry))
         if rt is None:
             ctx = cl.Context([dev])
             rt = Runtime(cl, dev, f"{dev.name.strip()} [{dev_id}]", ctx, cl.CommandQueue(ctx))
-            runtimes[key] = rt
+            runtimes[_key(entry)] = rt
     return rt

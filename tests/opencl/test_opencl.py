@@ -56,6 +56,7 @@ def _fresh_warnings(monkeypatch):
     """Each test sees the 'said once' fallback messages afresh (and probes devices anew)."""
     monkeypatch.setattr(backends, "_warned", set())
     monkeypatch.setattr(ort, "_build_faults", {})
+    monkeypatch.setattr(ort, "runtimes", dict(ort.runtimes))  # fakes' runtimes stay here
 
 
 def assert_close(a: np.ndarray, b: np.ndarray, scale: float, what: str) -> None:
@@ -639,7 +640,8 @@ def fake_cl(platforms=None, error: Exception | None = None, builds: list | None 
         return types.SimpleNamespace(build=build)
 
     return types.SimpleNamespace(get_platforms=get_platforms, device_type=kinds, Error=Exception,
-                                 Context=lambda devs: list(devs), Program=program)
+                                 Context=lambda devs: list(devs), CommandQueue=lambda ctx: None,
+                                 Program=program)
 
 
 def test_fallback_when_no_platform(monkeypatch):
