@@ -31,6 +31,9 @@ INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses
 # in more iterations, and eps shrinking before it has moved stalls it (docs: "Long eps rounds")
 BUDGET_NODES = 10_000  # an untangling budget holds up to this many free nodes; a wider mesh
 # gets it scaled by sqrt(free nodes / BUDGET_NODES), as its rounds are (`untangle_budget`)
+EXTEND_SHRINK = 0.5  # a spent untangling budget gets one more round while the worst corner
+# det closes in on 0: |min det| at most this x its value two rounds before (`_extend`)
+EXTEND_SHARE = 0.5  # ... up to this share of max_iter in all
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -213,13 +216,15 @@ class _Continuation:
         self.polish_used = 0
         self.status = ""
         self.eps_hist: list[float] = []
+        self.dmins = [dmin]  # the min det at the start and after each untangling round
+        self.granted = 0  # iterations `_extend` added to max_iter
         self.rounds = 0
         self.cancel = False
 
     def solve(self, t_start: float) -> None:
         """Rounds until the budget, a stop rule or a cancel ends them."""
         opt, en = self.opt, self.en
-        while self.total < opt.max_iter + self._extra():
+        while self.total < opt.max_iter + self.granted + self._extra():
             self.rounds += 1
             self.eps_hist.append(self.eps)
             guard = self.valid  # valid: polish the quality, never invert a corner again
@@ -237,12 +242,27 @@ class _Continuation:
             decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
             if self._done(guard, decrease, its, t_start):
                 break
+            if not guard:
+                self._extend(dmin)
             self.eps = self._next_eps(decrease, dmin)
+
+    def _extend(self, dmin: float) -> None:
+        """One more round when the budget is spent, the mesh still tangled and its worst
+        corner det closing in on 0 (|min det| at most EXTEND_SHRINK x its value two rounds
+        before), up to EXTEND_SHARE x max_iter in all: a fold about to give way finishes
+        instead of starting over (docs/global_untangle.md, "Budget")."""
+        self.dmins.append(dmin)
+        spent = self.total >= self.opt.max_iter + self.granted
+        if (not spent or self.valid or len(self.dmins) < 3
+                or -dmin > EXTEND_SHRINK * -self.dmins[-3]):
+            return
+        more = min(self.inner, int(EXTEND_SHARE * self.opt.max_iter) - self.granted)
+        self.granted += max(more, 0)
 
     def _cap(self, guard: bool) -> int:
         """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one
         long run, no memory restarts (the rest of the polish budget)."""
-        left = self.opt.max_iter - self.total
+        left = self.opt.max_iter + self.granted - self.total
         if guard:
             return min(left + self._extra(), self._polish_budget() - self.polish_used)
         return min(left, self.inner)

@@ -6,9 +6,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from meshdata import spun_hole
 
 from core import EEGTParams, pipeline, untangle_and_smooth
-from core.optimize import untangle_budget
+from core.optimize import untangle_budget, untangle_global
+from core.optimize.energy import FoldoverEnergy
+from core.optimize.options import GlobalOptions
 from core.optimize.stages import BUDGET_NODES
 
 
@@ -44,3 +47,67 @@ def test_pipeline_hands_the_whole_mesh_stage_the_scaled_budget(monkeypatch):
     prm = EEGTParams(untangle="global", max_untangle_iterations=100, polish_iterations=7)
     res = untangle_and_smooth(pts, faces, params=prm)
     assert res.before.n_inverted > 0 and seen[0] == (109 * 109, 109 + 7, 7)
+
+
+def blended_turn(degrees: float) -> tuple[np.ndarray, dict[int, np.ndarray], np.ndarray]:
+    """An annulus (8 x 48 triangles) whose hole is turned by `degrees`, every node following
+    in proportion to its nearness to the hole (a moved boundary's blend): the middle rings
+    fold. Returns points, groups and the free (interior) nodes."""
+    pts, groups = spun_hole(8, 48, 0.0, True)
+    r = np.hypot(*pts.T)
+    t = np.radians(degrees)
+    turned = pts @ np.array([[np.cos(t), np.sin(t)], [-np.sin(t), np.cos(t)]])
+    free = (r > 1.0 + 1e-9) & (r < 2.0 - 1e-9)
+    return pts + (2.0 - r)[:, None] * (turned - pts), groups, free
+
+
+def scripted_rounds(monkeypatch, tangled, valid, shares):
+    """Each untangling round's solve returns the point `share` of the way from `valid` to
+    `tangled` (the next share in turn), having spent its whole cap; a polish round stops at
+    once. Returns the shares used."""
+    used: list[float] = []
+
+    def solve(_view, st, v, _eps, max_it, guard, tick=None):
+        if guard:
+            return v, 0
+        s = shares[len(used)]
+        used.append(s)
+        p = valid + s * (tangled - valid)
+        return st.pack(p[:, 0], p[:, 1]), max_it
+
+    monkeypatch.setattr(GlobalOptions, "run", lambda self, sliding=False: solve)
+    return used
+
+
+def test_spent_budget_gets_more_rounds_while_the_worst_corner_closes_in(monkeypatch):
+    """Three rounds of 1000 iterations spend a budget of 3000 with the mesh still folded: when
+    the worst corner det came well over twice closer to 0 in the last two rounds, the run
+    goes on (up to half the budget more) and untangles; when it crept, the run stops at the
+    budget, tangled."""
+    tangled, groups, free = blended_turn(150.0)
+    valid, info = untangle_global(tangled, groups, free, GlobalOptions(max_iter=20_000))
+    assert info["status"] == "untangled" and info["n_inverted_in"] > 100
+    en = FoldoverEnergy(tangled, groups, free)
+
+    def dmin(s: float) -> float:
+        p = valid + s * (tangled - valid)
+        return float(np.min(en.dets(p[:, 0], p[:, 1])))
+
+    lo, hi = 0.0, 1.0  # the share where the mesh folds: dmin(lo) > 0 >= dmin(hi)
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if dmin(mid) > 0 else (lo, mid)
+    gap = 1.0 - hi
+    options = GlobalOptions(max_iter=3000, polish_iter=0)
+
+    closing = [hi + gap * f for f in (0.4, 0.16, 0.064)] + [0.5 * lo, 0.0]
+    used = scripted_rounds(monkeypatch, tangled, valid, closing)
+    assert -dmin(closing[2]) < 0.5 * -dmin(closing[0])
+    _, info = untangle_global(tangled, groups, free, options)
+    assert info["status"] == "untangled" and info["iterations"] == 4000 and len(used) == 4
+
+    creeping = [hi + gap * f for f in (0.5, 0.45, 0.4, 0.35, 0.3)]
+    used = scripted_rounds(monkeypatch, tangled, valid, creeping)
+    assert -dmin(creeping[2]) > 0.5 * -dmin(creeping[0])
+    _, info = untangle_global(tangled, groups, free, options)
+    assert info["status"] == "failed" and info["iterations"] == 3000 and len(used) == 3
