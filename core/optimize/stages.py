@@ -138,7 +138,8 @@ def untangle_global(
     slide: the free nodes that slide along their boundary curves (core.optimize.slide; the
     host solver then runs). progress(iterations, max_iter, n_inverted, current) is called
     after each round and every `tick_every` L-BFGS iterations inside it (a few tenths of a
-    second of work on any mesh size), n_inverted the best iterate's and current() the current
+    second of work on any mesh size), max_iter the budget so far (more rounds for a fold
+    about to give way raise it), n_inverted the best iterate's and current() the current
     iterate's (N, 2) points (made when called: the caller measures them when it wants to);
     a falsy answer other than None cancels (`stops`).
 
@@ -236,7 +237,8 @@ class _Continuation:
             its = self._round(cap, guard)
             e_end, dmin, n_inv = self._take_iterate(its, guard)
             if self.cancel or (self.progress is not None and stops(self.progress(
-                    self.total, opt.max_iter, n_inv, partial(self._points, self.v)))):
+                    self.total, opt.max_iter + self.granted, n_inv,
+                    partial(self._points, self.v)))):
                 self.status = "cancelled"
                 break
             decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
@@ -286,7 +288,7 @@ class _Continuation:
         """The progress tick of a round (long runs report, and cancel, from inside)."""
         if self.progress is None:
             return None
-        progress, max_iter = self.progress, self.opt.max_iter
+        progress, max_iter = self.progress, self.opt.max_iter + self.granted
         done, n_now = self.total, self.best_inv
 
         def tick(it: int, point: Callable[[], np.ndarray]) -> bool:

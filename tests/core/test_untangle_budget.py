@@ -103,8 +103,11 @@ def test_spent_budget_gets_more_rounds_while_the_worst_corner_closes_in(monkeypa
     closing = [hi + gap * f for f in (0.4, 0.16, 0.064)] + [0.5 * lo, 0.0]
     used = scripted_rounds(monkeypatch, tangled, valid, closing)
     assert -dmin(closing[2]) < 0.5 * -dmin(closing[0])
-    _, info = untangle_global(tangled, groups, free, options)
+    told: list[tuple[int, int]] = []
+    _, info = untangle_global(tangled, groups, free, options,
+                              progress=lambda it, most, _n, _p: told.append((it, most)))
     assert info["status"] == "untangled" and info["iterations"] == 4000 and len(used) == 4
+    assert told == [(1000, 3000), (2000, 3000), (3000, 3000), (4000, 4000)]  # the budget grew
 
     creeping = [hi + gap * f for f in (0.5, 0.45, 0.4, 0.35, 0.3)]
     used = scripted_rounds(monkeypatch, tangled, valid, creeping)
