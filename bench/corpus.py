@@ -33,12 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
+from bench import libm
 from core import FaceSet, faces_from_csr, mesh_stats
 from core.topology import boundary_nodes
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "build" / "corpus"
-VERSION = 2  # part of every cache name: bump when a generator changes its output
+VERSION = 3  # part of every cache name: bump when a generator changes its output
 
 __all__ = ["CACHE", "Case", "CaseSpec", "default_specs", "load", "scale_specs", "specs"]
 
@@ -136,7 +137,8 @@ def naca0012(h: float, chord: float = 1.0) -> np.ndarray:
     beta = np.linspace(0.0, np.pi, k + 1)
     x = 0.5 * (1 - np.cos(beta))
     t = 0.12
-    y = 5 * t * (0.2969 * np.sqrt(x) - 0.1260 * x - 0.3516 * x**2 + 0.2843 * x**3 - 0.1036 * x**4)
+    y = 5 * t * (0.2969 * np.sqrt(x) - 0.1260 * x - 0.3516 * x**2 + 0.2843 * libm.power(x, 3)
+                 - 0.1036 * libm.power(x, 4))
     upper = np.column_stack([x, y])[::-1]  # trailing edge -> leading edge
     lower = np.column_stack([x, -y])[1:-1]  # leading edge -> trailing edge (no repeats)
     return np.concatenate([upper, lower]) * chord
@@ -354,7 +356,8 @@ def motion(pts: np.ndarray, fs: FaceSet, domain: str, angle: float, shift: tuple
     d_o = _min_dist(pts, pts[bnd & ~on_moving])
     with np.errstate(divide="ignore", invalid="ignore"):
         w = np.where(d_m == 0, 1.0, np.where(d_o == 0, 0.0,
-                     d_o ** -power / (d_m ** -power + d_o ** -power)))
+                     libm.power(d_o, -power) / (libm.power(d_m, -power)
+                                                 + libm.power(d_o, -power))))
     t = np.radians(angle)
     rot = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
     moved = (pts - c) @ rot.T + c + np.array(shift)

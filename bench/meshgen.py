@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from bench import libm
 from core.faces import FaceSet
 
 __all__ = ["jittered_square"]
@@ -144,7 +145,7 @@ def moved_body(
     43 of the default annulus's quads."""
     r = np.hypot(pts[:, 0], pts[:, 1])
     s = np.clip((r - 1.0) / (reach - 1.0), 0.0, 1.0)
-    w = (1.0 - s) ** 3 * (1.0 + 3.0 * s)  # 1 at the body, 0 (and flat) at `reach`
+    w = libm.power(1.0 - s, 3) * (1.0 + 3.0 * s)  # 1 at the body, 0 (and flat) at `reach`
     a = np.radians(turn_deg)
     c, si = np.cos(a), np.sin(a)
     moved = np.column_stack([c * pts[:, 0] - si * pts[:, 1] + shift[0],

@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from bench import corpus
+from bench import corpus, libm
 from bench.peer_invertible_maps import (
     ENV,
     PeerMissing,
@@ -19,6 +26,8 @@ from core.topology import boundary_nodes
 
 pytest.importorskip("triangle", reason="the bench dependency group (triangle) is not installed")
 pytest.importorskip("gmsh", reason="the bench dependency group (gmsh) is not installed")
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(autouse=True)
@@ -88,3 +97,54 @@ def test_peer_missing_says_which_variable(monkeypatch):
     monkeypatch.setenv(ENV, "/nonexistent/untangle2d")
     with pytest.raises(PeerMissing, match="not an executable"):
         peer_binary()
+
+
+MAKE_CASES = r"""
+import hashlib, json, sys
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+from bench import corpus
+out = {}
+for spec in (corpus.CaseSpec("motion", "annulus", "tri30", 3000, 3, {"angle": 180.0}),
+             corpus.CaseSpec("motion", "naca", "gmshgraded", 3000, 2, {"angle": -20.0, "dy": 0.1}),
+             corpus.CaseSpec("motion+jitter", "naca", "tri30", 3000, 1,
+                             {"angle": -10.0, "dy": 0.05, "share": 2})):
+    made = corpus._make(spec)
+    out[spec.name] = [hashlib.sha256(np.ascontiguousarray(made[k]).tobytes()).hexdigest()
+                      for k in ("points", "reference")]
+print(json.dumps(out))
+"""
+
+
+def _made_with(env_extra: dict[str, str]) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "NPY_DISABLE_CPU_FEATURES"}
+    env.update(env_extra)
+    done = subprocess.run([sys.executable, "-c", MAKE_CASES, str(ROOT)], env=env,
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow
+def test_moved_boundary_cases_are_the_same_bits_with_and_without_avx512():
+    """NumPy's power has its own AVX-512 code (last-bit differences from the C library's
+    pow): the motion's blend weights and the airfoil's outline go through bench.libm, so a
+    case is the same mesh on every machine, and so is a long run from it."""
+    from numpy.core import _multiarray_umath as mu
+
+    have = [f for f in mu.__cpu_dispatch__ if mu.__cpu_features__.get(f)]
+    if not have:
+        pytest.skip("this NumPy dispatches no SIMD extension on this CPU: nothing to restrict")
+    mine = _made_with({})
+    assert len(mine) == 3
+    for off in ([f for f in have if f.startswith("AVX512")], have):
+        if off:
+            assert _made_with({"NPY_DISABLE_CPU_FEATURES": " ".join(off)}) == mine, off
+
+
+def test_libm_power_is_the_c_librarys_pow_element_by_element():
+    x = np.array([0.0, 0.3, 1.7, 2.5e-3, 9.0])
+    assert np.array_equal(libm.power(x[1:], 3), [math.pow(v, 3) for v in x[1:]])
+    neg = libm.power(x, -2.0)
+    assert neg[0] == np.inf and np.array_equal(neg[1:], [math.pow(v, -2.0) for v in x[1:]])
+    assert libm.power(x.reshape(5, 1), 4).shape == (5, 1)
