@@ -46,7 +46,8 @@ class EEGTParams:
     max_untangle_iterations: int = field(
         default=20000, metadata={"help": "Untangling gives up after this many iterations "
                                  "(the optimizer: per attempt, more on a wide mesh, in "
-                                 "proportion to its width; a run still tangled is tried once "
+                                 "proportion to its width, up to half again while a fold "
+                                 "closes in; a run still tangled is tried once "
                                  "more from its other start, the input or the harmonic map)."}
     )
     max_smooth_iterations: int = field(
