@@ -22,9 +22,9 @@ def power(x, p: float) -> np.ndarray:
     """x ** p element by element through the C library's pow; 0 ** (p < 0) is inf, as
     NumPy gives it."""
     x = np.asarray(x, dtype=np.float64)
-    if p < 0:
-        out = np.full(x.shape, np.inf)
-        nz = x != 0.0
-        out[nz] = _pow(x[nz], float(p)).astype(np.float64)
-        return out
-    return _pow(x, float(p)).astype(np.float64).reshape(x.shape)
+    if p >= 0:
+        return np.asarray(_pow(x, float(p)), dtype=np.float64)
+    out = np.full(x.shape, np.inf)  # math.pow(0, p < 0) raises
+    nz = x != 0.0
+    out[nz] = _pow(x[nz], float(p))
+    return out

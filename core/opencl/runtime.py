@@ -219,10 +219,11 @@ def _key(entry) -> str:
 def _runtime_of(cl, entry) -> Runtime:
     """The device's runtime, made on first use."""
     dev_id, _, dev = entry
+    key = _key(entry)
     with LOCK:
-        rt = runtimes.get(_key(entry))
+        rt = runtimes.get(key)
         if rt is None:
             ctx = cl.Context([dev])
             rt = Runtime(cl, dev, f"{dev.name.strip()} [{dev_id}]", ctx, cl.CommandQueue(ctx))
-            runtimes[_key(entry)] = rt
+            runtimes[key] = rt
     return rt

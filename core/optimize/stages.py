@@ -225,7 +225,7 @@ class _Continuation:
     def solve(self, t_start: float) -> None:
         """Rounds until the budget, a stop rule or a cancel ends them."""
         opt, en = self.opt, self.en
-        while self.total < opt.max_iter + self.granted + self._extra():
+        while self.total < self.budget + self._extra():
             self.rounds += 1
             self.eps_hist.append(self.eps)
             guard = self.valid  # valid: polish the quality, never invert a corner again
@@ -237,8 +237,7 @@ class _Continuation:
             its = self._round(cap, guard)
             e_end, dmin, n_inv = self._take_iterate(its, guard)
             if self.cancel or (self.progress is not None and stops(self.progress(
-                    self.total, opt.max_iter + self.granted, n_inv,
-                    partial(self._points, self.v)))):
+                    self.total, self.budget, n_inv, partial(self._points, self.v)))):
                 self.status = "cancelled"
                 break
             decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
@@ -248,13 +247,18 @@ class _Continuation:
                 self._extend(dmin)
             self.eps = self._next_eps(decrease, dmin)
 
+    @property
+    def budget(self) -> int:
+        """max_iter and the iterations `_extend` granted."""
+        return self.opt.max_iter + self.granted
+
     def _extend(self, dmin: float) -> None:
         """One more round when the budget is spent, the mesh still tangled and its worst
         corner det closing in on 0 (|min det| at most EXTEND_SHRINK x its value two rounds
         before), up to EXTEND_SHARE x max_iter in all: a fold about to give way finishes
         instead of starting over (docs/global_untangle.md, "Budget")."""
         self.dmins.append(dmin)
-        spent = self.total >= self.opt.max_iter + self.granted
+        spent = self.total >= self.budget
         if (not spent or self.valid or len(self.dmins) < 3
                 or -dmin > EXTEND_SHRINK * -self.dmins[-3]):
             return
@@ -264,7 +268,7 @@ class _Continuation:
     def _cap(self, guard: bool) -> int:
         """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one
         long run, no memory restarts (the rest of the polish budget)."""
-        left = self.opt.max_iter + self.granted - self.total
+        left = self.budget - self.total
         if guard:
             return min(left + self._extra(), self._polish_budget() - self.polish_used)
         return min(left, self.inner)
@@ -288,7 +292,7 @@ class _Continuation:
         """The progress tick of a round (long runs report, and cancel, from inside)."""
         if self.progress is None:
             return None
-        progress, max_iter = self.progress, self.opt.max_iter + self.granted
+        progress, max_iter = self.progress, self.budget
         done, n_now = self.total, self.best_inv
 
         def tick(it: int, point: Callable[[], np.ndarray]) -> bool:
