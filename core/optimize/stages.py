@@ -44,6 +44,7 @@ LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE t
 LIFT_ACTIVE = 1.0  # rounds after the first move only the nodes within options.lift_rings
 #                    rings of the elements with q < LIFT_ACTIVE * floor (a small local problem)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
+LIFT_RETRY = 0.5  # share of the floor step after a round that cost too much q_avg (`_retries`)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
 
 
@@ -411,7 +412,8 @@ def lift_min_quality(
     nodes within `options.lift_rings` rings of the elements under the new floor. A round is
     kept only when q_min rises, q_avg stays within LIFT_AVG_DROP (relative) of the best q_avg
     seen and, once q_min >= LIFT_POOR q_avg, at least the input's, and any q_avg it costs buys
-    at least LIFT_RATE times as much q_min.
+    at least LIFT_RATE times as much q_min; a round that is not kept ends the climb, or once,
+    on a poor mesh, makes the later rounds take LIFT_RETRY of the floor step (`_retries`).
     Returns (points, info) with the kept iterate: the input itself (bit-identical) when
     nothing qualifies or the input has an inverted element. info: iterations, rounds (kept),
     q_min_in, q_avg_in, q_min_out, q_avg_out, trail ((q_min, q_avg) after each run), seconds,
@@ -493,9 +495,11 @@ class _Lift:
         self.live: Sampled[tuple[float, float]] = Sampled()  # (q_min, q_avg): progress
         self.live.set((self.m0, self.a0))
         self.cancel = False
+        self.step = 1.0  # share of the full floor step a round takes (halved on a miss)
 
     def climb(self) -> bool:
-        """Every round the options allow, until one is not kept; False: cancelled."""
+        """Every round the options allow, until one is not kept (and not retried); False:
+        cancelled."""
         en, st, progress = self.en, self.st, self.progress
         for r in range(self.opt.lift_rounds + 1):
             en.qc = self._floor(r)
@@ -516,7 +520,10 @@ class _Lift:
                                stops(progress(self.total, r, *shown))):
                 return False
             if not kept:
-                break
+                if not self._retries(qm):
+                    break
+                self.step = LIFT_RETRY
+                continue
             # the first run maximises q_avg at the input's floor: the start of the climb
             self.v, self.q, self.cur_m, self.cur_a = vt, qt, qm, qa
             self.peak = max(self.peak, qa)
@@ -526,12 +533,20 @@ class _Lift:
                 self.best_v, self.best_m, self.best_a = self.v, self.cur_m, self.cur_a
         return True
 
+    def _retries(self, qm: float) -> bool:
+        """Whether a round that was not kept is tried again at LIFT_RETRY of its floor step
+        (it and every later round): once, and only when it raised q_min on a poor mesh (q_min
+        < LIFT_POOR q_avg), where it missed on the q_avg it cost, not on q_min."""
+        return (self.step == 1.0 and qm > self.cur_m
+                and self.cur_m < LIFT_POOR * self.cur_a)
+
     def _floor(self, r: int) -> float:
         """Round r's floor qc: the input's q_min, then rising with the kept iterate's."""
         if r == 0:
             return self.m0
         m, a = self.cur_m, self.cur_a
-        return min(m * self.opt.lift_grow, m + LIFT_GAP * (a - m))
+        full = min(m * self.opt.lift_grow, m + LIFT_GAP * (a - m))
+        return full if self.step == 1.0 else m + self.step * (full - m)
 
     def _tick(self, r: int, numbers: Callable[[np.ndarray], tuple[float, float]]
               ) -> Tick | None:

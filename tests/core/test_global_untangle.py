@@ -384,6 +384,59 @@ def test_local_mode_lift_takes_the_larger_floor_step(monkeypatch) -> None:
     assert seen == [pipeline.LOCAL_LIFT_GROW, 1.15] and pipeline.LOCAL_LIFT_GROW == 1.3
 
 
+def lift_runs(name: str, monkeypatch, retry: bool) -> tuple[object, dict]:
+    """untangle_and_smooth's defaults on tests/data/NAME.obj, with or without the lift's
+    half-step retry: (result, the lift's info)."""
+    from meshdata import load2d
+
+    from core import EEGTParams, pipeline, untangle_and_smooth
+    from core.optimize import stages
+
+    infos: list[dict] = []
+    real = pipeline.lift_min_quality
+
+    def spy(*a, **k):
+        out, info = real(*a, **k)
+        infos.append(info)
+        return out, info
+
+    monkeypatch.setattr(pipeline, "lift_min_quality", spy)
+    if not retry:
+        monkeypatch.setattr(stages._Lift, "_retries", lambda self, qm: False)
+    pts, faces = load2d(name)
+    res = untangle_and_smooth(pts, faces, params=EEGTParams(), backend="numpy")
+    monkeypatch.undo()
+    assert res.after.n_inverted == 0 and len(infos) == 1
+    return res, infos[0]
+
+
+def test_lift_round_that_costs_too_much_q_avg_is_retried_at_half_the_step(monkeypatch) -> None:
+    """naca_deform's eighth lift round raises q_min 0.415 -> 0.474 but takes q_avg below 97 %
+    of the lift's best (0.841): the climb ended there, at the paper's q_min (0.4157). Tried
+    again at half the floor step it is kept and the climb goes on (measured 0.4442 / 0.8508
+    against 0.4154 / 0.8547)."""
+    before, _ = lift_runs("naca_deform", monkeypatch, retry=False)
+    after, info = lift_runs("naca_deform", monkeypatch, retry=True)
+    assert before.after.q_min < 0.4157 < 0.4357 < after.after.q_min
+    assert after.after.q_avg > max(before.after.q_avg - 0.005, 0.8102 + 0.03)
+    trail = info["trail"]
+    missed = [i for i in range(1, len(trail) - 1)
+              if trail[i + 1][0] < trail[i][0] and trail[i + 1][1] > trail[i][1]]
+    assert missed  # a round's point followed by the retry's lower q_min, higher q_avg
+    assert info["q_min_out"] > trail[missed[0] - 1][0]  # the climb went past the miss
+
+
+def test_lift_on_a_good_mesh_ends_at_the_first_miss(monkeypatch) -> None:
+    """Once q_min >= q_avg / 2 a round must keep the input's q_avg: a miss there ends the
+    climb as before (quad_hole: the same points with and without the retry)."""
+    plain, _ = lift_runs("quad_hole", monkeypatch, retry=False)
+    res, info = lift_runs("quad_hole", monkeypatch, retry=True)
+    assert np.array_equal(res.points, plain.points)
+    last_m, last_a = info["trail"][-1]  # the miss: more q_min, less q_avg, not kept
+    assert last_m > info["q_min_out"] and last_a < info["q_avg_out"]
+    assert res.after.q_min > 0.77 and res.after.q_avg > 0.892  # measured 0.7706 / 0.8922
+
+
 def test_local_mode_leaves_out_eegt_smoothing_after_a_kept_lift_round() -> None:
     """'eegt+local': once a lift round is kept, EEGT smoothing (which would move every node
     and not raise the lifted worst faces) is left out; without lift rounds it runs."""
