@@ -444,6 +444,25 @@ def specs(sizes: tuple[int, ...] = (10_000, 100_000), seeds: tuple[int, ...] = S
                 yield CaseSpec("lattice", dom, "meshgen", n, 0)
 
 
+# Moved boundaries no default case has (other angles, shifts, meshers, sizes): the check that
+# nothing is tuned to the default cases. Seeds play no part in a motion.
+HELD_OUT: tuple[CaseSpec, ...] = tuple(
+    CaseSpec("motion", dom, mesher, n, 1, params) for dom, mesher, n, params in (
+        ("annulus", "gmshquad", 10_000, {"angle": 150.0}),
+        ("annulus", "tri30", 10_000, {"angle": 150.0}),
+        ("annulus", "tri20", 20_000, {"angle": 120.0}),
+        ("annulus", "gmshmixed", 10_000, {"angle": 110.0}),
+        ("gear", "tri30", 10_000, {"angle": 45.0}),
+        ("gear", "gmsh", 10_000, {"angle": 75.0}),
+        ("gear", "gmshquad", 5_000, {"angle": 60.0}),
+        ("channel", "gmshgraded", 10_000, {"dx": 1.25}),
+        ("channel", "tri30", 10_000, {"dx": 0.8, "dy": 0.2}),
+        ("naca", "gmshgraded", 10_000, {"angle": -25.0, "dy": 0.12}),
+        ("naca", "gmshmixed", 10_000, {"angle": -15.0, "dy": 0.08}),
+        ("naca", "gmshquad", 10_000, {"angle": -20.0, "dy": 0.1}),
+    ))
+
+
 def default_specs() -> list[CaseSpec]:
     return list(specs())
 

@@ -9,7 +9,7 @@ The peer (bench.peer_invertible_maps) needs EEGT_PEER_UNTANGLER; without it its 
 OMP_NUM_THREADS=1), one after the other in this process.
 
 Run: `python -m bench.fold_families [--sizes 10000] [--only annulus] [--json out.json]
-[--against earlier.json]`.
+[--against earlier.json]`; `--held-out` runs the moved boundaries no default case has.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.corpus import ROOT, load, specs
+from bench.corpus import HELD_OUT, ROOT, load, specs
 from bench.peer_invertible_maps import PeerMissing, peer_binary, run_peer
 from core import EEGTParams, mesh_stats, untangle_and_smooth
 from core.obj_io import read_obj
@@ -81,6 +81,8 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[10_000])
     ap.add_argument("--only", default="", help="only cases whose name contains this")
     ap.add_argument("--backend", default="numpy")
+    ap.add_argument("--held-out", action="store_true",
+                    help="the held-out moved boundaries (bench.corpus.HELD_OUT) instead")
     ap.add_argument("--no-shared", action="store_true", help="skip the shared meshes")
     ap.add_argument("--json", type=Path, help="write every row here")
     ap.add_argument("--against", type=Path, help="an earlier --json: flag shared meshes worse now")
@@ -93,7 +95,7 @@ def main() -> None:
     print(f"{platform.machine()}, {os.cpu_count()} cores (shared machine), load "
           f"{os.getloadavg()[0]:.1f}; ours: default parameters, backend {args.backend}; {note}")
     groups: dict[str, list] = {}
-    for spec in specs(tuple(args.sizes)):
+    for spec in HELD_OUT if args.held_out else specs(tuple(args.sizes)):
         if args.only in spec.name:
             groups.setdefault(group_name(spec), []).append(spec)
     rows, worse = [], []
