@@ -335,7 +335,7 @@ def opencl_device() -> str:
         from core.opencl.runtime import runtime
 
         cls, why = engine_opencl.available()
-        return runtime().name if cls is not None else f"none ({why})"
+        return runtime().name if cls is not None else f"none ({why.split(' (')[0]})"
     except Exception as exc:  # no pyopencl at all
         return f"none ({exc})"
 
