@@ -44,7 +44,8 @@ LIFT_RATE = 3.0  # a round that lowers q_avg must raise q_min by at least RATE t
 LIFT_ACTIVE = 1.0  # rounds after the first move only the nodes within options.lift_rings
 #                    rings of the elements with q < LIFT_ACTIVE * floor (a small local problem)
 LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's (still capped)
-LIFT_RETRY = 0.5  # share of the floor step after a round that cost too much q_avg (`_retries`)
+LIFT_RETRY = 0.5  # share of the floor step after a round that cost too much q_avg (`_retries`;
+#                   1.0: no retry)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
 
 
@@ -537,7 +538,7 @@ class _Lift:
         """Whether a round that was not kept is tried again at LIFT_RETRY of its floor step
         (it and every later round): once, and only when it raised q_min on a poor mesh (q_min
         < LIFT_POOR q_avg), where it missed on the q_avg it cost, not on q_min."""
-        return (self.step == 1.0 and qm > self.cur_m
+        return (LIFT_RETRY < 1.0 and self.step == 1.0 and qm > self.cur_m
                 and self.cur_m < LIFT_POOR * self.cur_a)
 
     def _floor(self, r: int) -> float:

@@ -402,7 +402,7 @@ def lift_runs(name: str, monkeypatch, retry: bool) -> tuple[object, dict]:
 
     monkeypatch.setattr(pipeline, "lift_min_quality", spy)
     if not retry:
-        monkeypatch.setattr(stages._Lift, "_retries", lambda self, qm: False)
+        monkeypatch.setattr(stages, "LIFT_RETRY", 1.0)
     pts, faces = load2d(name)
     res = untangle_and_smooth(pts, faces, params=EEGTParams(), backend="numpy")
     monkeypatch.undo()
