@@ -513,8 +513,10 @@ def t_batch_files_per_worker():
 
 
 def _count_outputs(folder):
-    return len([n for n in os.listdir(folder) if n.endswith(".obj")]) if \
-        os.path.isdir(folder) else 0
+    """Finished .obj outputs: a run's temporary file (hidden, ending in the format's suffix
+    too) is not one."""
+    return len([n for n in os.listdir(folder) if n.endswith(".obj") and
+                not n.startswith(".")]) if os.path.isdir(folder) else 0
 
 
 def _start_batch(args, log):
