@@ -496,7 +496,7 @@ class _Lift:
         self.live: Sampled[tuple[float, float]] = Sampled()  # (q_min, q_avg): progress
         self.live.set((self.m0, self.a0))
         self.cancel = False
-        self.step = 1.0  # share of the full floor step a round takes (halved on a miss)
+        self.step = 1.0  # share of the full floor step a round takes (LIFT_RETRY once retried)
 
     def climb(self) -> bool:
         """Every round the options allow, until one is not kept (and not retried); False:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from meshdata import load_groups, spun_hole
+from meshdata import load2d, load_groups, spun_hole
 
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 
@@ -387,8 +387,6 @@ def test_local_mode_lift_takes_the_larger_floor_step(monkeypatch) -> None:
 def lift_runs(name: str, monkeypatch, retry: bool) -> tuple[object, dict]:
     """untangle_and_smooth's defaults on tests/data/NAME.obj, with or without the lift's
     half-step retry: (result, the lift's info)."""
-    from meshdata import load2d
-
     from core import EEGTParams, pipeline, untangle_and_smooth
     from core.optimize import stages
 
