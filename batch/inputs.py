@@ -16,7 +16,7 @@ import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
-from .solver_formats import SOLVER_EXTENSIONS, SOLVER_FORMATS
+from ..fileio.solver_formats import SOLVER_EXTENSIONS, SOLVER_FORMATS
 
 # Every file type the command reads and writes: Blender's own, then the solver meshes.
 MESH_EXTENSIONS = (".blend", ".obj", ".ply", ".stl", *SOLVER_EXTENSIONS)

@@ -18,13 +18,13 @@ import time
 from collections.abc import Iterable
 from typing import Any
 
-from .run_stats import KINDS, MESH, kind_of_objects
+from ..fileio.run_stats import KINDS, MESH, kind_of_objects
 
 EXIT_INTERRUPTED = 130
 # Worst first: an unfinished run, then nothing written, then a mesh left tangled.
 _SEVERITY = {1: 3, 2: 2, 3: 1, 0: 0}
 STATUSES = ("ok", "failed", "error", "timeout", "crashed", "skipped", "cancelled")
-# Each kind's stats columns (batch/run_stats.py), the mesh ones first as they always were,
+# Each kind's stats columns (fileio/run_stats.py), the mesh ones first as they always were,
 # then the kind of the file's run; a file fills the columns of its kind only.
 CSV_COLUMNS = ("input", "output", "status", "exit_code", "seconds", "objects",
                *(c for k in KINDS.values() for c in k.columns()), "kind",

@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from core import backends
-from core.faces import FaceSet
-from core.obj_io import read_obj
+from core.eegt import backends
+from core.mesh.faces import FaceSet
+from core.mesh.obj_io import read_obj
 from core.params import EEGTParams
-from core.pipeline import free_nodes, untangle_and_smooth
+from core.run.pipeline import free_nodes, untangle_and_smooth
 
 from .meshgen import jittered_square
 

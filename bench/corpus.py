@@ -35,7 +35,7 @@ import numpy as np
 
 from bench import libm
 from core import FaceSet, faces_from_csr, mesh_stats
-from core.topology import boundary_nodes
+from core.mesh.topology import boundary_nodes
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "build" / "corpus"

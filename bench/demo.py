@@ -35,7 +35,7 @@ def main() -> int:
 
     from bench.plot import before_after_png
     from core import mesh_stats
-    from core.obj_io import read_obj
+    from core.mesh.obj_io import read_obj
 
     zip_path = build_extension.build_pure(str(out))
     print(f"built {zip_path}")

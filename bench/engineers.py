@@ -6,7 +6,7 @@ Run `python -m bench.engineers [--out docs] [--no-pictures]`. Prints markdown ta
    parameters): fixed vs slide, the whole mesh's q_min / q_avg and that of the faces
    touching the boundary, and the proof for slide: the largest distance of a result
    boundary vertex to its input boundary loop (relative to the mesh size; measured here,
-   independently of core.boundary, against every segment of the loop), corners moved, loops
+   independently of core.eegt.boundary, against every segment of the loop), corners moved, loops
    whose cyclic order changed, boundary vertices that slid.
 2. Free boundary: our three-quads-around-a-triangle case (Mesquite's fixed-flag convention:
    only boundary nodes, six pinned, the triangle's three start at one point) and the
@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from core import EEGTParams, mesh_stats, quality, untangle_and_smooth
-from core.faces import as_faceset
-from core.measures import face_values
-from core.obj_io import read_legacy_vtk, read_obj
-from core.reference_shapes import reference_targets
+from core.mesh.faces import as_faceset
+from core.mesh.obj_io import read_legacy_vtk, read_obj
+from core.metrics.measures import face_values
+from core.metrics.reference_shapes import reference_targets
 
 from .meshgen import boundary_layer_annulus, moved_body
 

@@ -27,7 +27,7 @@ import numpy as np
 from bench.corpus import HELD_OUT, ROOT, load, specs
 from bench.peer_invertible_maps import PeerMissing, peer_binary, run_peer
 from core import EEGTParams, mesh_stats, untangle_and_smooth
-from core.obj_io import read_obj
+from core.mesh.obj_io import read_obj
 
 SHARED = ROOT / "tests" / "data"
 

@@ -42,9 +42,9 @@ from pathlib import Path
 import numpy as np
 
 from core import EEGTParams, untangle_and_smooth
-from core.faces import as_faceset
+from core.mesh.faces import as_faceset
+from core.mesh.topology import boundary_nodes
 from core.params import UNTANGLE_METHODS
-from core.topology import boundary_nodes
 
 INVARIANTS = ("error", "nan", "fixed", "worse", "determinism", "units", "parity")
 DEFAULT_OUT = Path("out/fuzz_failures")
@@ -526,9 +526,9 @@ def _worker(job) -> dict:
 def opencl_usable() -> str | None:
     """None when the OpenCL engine can run here, else why not."""
     try:
-        from core import engine_opencl
+        from core.eegt import engine_opencl
     except ImportError as exc:
-        return f"core.engine_opencl: {exc}"
+        return f"core.eegt.engine_opencl: {exc}"
     cls, why = engine_opencl.available()
     return None if cls is not None else why
 

@@ -34,7 +34,7 @@ from core.optimize.energy import FoldoverEnergy, LiftEnergy
 from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
 from core.optimize.state import State
-from core.pipeline import free_nodes
+from core.run.pipeline import free_nodes
 
 from .meshgen import holed_square
 

@@ -4,7 +4,7 @@ Installs the built extension (sandboxed, as ``bench.blender_scale``), makes a Gr
 5 000 and 50 000 quads (one UV island) in Edit Mode and runs the UV tool's drag as its modal
 does on each timer tick: the cursor's UV for this tick (a pixel -> UV map standing in for the
 UV editor's view, which headless Blender has not), the core frame warm from the last one
-under ``core.live.FRAME_BUDGET``, the changed UVs written into the edit mesh. The redraw
+under ``core.run.live.FRAME_BUDGET``, the changed UVs written into the edit mesh. The redraw
 request (``area.tag_redraw``) only flags the area: there is no area headless, so it is not
 timed. Prints a markdown table: updates per second (frames over their summed wall time),
 median and worst frame, and the worst frame's split into core and writes.
@@ -33,7 +33,7 @@ def grid(bpy, faces: int):
 
 def run(bpy, ext, faces: int, frames: int) -> dict:
     obj, n_faces = grid(bpy, faces)
-    drag_mod, live = ext.operators.live.drag, ext.core.live
+    drag_mod, live = ext.operators.live.drag, ext.core.run.live
     t0 = time.perf_counter()
     drag = drag_mod.UVDrag(obj, (0.5, 0.5), ext.core.EEGTParams(), radius=0.01)
     setup = time.perf_counter() - t0

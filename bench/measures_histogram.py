@@ -22,8 +22,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from core import MEASURE_NAMES, MEASURES, summarize, untangle_and_smooth
-from core.obj_io import read_obj
-from core.quality import quality
+from core.mesh.obj_io import read_obj
+from core.metrics.face_quality import quality
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data"

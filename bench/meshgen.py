@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench import libm
-from core.faces import FaceSet
+from core.mesh.faces import FaceSet
 
 __all__ = ["jittered_square"]
 

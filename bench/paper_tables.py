@@ -116,7 +116,7 @@ SMALL_REPEATS = 15  # timed rounds when the first round took under 0.2 s (noisy 
 
 def load_table1() -> tuple[np.ndarray, np.ndarray]:
     """The Table 1 mesh from the legacy VTK file, read in place; its clockwise quads reversed."""
-    from core.obj_io import read_legacy_vtk
+    from core.mesh.obj_io import read_legacy_vtk
 
     pts, cells = read_legacy_vtk(TABLE1_VTK)
     if set(np.diff(cells.offsets).tolist()) != {4}:
@@ -331,7 +331,7 @@ def simd_level() -> str:
 def opencl_device() -> str:
     """The OpenCL device "auto" uses here, or why there is none."""
     try:
-        from core import engine_opencl
+        from core.eegt import engine_opencl
         from core.opencl.runtime import runtime
 
         cls, why = engine_opencl.available()
@@ -345,7 +345,7 @@ def mesh_table(
 ) -> tuple[list[str], str]:
     from bench.plot import before_after_png
     from core import EEGTParams, as_faceset, mesh_stats
-    from core.obj_io import read_obj
+    from core.mesh.obj_io import read_obj
 
     if key == "table1":
         pts3, quads = load_table1()

@@ -9,9 +9,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection, PolyCollection
 
-from core.faces import FaceSet
-from core.quality import quality
-from core.topology import EdgeInfo
+from core.mesh.faces import FaceSet
+from core.mesh.topology import EdgeInfo
+from core.metrics.face_quality import quality
 
 
 def draw(ax, points: np.ndarray, faces: FaceSet, title: str) -> None:

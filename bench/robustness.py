@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from core import EEGTParams, free_nodes, untangle_and_smooth
-from core.obj_io import read_obj
+from core.mesh.obj_io import read_obj
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from core import EEGTParams, untangle_and_smooth
-from core.engine_numpy import NumpyEngine
-from core.obj_io import read_obj
-from core.pipeline import free_nodes
+from core.eegt.engine_numpy import NumpyEngine
+from core.mesh.obj_io import read_obj
+from core.run.pipeline import free_nodes
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 MESHES = ["quad_hole", "tri_two_holes", "naca_deform", "mixed_quad_tri", "polygon_voronoi"]

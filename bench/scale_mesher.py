@@ -32,7 +32,7 @@ from bench.corpus import ROOT, load, scale_specs
 
 def child(n: int, backend: str) -> None:
     """One run with phase timing; prints one JSON line."""
-    import core.pipeline as pipeline
+    import core.run.pipeline as pipeline
     from core import EEGTParams, mesh_stats, untangle_and_smooth
 
     case = load(scale_specs((n,))[0])

@@ -21,11 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from core import EEGTParams, backends, mesh_stats, untangle_and_smooth
-from core.faces import FaceSet, as_faceset
-from core.obj_io import read_obj
-from core.pipeline import free_nodes
-from core.targets import face_shapes_2d, prepare_targets
+from core import EEGTParams, mesh_stats, untangle_and_smooth
+from core.eegt import backends
+from core.mesh.faces import FaceSet, as_faceset
+from core.mesh.obj_io import read_obj
+from core.metrics.targets import face_shapes_2d, prepare_targets
+from core.run.pipeline import free_nodes
 
 from .meshgen import jittered_square
 

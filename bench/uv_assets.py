@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from core import boundary_nodes
-from core.uv_layout import UVLayout, weld_uv
+from core.uv.uv_layout import UVLayout, weld_uv
 
 __all__ = ["ASSETS", "TANGLES", "make_asset", "pin_some", "read_uv", "tangle", "write_uv"]
 
@@ -261,8 +261,8 @@ def pin_some(obj: Any, fraction: float = 0.01, seed: int = 1,
     ``rings`` faces of a flipped, inverted or overlapping face (a pin inside a fold can make
     it impossible to undo, and an artist pins what is right; None: anywhere); (L,) bool
     pins."""
-    from core.uv_overlap import overlapping_faces
-    from core.uv_untangle import flipped_faces
+    from core.uv.uv_overlap import overlapping_faces
+    from core.uv.uv_untangle import flipped_faces
 
     me = obj.data
     lay = layout(obj)

@@ -46,9 +46,9 @@ def measure(obj, uv, border_loops, pins) -> dict:
     """Counts and distortion of the UV values ``uv`` of ``obj`` (its 3D shapes as targets)."""
     from bench import uv_assets
     from core import faces_from_csr
-    from core.targets import face_shapes_2d
-    from core.uv_layout import weld_uv
-    from core.uv_untangle import measure as uv_measure
+    from core.metrics.targets import face_shapes_2d
+    from core.uv.uv_layout import weld_uv
+    from core.uv.uv_untangle import measure as uv_measure
 
     me = obj.data
     ls, lt, cv = uv_assets.mesh_csr(obj)

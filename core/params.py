@@ -12,7 +12,7 @@ from .choices import BOUNDARY, PARAMETERS, TARGET, UNTANGLE, ids, violation
 __all__ = ["BOUNDARY_MODES", "TARGETS", "UNTANGLE_METHODS", "EEGTParams"]
 
 UNTANGLE_METHODS = ids(UNTANGLE)
-BOUNDARY_MODES = ids(BOUNDARY)  # core.boundary
+BOUNDARY_MODES = ids(BOUNDARY)  # core.eegt.boundary
 TARGETS = ids(TARGET)
 
 

@@ -3,7 +3,7 @@ read in place from ../shared/meshes (third-party, never copied here).
 
 Every test folder imports it as ``meshdata`` (tests/conftest.py puts tests/ on ``sys.path``);
 a child Python process started by a test gets it with ``tests`` on its PYTHONPATH. The meshes
-are read with the core's own reader (core.obj_io); nothing is cached, so every call returns
+are read with the core's own reader (core.mesh.obj_io); nothing is cached, so every call returns
 fresh arrays a test may change.
 """
 
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core.faces import FaceSet, as_faceset
-from core.obj_io import read_legacy_vtk, read_obj
+from core.mesh.faces import FaceSet, as_faceset
+from core.mesh.obj_io import read_legacy_vtk, read_obj
 
 ROOT = Path(__file__).resolve().parents[1]  # the repository (= the extension package)
 DATA = ROOT / "tests" / "data"

@@ -70,8 +70,7 @@ def every_format(msh: Path, folder: Path) -> dict[str, Path]:
     """The Gmsh mesh converted by meshio into every other format, with each format's own
     tag arrays (medit:ref, su2:tag) and 2D points where the format is 2D; name -> path."""
     import meshio
-
-    from batch.solver_mesh import write_mesh
+    from eegt_blender.fileio.solver_mesh import write_mesh
 
     m = meshio.read(msh)
     phys = [np.asarray(a, dtype=np.int64) for a in m.cell_data["gmsh:physical"]]

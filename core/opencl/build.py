@@ -29,7 +29,7 @@ __all__ = [
 
 HERE = Path(__file__).parent
 COMMON_FILE = HERE / "common.cl"  # in front of every program
-EEGT_FILE = HERE / "eegt_kernels.cl"  # the EEGT iteration (core.engine_opencl)
+EEGT_FILE = HERE / "eegt_kernels.cl"  # the EEGT iteration (core.eegt.engine_opencl)
 NCACHE = 8  # nearest boundary nodes cached per face for the distance refresh
 NGON_MAXN = 16  # private-array size of the generic n-gon kernels (bigger faces: own build)
 

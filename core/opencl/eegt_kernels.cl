@@ -1,5 +1,5 @@
 // EEGT iteration kernels (float64). Every formula is written in the same operation order as
-// the NumPy reference (core/quality.py, core/transform.py, core/engine_numpy.py) and FP
+// the NumPy reference (core/metrics/face_quality.py, core/eegt/transform.py, core/eegt/engine_numpy.py) and FP
 // contraction is off, so results match NumPy to the last bit (no math library calls: powers
 // are core.fpmath's algorithm, sums are added in NumPy's order; both are in common.cl,
 // which the loader puts in front of this file). Faces come in arity groups laid out like
@@ -14,8 +14,8 @@
 // The paper's terms: step_size (lambda, eq. 17), stretch_vector / TRI_PAPER_STRETCH (the
 // stretch), transform_moves (stretch and shrink), distance_weight (f, eq. 20),
 // quality_weight (g, eq. 21), FACE_WEIGHT (w = f g), stitch (eq. 18); NumPy's twins in
-// core/engine_numpy.py (same names) and core/transform.py.
-// Per-face targets (core/targets.py): the *_tgt kernels read a group's (6, n, F) target
+// core/eegt/engine_numpy.py (same names) and core/eegt/transform.py.
+// Per-face targets (core/metrics/targets.py): the *_tgt kernels read a group's (6, n, F) target
 // array tg (fields x, y, c_n K_x, c_n K_y, cos_a, inv_sin; corner k of face j of field m is
 // tg[(m * n + k) * F + j]) and take the general formulas for every arity (triangles written
 // out with scalars, quads and n-gons by the generic functions).

@@ -32,7 +32,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from .. import fpmath
-from ..csr import bincount_csr, ragged_arange
+from ..mesh.csr import bincount_csr, ragged_arange
 from .mesh_tables import (
     Factors,
     corner_factor_values,

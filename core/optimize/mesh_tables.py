@@ -15,7 +15,7 @@ __all__ = ["Factors", "corner_factor_values", "corner_triangles", "mesh_tables",
 
 # Per-face target shapes for the energies: arity -> (u00, u01, u11), each (F_n, n) and
 # aligned with the groups' rows; corner k's target matrix is s [[u00, u01], [0, u11]]
-# (core.targets.corner_factors). None: the regular polygon everywhere.
+# (core.metrics.targets.corner_factors). None: the regular polygon everywhere.
 Factors = Mapping[int, tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 SIZE_SMOOTHING = 2  # smoothing passes of the reference-size field

@@ -1,5 +1,5 @@
 """Boundary sliding in the global stage: a sliding node's variable is its parameter on its
-boundary curve (core.boundary), not its two coordinates.
+boundary curve (core.eegt.boundary), not its two coordinates.
 
 The L-BFGS then runs on v = [x_free, y_free, tau_sliding]; the energy sees every node's
 position, the sliding ones at point(tau) (piecewise linear: the gradient in tau is the
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..boundary import SlideView
+from ..eegt.boundary import SlideView
 from .state import State
 
 __all__ = ["SlideProblem", "SlideState", "make_state"]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..csr import bincount_csr
+from ..mesh.csr import bincount_csr
 from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
 from ..opencl.runtime import LOCK, runtime
 from .dispatch import TooLarge, on_host, single_kernel_corners

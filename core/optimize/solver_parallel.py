@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..csr import bincount_csr, point_morton
 from ..fpmath import PAIRWISE_BLOCK, REDUCE_CHUNK
+from ..mesh.csr import bincount_csr, point_morton
 from ..opencl.build import cl_defines, fpmath_options, kernel_file, program_source
 from ..opencl.runtime import LOCK, runtime
 from .dispatch import SMALL_CORNERS, Solver, TooLarge, route, single_kernel_corners

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..boundary import SlideView
+from ..eegt.boundary import SlideView
 from ..fpmath import add_reduce
 from .dispatch import Solver
 from .energy import FoldoverEnergy, LiftEnergy, chi_scalar

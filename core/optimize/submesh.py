@@ -7,7 +7,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..csr import bincount_csr, ragged_arange
+from ..mesh.csr import bincount_csr, ragged_arange
 from .mesh_tables import Factors
 
 __all__ = ["Neighbourhood", "active_submesh"]

@@ -51,7 +51,7 @@ import bpy
 
 from ...batch.inputs import replaces_input
 from ...core import EEGTParams
-from ...core.backends import warm_up
+from ...core.eegt import warm_up
 from ..mesh import reference_mesh, runner
 from ..mesh.reference_mesh import ReferenceSource, from_file
 from ..shared.progress import printer

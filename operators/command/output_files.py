@@ -12,8 +12,8 @@ from typing import Any
 
 import bpy
 
-from ...batch import solver_mesh
-from ...batch.solver_formats import solver_format
+from ...fileio import solver_mesh
+from ...fileio.solver_formats import solver_format
 from ..solver_io import blender_mesh
 from .usage import UsageError, why
 

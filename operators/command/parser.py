@@ -6,9 +6,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ...batch.solver_formats import SOLVER_EXTENSIONS
 from ...core import EEGTParams
 from ...core.choices import BACKEND, UV_SCOPE, ids
+from ...fileio.solver_formats import SOLVER_EXTENSIONS
 from ..ui import props
 from . import metrics
 from .usage import EXIT_OK, EXIT_USAGE, INPUT_EXTENSIONS, UsageError

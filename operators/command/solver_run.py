@@ -18,9 +18,9 @@ from typing import Any
 import bpy
 import numpy as np
 
-from ...batch import solver_mesh
-from ...batch.solver_formats import SOLVER_EXTENSIONS, solver_format
 from ...core import EEGTParams, boundary_nodes, faces_from_csr, summaries
+from ...fileio import solver_mesh
+from ...fileio.solver_formats import SOLVER_EXTENSIONS, solver_format
 from ..mesh import runner
 from ..solver_io import blender_mesh
 from .usage import UsageError

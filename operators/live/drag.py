@@ -3,7 +3,7 @@
 
 ``UVDrag`` moves UV vertices of the active UV map (the UV editor), ``MeshDrag`` vertices of
 a planar mesh (the 3D View). Both read the mesh once (bulk reads in Object Mode, then back
-in Edit Mode), run ``core.live.LiveSession`` frames and write only the values that changed
+in Edit Mode), run ``core.run.live.LiveSession`` frames and write only the values that changed
 into the edit mesh (BMesh: there is no bulk write in Edit Mode). ``restore`` writes every value read
 at the start back, bit for bit. No operator logic here: the modal operators drive these.
 """
@@ -19,9 +19,9 @@ import bpy
 import numpy as np
 
 from ...core import EEGTParams, faces_from_csr
-from ...core.live import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, uv_region
-from ...core.targets import face_shapes_2d
-from ...core.uv_layout import weld_uv
+from ...core.metrics import face_shapes_2d
+from ...core.run import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, uv_region
+from ...core.uv import weld_uv
 from ..mesh import mesh_io, runner
 from ..shared import modes
 from ..uv import uv_mesh

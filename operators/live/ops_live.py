@@ -5,7 +5,7 @@ Edit Mode (``mesh.eegt_live_untangle``).
 Press the left mouse button on a vertex (none under the cursor: the selection is grabbed)
 and drag: a timer runs one frame at a time with the latest cursor position (mouse moves that
 arrive meanwhile only update that position, so a slow frame skips to where the cursor is,
-never queues), each frame (core and writes) kept under ``core.live.FRAME_BUDGET``. Release or
+never queues), each frame (core and writes) kept under ``core.run.live.FRAME_BUDGET``. Release or
 Enter keeps the result (one undo step); Esc or the right button puts every value back.
 """
 

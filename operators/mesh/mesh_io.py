@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ...core.csr import ragged_arange
+from ...core.mesh import ragged_arange
 
 PIN_NAME = "eegt_pinned"
 QUALITY_NAME = "eegt_quality"

@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """``mesh.eegt_analyze`` and ``mesh.eegt_select_inverted``: per-face quality measures (the mean
-ratio by default, or any measure of ``core.measures``) and their heat map."""
+ratio by default, or any measure of ``core.metrics.measures``) and their heat map."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 from bpy.props import BoolProperty, FloatProperty
 
 from ...core import MEASURES, faces_from_csr, quality, summarize
-from ...core.measures import goodness
-from ...core.plane import PlaneFrame
+from ...core.mesh import PlaneFrame
+from ...core.metrics import goodness
 from ..shared import modes
 from ..ui import props
 from . import mesh_io, runner
@@ -43,7 +43,7 @@ def face_quality(obj: bpy.types.Object, measure: str = "mean_ratio") -> np.ndarr
 
 def heat_colors(q: np.ndarray) -> np.ndarray:
     """RGBA per face from a heat-map position (the mean ratio itself, else
-    ``core.measures.goodness``): pure red at 0 (inverted, or at/past the measure's worst),
+    ``core.metrics.measures.goodness``): pure red at 0 (inverted, or at/past the measure's worst),
     then red -> yellow (the threshold) -> green as it goes 0 -> 1."""
     q = np.clip(q, 0.0, 1.0)
     rgba = np.empty((q.size, 4), dtype=np.float32)

@@ -17,8 +17,7 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ...core.faces import FaceSet, faces_from_csr
-from ...core.obj_io import read_obj
+from ...core.mesh import FaceSet, faces_from_csr, read_obj
 from . import mesh_io
 
 

@@ -16,11 +16,9 @@ import bpy
 import numpy as np
 
 from ...core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
-from ...core.csr import ragged_arange
-from ...core.pipeline import frozen_note
-from ...core.plane import PlaneFrame
-from ...core.reference_shapes import reference_targets, reference_to_2d
-from ...core.topology import EdgeInfo
+from ...core.mesh import EdgeInfo, PlaneFrame, ragged_arange
+from ...core.metrics import reference_targets, reference_to_2d
+from ...core.run import frozen_note
 from ..shared.progress import Progress
 from ..shared.result import RunResult
 from . import mesh_io, reference_mesh
@@ -331,7 +329,7 @@ def _edge_info(corners: np.ndarray | slice, offsets: np.ndarray, topo: mesh_io.M
 
 def select_opencl_device(device: str | None) -> None:
     """Tell the core's OpenCL backend which device to use ("AUTO"/None: automatic)."""
-    from ...core import engine_opencl  # imports pyopencl only when a device is used
+    from ...core.eegt import engine_opencl  # imports pyopencl only when a device is used
 
     engine_opencl.select_device(None if device in (None, "", "AUTO") else device)
 

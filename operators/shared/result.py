@@ -1,6 +1,6 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """One run result for mesh and UV runs: the fields both have, a typed stats block per kind
-(``batch/run_stats.py``: the keys of ``before`` / ``after``), the one last-run store on the
+(``fileio/run_stats.py``: the keys of ``before`` / ``after``), the one last-run store on the
 object and the one sidebar section that shows it.
 
 ``runner.ObjectResult`` (kind "mesh") and ``uv_runner.UVObjectResult`` (kind "uv") add their
@@ -14,7 +14,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from ...batch.run_stats import KINDS, Kind
+from ...fileio.run_stats import KINDS, Kind
 
 OK_STATUSES = ("valid", "untangled")
 # The property group (props.py / uv_props.py) that keeps an object's last run, per kind.

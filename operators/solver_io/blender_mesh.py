@@ -16,8 +16,8 @@ import os
 import bpy
 import numpy as np
 
-from ...batch import solver_mesh
-from ...batch.solver_mesh import SolverMesh, SolverMeshError
+from ...fileio import solver_mesh
+from ...fileio.solver_mesh import SolverMesh, SolverMeshError
 from ..mesh.mesh_io import PIN_NAME, read_positions
 
 SOURCE, DIGEST, FORMAT = "eegt_solver_source", "eegt_solver_sha256", "eegt_solver_format"

@@ -10,8 +10,8 @@ import bpy
 from bpy.props import StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
-from ...batch import solver_mesh
-from ...batch.solver_formats import SOLVER_EXTENSIONS, SOLVER_LABEL, solver_format
+from ...fileio import solver_mesh
+from ...fileio.solver_formats import SOLVER_EXTENSIONS, SOLVER_LABEL, solver_format
 from . import blender_mesh
 
 _GLOB = ";".join("*" + e for e in SOLVER_EXTENSIONS)

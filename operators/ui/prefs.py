@@ -34,7 +34,7 @@ def _list_devices() -> list[tuple[str, str]]:
     global _devices_found
     if _devices_found is None:
         try:
-            from ...core import engine_opencl
+            from ...core.eegt import engine_opencl
             _devices_found = [(str(i), str(label)) for i, label in engine_opencl.list_devices()]
         except Exception:  # no backend module, no pyopencl, or a broken driver: "Automatic" only
             _devices_found = []

@@ -13,9 +13,9 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from ...batch.run_stats import MESH, Kind
 from ...core import MEASURES, EEGTParams
 from ...core.choices import BACKEND, PARAMETERS, Bound, Enumeration
+from ...fileio.run_stats import MESH, Kind
 
 
 def enum_items(choices: Enumeration, upper: bool = False) -> tuple[tuple[str, str, str], ...]:
@@ -70,7 +70,7 @@ BACKEND_ITEMS: tuple[tuple[str, str, str], ...] = (
 )
 
 
-# Analyze Quality's measures (core.measures): identifier, label, tooltip.
+# Analyze Quality's measures (core.metrics.measures): identifier, label, tooltip.
 MEASURE_ITEMS: tuple[tuple[str, str, str], ...] = tuple(
     (m.name, m.label, m.description) for m in MEASURES.values())
 
@@ -185,7 +185,7 @@ EEGT_PG_settings = _settings_class()
 
 def last_run_class(name: str, doc: str, kind: Kind, extra: dict[str, Any]) -> type:
     """A property group keeping an object's last run of one kind: whether it ran, its
-    status, message and seconds, each stat of the kind (``batch/run_stats.py``) before and
+    status, message and seconds, each stat of the kind (``fileio/run_stats.py``) before and
     after (an int for a count, else a float) and the kind's ``extra`` properties."""
     annotations: dict[str, Any] = {"has_run": BoolProperty(default=False),
                                    "status": StringProperty(default=""),

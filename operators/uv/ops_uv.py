@@ -16,9 +16,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty
 
-from ...core.uv_layout import weld_uv
-from ...core.uv_overlap import overlapping_faces
-from ...core.uv_untangle import flipped_faces
+from ...core.uv import flipped_faces, overlapping_faces, weld_uv
 from ..mesh import mesh_io
 from ..mesh.ops_untangle import EEGTRunMixin
 from ..shared import modes

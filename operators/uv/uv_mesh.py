@@ -112,7 +112,7 @@ def read_uv_face_selection(me: bpy.types.Mesh, layer: bpy.types.MeshUVLoopLayer,
 
 def _face_order(topo: mesh_io.MeshArrays) -> np.ndarray:
     """Loops face by face (Blender's face offsets may come in any order)."""
-    from ...core.uv_layout import corner_loops
+    from ...core.uv import corner_loops
     return corner_loops(topo.loop_start, topo.loop_total)
 
 

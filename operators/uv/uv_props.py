@@ -12,8 +12,8 @@ from typing import Any
 import bpy
 from bpy.props import BoolProperty, EnumProperty, StringProperty
 
-from ...batch.run_stats import UV
 from ...core.choices import UV_SCOPE, UV_TARGET
+from ...fileio.run_stats import UV
 from ..ui.props import enum_items, last_run_class
 
 TARGET_ITEMS = enum_items(UV_TARGET)

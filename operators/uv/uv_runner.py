@@ -2,7 +2,7 @@
 """Glue between one mesh object's UV map and the core: prepare, compute, apply.
 
 ``prepare`` reads the UV map, its pins and selection (main thread, Object Mode),
-``compute`` welds nothing and writes nothing: it runs ``core.uv_untangle`` on arrays (safe in
+``compute`` welds nothing and writes nothing: it runs ``core.uv.uv_untangle`` on arrays (safe in
 a worker thread), ``apply`` writes the UV map back (main thread, Object Mode). Only the
 loops of UV vertices that moved are given new values; every other value of the UV map, and
 every other UV map and attribute, keeps its bits.
@@ -19,15 +19,16 @@ import numpy as np
 
 from ...core import EEGTParams, faces_from_csr
 from ...core.choices import UV_TARGET, ids
-from ...core.targets import face_shapes_2d
-from ...core.uv_layout import UVLayout, weld_uv
-from ...core.uv_untangle import (
+from ...core.metrics import face_shapes_2d
+from ...core.uv import (
+    UVLayout,
     UVMeasures,
     UVResult,
     measure,
     overlaps_around,
     tangled_faces,
     untangle_uv,
+    weld_uv,
 )
 from ..mesh import mesh_io, runner
 from ..shared.progress import Progress
@@ -91,7 +92,7 @@ class UVJob:
     fixed: np.ndarray | None = None  # (V,) pinned UV vertices
     targets: np.ndarray | None = None  # (C, 2) or None (regular polygons)
     target_kind: str = "3D"
-    scope: str = "tangles"  # core.uv_untangle.SCOPES
+    scope: str = "tangles"  # core.uv.uv_untangle.SCOPES
     notes: list[str] = field(default_factory=list)
     error: str | None = None
     result: UVResult | None = None
@@ -111,7 +112,7 @@ def prepare(obj: bpy.types.Object, uv_name: str | None = None, *, selected_only:
     """Read one object's UV map (``uv_name``, default the active one) into a :class:`UVJob`
     (``job.error`` set for bad input). ``selected_only``: only the faces selected in the UV
     editor (see ``uv_mesh.read_uv_face_selection``); else every face. ``scope``: see
-    ``core.uv_untangle.untangle_uv``."""
+    ``core.uv.uv_untangle.untangle_uv``."""
     me = obj.data
     job = UVJob(object=obj.name, mesh=me.name, target_kind=targets, scope=scope)
     why = runner.refusal(obj)

@@ -8,8 +8,7 @@ import socket
 import time
 
 import pytest
-
-from batch import arguments, dask_pool, worker
+from eegt_blender.batch import arguments, dask_pool, worker
 
 
 def single_parser():

@@ -6,8 +6,7 @@ from __future__ import annotations
 import os
 
 import pytest
-
-from batch import inputs
+from eegt_blender.batch import inputs
 
 
 def touch(path, text="v 0 0 0\n", mtime=None):

@@ -7,8 +7,7 @@ import json
 import os
 
 import pytest
-
-from batch import summary
+from eegt_blender.batch import summary
 
 
 def result(status, code, objects=(), **kw):

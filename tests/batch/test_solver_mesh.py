@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from eegt_blender.fileio import solver_mesh
+from eegt_blender.fileio.solver_mesh import SolverMeshError
 from solver_meshes import channel_msh, every_format, mesquite_vtk
 
-from batch import solver_mesh
-from batch.solver_mesh import SolverMeshError
 from core import boundary_nodes, faces_from_csr, quality, untangle_and_smooth
 
 pytest.importorskip("meshio", reason="meshio is not installed")

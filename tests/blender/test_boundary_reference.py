@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from bench.meshgen import boundary_layer_annulus, moved_body
-from core.obj_io import write_obj
+from core.mesh.obj_io import write_obj
 
 from .conftest import DATA, import_obj, positions, snapshot
 

@@ -55,11 +55,11 @@ def test_every_surface_lists_the_core_choices_and_bounds(bpy, ext):
     ch = ext.core.choices
     backends = [c.id.upper() for c in ch.BACKEND]
     # the core's own lists and checks
-    assert ext.core.backends.BACKENDS == ch.ids(ch.BACKEND)
+    assert ext.core.eegt.backends.BACKENDS == ch.ids(ch.BACKEND)
     assert ext.core.params.UNTANGLE_METHODS == ch.ids(ch.UNTANGLE)
     assert ext.core.params.BOUNDARY_MODES == ch.ids(ch.BOUNDARY)
     assert ext.core.params.TARGETS == ch.ids(ch.TARGET)
-    assert ext.core.uv_untangle.SCOPES == ch.ids(ch.UV_SCOPE)
+    assert ext.core.uv.uv_untangle.SCOPES == ch.ids(ch.UV_SCOPE)
     assert ext.operators.uv.uv_runner.TARGETS == ch.ids(ch.UV_TARGET)
     params = ext.core.EEGTParams()
     assert set(ch.PARAMETERS) <= {f.name for f in dataclasses.fields(params)}

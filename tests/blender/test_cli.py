@@ -10,7 +10,7 @@ import meshdata
 import numpy as np
 import pytest
 
-from core.topology import boundary_nodes
+from core.mesh.topology import boundary_nodes
 
 from .conftest import DATA, import_obj, positions
 

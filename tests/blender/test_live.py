@@ -76,7 +76,7 @@ def test_uv_drag_frame_is_the_core_frame_on_the_same_input(bpy, ext):
     obj = _grid(bpy, 12)
     drag, frames = _drag_uvs(bpy, ext, obj, [(0.04, 0.01)])
     reg = drag.region
-    live = ext.core.live.LiveSession(reg.points, reg.faces, reg.grab, fixed=reg.fixed,
+    live = ext.core.run.live.LiveSession(reg.points, reg.faces, reg.grab, fixed=reg.fixed,
                                      params=ext.core.EEGTParams(),
                                      targets=drag.session.targets)
     cold = live.frame(drag.targets_for((0.54, 0.51)), budget=None)

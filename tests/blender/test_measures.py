@@ -200,7 +200,7 @@ def read_points_faces(ext, path):
     """The OBJ's 2D points (as float32 positions) and faces, as the installed extension's
     FaceSet (its core is a module apart from the checkout's)."""
     pts, read = meshdata.read(path)
-    faces = ext.core.faces.FaceSet(read.offsets, read.indices)
+    faces = ext.core.mesh.faces.FaceSet(read.offsets, read.indices)
     return pts[:, :2].astype(np.float32).astype(np.float64), faces
 
 

@@ -21,9 +21,9 @@ starts failing (XPASS) the day the two paths agree.
 
 UV: Untangle & Smooth UVs (``uv.eegt_untangle_smooth``, Edit Mode, every face selected,
 defaults: 3D target shapes, scope "tangles") on a jittered UV sphere (bench.uv_assets),
-against ``core.uv_untangle.untangle_uv`` on the UV map welded by ``core.uv_layout.weld_uv``
+against ``core.uv.uv_untangle.untangle_uv`` on the UV map welded by ``core.uv.uv_layout.weld_uv``
 from the mesh's arrays read here with ``foreach_get``, targets
-``core.targets.face_shapes_2d`` of its 3D faces and the core's default acceptance (the
+``core.metrics.targets.face_shapes_2d`` of its 3D faces and the core's default acceptance (the
 operator passes ``runner.improves``; both accept this run). Shared with the operator: the
 Blender mesh being read and the parameters, as for the mesh.
 """
@@ -36,10 +36,10 @@ from meshdata import load
 
 from bench import uv_assets
 from core import EEGTParams, PlaneFrame, faces_from_csr, untangle_and_smooth
-from core.pipeline_3d import untangle_and_smooth_3d
-from core.targets import face_shapes_2d
-from core.uv_layout import weld_uv
-from core.uv_untangle import untangle_uv
+from core.metrics.targets import face_shapes_2d
+from core.run.pipeline_3d import untangle_and_smooth_3d
+from core.uv.uv_layout import weld_uv
+from core.uv.uv_untangle import untangle_uv
 
 from .conftest import import_obj, positions
 from .uvtools import tangled, uv_values

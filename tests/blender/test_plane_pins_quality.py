@@ -78,7 +78,7 @@ def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy,
     """The operator analyses the edges from Blender's edge table (no sort of every corner);
     a loose edge and a face selection change nothing: the same edges, counts and open
     edges as the sorted analysis of the chosen faces, the same frame."""
-    runner, plane = ext.operators.mesh.runner, ext.core.plane
+    runner, plane = ext.operators.mesh.runner, ext.core.mesh.plane
     obj = import_obj(bpy, "tri_two_holes")
     me = obj.data
     co = positions(obj).astype(np.float64) @ tilt().T + [1.0, 2.0, -3.0]
@@ -105,7 +105,7 @@ def test_plane_fit_from_the_edge_table_equals_the_sorted_search_bit_for_bit(bpy,
     offsets = np.concatenate([[0], np.cumsum(topo.loop_total[faces])])
     got = runner._edge_info(idx, offsets, topo, ext.operators.mesh.mesh_io.read_edges(me), lut, n)
     assert got is not None and job.edges is not None
-    sorted_info = ext.core.topology.EdgeInfo(job.faces, n)
+    sorted_info = ext.core.mesh.topology.EdgeInfo(job.faces, n)
     for info in (got, job.edges):
         assert np.array_equal(info.boundary_mask(), sorted_info.boundary_mask())
         assert sorted(zip(info.lo.tolist(), info.hi.tolist(), info.counts.tolist())) == \
@@ -128,7 +128,7 @@ def test_an_edge_table_naming_an_interior_edge_twice_falls_back_to_the_sorted_an
     the edge table: the table's counts would call it an open edge (its nodes fixed); the
     operator sees the table does not fit and analyses the faces themselves, so the result
     is the intact mesh's, bit for bit."""
-    runner, topology = ext.operators.mesh.runner, ext.core.topology
+    runner, topology = ext.operators.mesh.runner, ext.core.mesh.topology
     good, _ = grid_object(bpy, "intact", jitter=0.7)
     bad, _ = grid_object(bpy, "split", jitter=0.7)
     me = bad.data

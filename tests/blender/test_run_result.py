@@ -1,5 +1,5 @@
 """One run result for mesh and UV runs (operators/shared/result.py): the shared base, the stats
-block described once (batch/run_stats.py), the one last-run store and sidebar section."""
+block described once (fileio/run_stats.py), the one last-run store and sidebar section."""
 
 from __future__ import annotations
 

@@ -76,7 +76,7 @@ def test_untangles_keeps_uv_vertices_welded_and_borders_exact(bpy, ext):
     c0 = counts(ext, obj)
     assert c0["FLIPPED"] > 20 and c0["OVERLAPPING"] > 100
     groups = uv_vertex_groups(obj, uv0)
-    lay = ext.core.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv0)
+    lay = ext.core.uv.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv0)
     border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
     edit_all(bpy)
     assert bpy.ops.uv.eegt_untangle_smooth(**REGULAR) == {"FINISHED"}
@@ -109,7 +109,7 @@ def test_seam_sides_move_independently(bpy, ext):
     # its interior moves, the other half (and both sides of the seam) keep their bits
     obj = tangled(bpy, "monkey", "jitter", levels=1)
     uv0 = uv_values(obj)
-    lay = ext.core.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv0)
+    lay = ext.core.uv.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv0)
     sizes = np.bincount(lay.island)
     a, b = np.argsort(sizes)[-2:]  # the two halves
     seam_verts = np.intersect1d(lay.vertex[lay.node_island == a],
@@ -260,13 +260,13 @@ def uv_assets_organic(bpy, n):
 
 def test_mirrored_island_untangled_and_stays_mirrored(bpy, ext):
     obj = tangled(bpy, "monkey", "jitter", levels=1)
-    lay0 = ext.core.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv_values(obj))
+    lay0 = ext.core.uv.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv_values(obj))
     side0 = lay0.orientation()
     assert (side0 < 0).sum() == 1
     edit_all(bpy)
     assert bpy.ops.uv.eegt_untangle_smooth(**REGULAR) == {"FINISHED"}
     bpy.ops.object.mode_set(mode="OBJECT")
-    lay1 = ext.core.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv_values(obj))
+    lay1 = ext.core.uv.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv_values(obj))
     assert np.array_equal(lay1.orientation(), side0)
     assert counts(ext, obj)["INVERTED"] == 0
     (res,) = ops_uv(ext).LAST_RESULTS
@@ -401,7 +401,7 @@ def test_register_unregister_twice_keeps_uv_tools(bpy, ext):
 def _distortion_3d(ext, obj) -> tuple[float, float]:
     """(mean, worst) distortion of the active UV map against the 3D faces (all faces)."""
     job = ext.operators.uv.uv_runner.prepare(obj, targets="3D")
-    m = ext.core.uv_untangle.measure(job.layout, job.layout.points, job.selected, job.targets)
+    m = ext.core.uv.uv_untangle.measure(job.layout, job.layout.points, job.selected, job.targets)
     return m.distortion_mean, m.distortion_worst
 
 
@@ -552,7 +552,7 @@ def test_blender_grid_as_stored_welds_into_one_island(bpy, ext):
     free[groups[border]] = False
     uv1 = jitter_uv_vertices(obj, uv0, groups, free, 0.6, seed=3)
     _set_uv(obj, uv1)
-    lay = ext.core.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv1)
+    lay = ext.core.uv.uv_layout.weld_uv(*uv_assets.mesh_csr(obj), uv1)
     assert (lay.n_nodes, lay.n_islands) == (121, 1)
     assert np.array_equal(lay.loop_node, groups)  # numbered as here: by vertex
     edit_all(bpy)

@@ -48,7 +48,7 @@ def test_nan_or_inf_coordinates_raise_clear_error(bad):
 def _complex_calls():
     """(name, call with one complex array at the core's input) for every entry point."""
     from core import EEGTParams, PlaneFrame, mesh_stats, quality, summaries
-    from core.reference_shapes import reference_targets, reference_to_2d
+    from core.metrics.reference_shapes import reference_targets, reference_to_2d
 
     p = square_pts()
     z = p + 0.5j  # every imaginary part nonzero: a cast would silently drop them

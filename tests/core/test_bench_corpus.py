@@ -22,7 +22,7 @@ from bench.peer_invertible_maps import (
     write_input,
 )
 from core import faces_from_csr, mesh_stats
-from core.topology import boundary_nodes
+from core.mesh.topology import boundary_nodes
 
 pytest.importorskip("triangle", reason="the bench dependency group (triangle) is not installed")
 pytest.importorskip("gmsh", reason="the bench dependency group (gmsh) is not installed")

@@ -1,6 +1,6 @@
 """Boundary modes: 'fixed' (the paper), 'slide' along the input boundary, 'free'.
 
-The slide checks are independent of core.boundary: the input boundary loops are walked here
+The slide checks are independent of core.eegt.boundary: the input boundary loops are walked here
 from the faces, every result boundary vertex is measured against the input loop's polyline
 (all of its segments), corners by their turning angle, order by the arc parameter."""
 
@@ -21,8 +21,8 @@ from core import (
     untangle_and_smooth,
     untangle_and_smooth_3d,
 )
-from core.boundary import SLIDE_GAP, SLIDE_REACH, Slide, SlideView, boundary_motion
-from core.faces import as_faceset
+from core.eegt.boundary import SLIDE_GAP, SLIDE_REACH, Slide, SlideView, boundary_motion
+from core.mesh.faces import as_faceset
 from core.optimize import GlobalOptions, untangle_global
 
 PAPER = EEGTParams.paper()

@@ -8,13 +8,13 @@ import numpy as np
 from meshdata import load2d
 
 from core import choices
-from core.faces import as_faceset
+from core.mesh.faces import as_faceset
 from core.opencl.build import cl_defines
 from core.optimize import dispatch
 from core.optimize.energy import FoldoverEnergy
 from core.optimize.solver import lbfgs
 from core.optimize.state import ARMIJO, CURVATURE, TRIALS, State, line_search_defines
-from core.pipeline import free_nodes
+from core.run.pipeline import free_nodes
 
 
 def quad_hole():

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from core import PlaneFrame
-from core.distance import NearestBoundary
+from core.eegt.distance import NearestBoundary
 
 
 def brute(qx, qy, bx, by):

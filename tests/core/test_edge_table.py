@@ -7,9 +7,9 @@ import pytest
 from meshdata import load2d as load
 
 from core import EEGTParams, PlaneFrame, untangle_and_smooth
-from core.faces import FaceSet, as_faceset
-from core.plane import open_edges
-from core.topology import EdgeInfo, free_nodes
+from core.mesh.faces import FaceSet, as_faceset
+from core.mesh.plane import open_edges
+from core.mesh.topology import EdgeInfo, free_nodes
 
 
 def _table(fs: FaceSet, n: int, seed: int = 0):

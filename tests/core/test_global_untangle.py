@@ -367,7 +367,8 @@ def test_local_mode_lift_takes_the_larger_floor_step(monkeypatch) -> None:
     """'eegt+local' lifts with lift_grow LOCAL_LIFT_GROW (1.3), 'global' with the default
     1.15: the whole-mesh mode keeps its results, the large-mesh mode reaches a higher q_min
     in the same rounds (bench/scale_mesher.py: 0.7876 -> 0.7938 at 1.06M triangles)."""
-    from core import EEGTParams, pipeline, untangle_and_smooth
+    from core import EEGTParams, untangle_and_smooth
+    from core.run import pipeline
 
     seen: list[float] = []
     real = pipeline.lift_min_quality
@@ -387,8 +388,9 @@ def test_local_mode_lift_takes_the_larger_floor_step(monkeypatch) -> None:
 def lift_runs(name: str, monkeypatch, retry: bool) -> tuple[object, dict]:
     """untangle_and_smooth's defaults on tests/data/NAME.obj, with or without the lift's
     half-step retry: (result, the lift's info)."""
-    from core import EEGTParams, pipeline, untangle_and_smooth
+    from core import EEGTParams, untangle_and_smooth
     from core.optimize import stages
+    from core.run import pipeline
 
     infos: list[dict] = []
     real = pipeline.lift_min_quality
@@ -522,7 +524,8 @@ def test_pipeline_progress_in_the_local_untangle_shows_the_current_iterate(monke
     the solve and q_avg moves from report to report as the sub-mesh is polished."""
     import dataclasses
 
-    from core import EEGTParams, pipeline, untangle_and_smooth
+    from core import EEGTParams, untangle_and_smooth
+    from core.run import pipeline
 
     measure_every_tick(monkeypatch)
     real_eegt, real_local = pipeline._Run.untangle_eegt, pipeline._Run.untangle_local

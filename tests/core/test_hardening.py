@@ -242,8 +242,8 @@ def test_bug_quality_rounding_above_one_gives_no_nan_weight():
     non-integer eta, and every node of such a face stood still. A face at 1 + 1 ulp now
     weighs what a face at exactly 1 does (nothing)."""
     from core import free_nodes
-    from core.engine_numpy import NumpyEngine
-    from core.faces import as_faceset
+    from core.eegt.engine_numpy import NumpyEngine
+    from core.mesh.faces import as_faceset
 
     p, f = load2d("mixed_quad_tri")
     fs = as_faceset(f, len(p))

@@ -1,4 +1,4 @@
-"""The global stage's harmonic start (core.harmonic) and the pipeline's restart from it:
+"""The global stage's harmonic start (core.run.harmonic) and the pipeline's restart from it:
 interior nodes at the mean of their neighbours, everything else bit-identical, and a
 half-turn fold that outlasts the budget from the input untangles from the harmonic map."""
 
@@ -7,11 +7,12 @@ from __future__ import annotations
 import numpy as np
 from meshdata import spun_hole
 
-from core import EEGTParams, pipeline, untangle_and_smooth
-from core.faces import as_faceset
-from core.harmonic import harmonic_positions
-from core.quality import folded_area
-from core.topology import pinched_faces
+from core import EEGTParams, untangle_and_smooth
+from core.mesh.faces import as_faceset
+from core.mesh.topology import pinched_faces
+from core.metrics.face_quality import folded_area
+from core.run import pipeline
+from core.run.harmonic import harmonic_positions
 
 
 def tri_grid(k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -141,7 +142,7 @@ def test_restart_that_does_not_help_keeps_the_first_stages_best(monkeypatch):
 def test_harmonic_solve_ticks_and_a_stop_there_cancels_the_run(monkeypatch):
     """The solve reports progress (a million nodes take thousands of iterations) and a stop
     answered there cancels the run: the input comes back unchanged."""
-    import core.harmonic as harmonic
+    import core.run.harmonic as harmonic
 
     monkeypatch.setattr(harmonic, "HARMONIC_TICK", 2)
     pts, faces = tri_grid(12)

@@ -1,4 +1,4 @@
-"""A run keeps its freed memory for reuse and hands it back when it ends (core/heap.py,
+"""A run keeps its freed memory for reuse and hands it back when it ends (core/host/heap.py,
 docs/scale.md); the result is the same bits with the allocator left alone."""
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from meshdata import load2d
 
-from core import EEGTParams, heap, untangle_and_smooth
+from core import EEGTParams, untangle_and_smooth
+from core.host import heap
 
 pytestmark = pytest.mark.skipif(not heap.available(), reason="not glibc's allocator")
 

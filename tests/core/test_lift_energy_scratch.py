@@ -10,11 +10,11 @@ import pytest
 from meshdata import load2d
 
 from bench.meshgen import holed_quads, holed_square
-from core.faces import as_faceset
+from core.mesh.faces import as_faceset
 from core.optimize import energy as energy_mod
 from core.optimize.energy import LiftEnergy
 from core.optimize.slide import make_state
-from core.pipeline import free_nodes
+from core.run.pipeline import free_nodes
 
 
 def naca():

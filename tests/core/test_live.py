@@ -1,4 +1,4 @@
-"""Live untangling's warm-started frames (core.live): same bits as a cold run, drags."""
+"""Live untangling's warm-started frames (core.run.live): same bits as a cold run, drags."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from uvdata import grid_uv, jitter_interior
 
 from bench.meshgen import jittered_square
 from core import EEGTParams, boundary_nodes, mesh_stats, untangle_and_smooth
-from core.live import LiveSession, live_params, uv_region
-from core.uv_layout import weld_uv
+from core.run.live import LiveSession, live_params, uv_region
+from core.uv.uv_layout import weld_uv
 
 
 def _centre_nodes(p: np.ndarray, k: int = 1) -> np.ndarray:

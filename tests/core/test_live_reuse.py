@@ -1,4 +1,4 @@
-"""What a live drag keeps between frames (core.live_reuse): each piece the same bits as
+"""What a live drag keeps between frames (core.run.live_reuse): each piece the same bits as
 measuring again, and frames after a far grab still equal cold runs."""
 
 from __future__ import annotations
@@ -7,12 +7,12 @@ import numpy as np
 
 from bench.meshgen import jittered_square
 from core import EEGTParams, mesh_stats, untangle_and_smooth
-from core.distance import NearestBoundary
-from core.engine_numpy import NumpyEngine
-from core.live import LiveSession, live_params
-from core.live_reuse import AnchorSearch, GivenQuality, StillDistances
-from core.targets import prepare_targets
-from core.topology import free_nodes
+from core.eegt.distance import NearestBoundary
+from core.eegt.engine_numpy import NumpyEngine
+from core.mesh.topology import free_nodes
+from core.metrics.targets import prepare_targets
+from core.run.live import LiveSession, live_params
+from core.run.live_reuse import AnchorSearch, GivenQuality, StillDistances
 
 
 def _brute(bx, by, qx, qy):

@@ -1,4 +1,4 @@
-"""Quality measures (core.measures): hand-computed single elements, degenerate input, a
+"""Quality measures (core.metrics.measures): hand-computed single elements, degenerate input, a
 per-element reference on real meshes, mesh summaries and threshold counts."""
 
 import math
@@ -8,8 +8,8 @@ import pytest
 from meshdata import load2d
 
 from core import MEASURE_NAMES, quality, summaries, summarize
-from core.mean_ratio import group_quality
-from core.measures import (
+from core.metrics.mean_ratio import group_quality
+from core.metrics.measures import (
     ASPECT_MAX,
     MEASURES,
     face_values,
@@ -362,7 +362,7 @@ def test_measures_are_the_same_bits_without_avx512_and_on_baseline_simd():
     root = Path(__file__).resolve().parents[2]
     child = (
         "import hashlib, sys\nsys.path.insert(0, sys.argv[1])\n"
-        "from core import MEASURE_NAMES, quality\nfrom core.obj_io import read_obj\n"
+        "from core import MEASURE_NAMES, quality\nfrom core.mesh.obj_io import read_obj\n"
         "h = hashlib.sha256()\n"
         "for name in ('polygon_voronoi', 'mixed_quad_tri', 'tri_two_holes'):\n"
         "    p, f = read_obj(f'{sys.argv[1]}/tests/data/{name}.obj')\n"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import core.optimize.mesh_tables as mt
-from core.csr import bincount_csr
+from core.mesh.csr import bincount_csr
 from core.optimize.mesh_tables import mesh_tables, reference_sizes
 
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from core import mesh_stats, quality, summaries
-from core.faces import as_faceset
-from core.mean_ratio import group_quality
-from core.quality import folded_area
+from core.mesh.faces import as_faceset
+from core.metrics.face_quality import folded_area
+from core.metrics.mean_ratio import group_quality
 
 
 def tri_closed_form(p: np.ndarray) -> float:
@@ -188,7 +188,7 @@ def test_mean_ratio_against_targets_is_scale_safe():
 
 @pytest.mark.parametrize("n", [3, 4, 5, 9])
 def test_mean_ratio_in_pieces_is_the_whole_group_bit_for_bit(monkeypatch, n):
-    import core.mean_ratio as mr
+    import core.metrics.mean_ratio as mr
 
     rng = np.random.default_rng(n)
     X, Y = rng.random((n, 1001)), rng.random((n, 1001))  # some faces inverted, some not

@@ -1,5 +1,5 @@
 """Target 'reference': each face pulled towards its own shape in a mesh of the same
-topology (core.reference_shapes), so a graded or anisotropic mesh keeps its grading."""
+topology (core.metrics.reference_shapes), so a graded or anisotropic mesh keeps its grading."""
 
 import numpy as np
 import pytest
@@ -7,9 +7,9 @@ from meshdata import load, load2d
 
 from bench.meshgen import boundary_layer_annulus, moved_body
 from core import EEGTParams, mesh_stats, quality, untangle_and_smooth, untangle_and_smooth_3d
-from core.faces import as_faceset
-from core.measures import face_values
-from core.reference_shapes import reference_targets, reference_to_2d
+from core.mesh.faces import as_faceset
+from core.metrics.measures import face_values
+from core.metrics.reference_shapes import reference_targets, reference_to_2d
 
 REFERENCE = EEGTParams(target="reference")
 

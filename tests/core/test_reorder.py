@@ -1,4 +1,4 @@
-"""Z-order renumbering of large meshes (core.reorder): the same faces, memory locality, and
+"""Z-order renumbering of large meshes (core.mesh.reorder): the same faces, memory locality, and
 a pipeline run that is exactly the run of the renumbered mesh, mapped back."""
 
 import threading
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from meshdata import load2d
 
-import core.pipeline as pipeline
-import core.side_by_side
+import core.host.side_by_side
+import core.run.pipeline as pipeline
 from core import EEGTParams, mesh_stats, untangle_and_smooth
-from core.faces import FaceSet
-from core.reorder import scattered, z_order
+from core.mesh.faces import FaceSet
+from core.mesh.reorder import scattered, z_order
 
 
 def _shuffled(p: np.ndarray, fs: FaceSet, seed: int = 0) -> tuple[np.ndarray, FaceSet]:
@@ -73,7 +73,7 @@ def test_large_mesh_runs_as_its_z_ordered_renumbering_bit_for_bit(monkeypatch, b
     params = EEGTParams(untangle="eegt+local")
     monkeypatch.setattr(pipeline, "REORDER_MIN_FACES", 1_000)
     if side_by_side:
-        monkeypatch.setattr(core.side_by_side, "SIDE_BY_SIDE_FROM", 1_000)
+        monkeypatch.setattr(core.host.side_by_side, "SIDE_BY_SIDE_FROM", 1_000)
     threads = []
     monkeypatch.setattr(pipeline, "z_order", lambda *a: threads.append(
         threading.current_thread().name) or z_order(*a))

@@ -1,11 +1,11 @@
-"""core.run_scoped.RunScoped: the first run in switches the process's setting, the last one
+"""core.host.run_scoped.RunScoped: the first run in switches the process's setting, the last one
 out puts it back: nested, raising and concurrent runs included."""
 
 import threading
 
 import pytest
 
-from core.run_scoped import RunScoped
+from core.host.run_scoped import RunScoped
 
 
 def _recorder():

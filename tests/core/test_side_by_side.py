@@ -1,12 +1,12 @@
-"""core.side_by_side: two pieces of host set-up at once for large work, one after the
+"""core.host.side_by_side: two pieces of host set-up at once for large work, one after the
 other for small, with both ended and exceptions raised in the caller's thread."""
 
 import threading
 
 import pytest
 
-import core.side_by_side as sbs
-from core.side_by_side import SIDE_BY_SIDE_FROM, side_by_side
+import core.host.side_by_side as sbs
+from core.host.side_by_side import SIDE_BY_SIDE_FROM, side_by_side
 
 
 def test_small_work_runs_both_pieces_in_the_callers_thread_in_order():

@@ -4,14 +4,14 @@ one along the boundary): the face between them is flat, and only sliding can ope
 The grid is 5 x 5 unit quads on [0, 5]^2 (nodes 0..35, row by row); its input boundary
 polyline is the square, so every result boundary node must lie exactly on the square, the
 four corners must stay bit-identical and the boundary nodes must keep their order. These
-checks are written here from the square, not with core.boundary."""
+checks are written here from the square, not with core.eegt.boundary."""
 
 import numpy as np
 import pytest
 
 from core import EEGTParams, mesh_stats, untangle_and_smooth
-from core.boundary import SlideView, boundary_motion
-from core.faces import as_faceset
+from core.eegt.boundary import SlideView, boundary_motion
+from core.mesh.faces import as_faceset
 from core.optimize import GlobalOptions, untangle_global
 
 N = 5  # quads per side

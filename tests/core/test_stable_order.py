@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.csr import bincount_csr, stable_order
+from core.mesh.csr import bincount_csr, stable_order
 
 CASES = [(n, dtype) for n in (2, 255, 65536, 65537, 1 << 20, 1 << 31, 1 << 32, 1 << 40, 1 << 63)
          for dtype in (np.int64, np.uint64, np.int32, np.uint32) if n - 1 <= np.iinfo(dtype).max]

@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from meshdata import load2d
 
-from core.faces import as_faceset
+from core.mesh.faces import as_faceset
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize import energy as energy_mod
 from core.optimize.energy import FoldoverEnergy, LiftEnergy, _corner_limit
 from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
 from core.optimize.state import LIMIT_MARGIN, TRIALS, State, skipped_trials
-from core.pipeline import free_nodes
+from core.run.pipeline import free_nodes
 
 
 def test_skipped_trials_halves_down_to_the_first_step_under_the_limit():

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from meshdata import load2d
 
-from core.faces import as_faceset
+from core.mesh.faces import as_faceset
+from core.metrics.targets import corner_factors, prepare_targets
 from core.optimize.energy import LiftEnergy
 from core.optimize.submesh import Neighbourhood, active_submesh
-from core.pipeline import free_nodes
-from core.targets import corner_factors, prepare_targets
+from core.run.pipeline import free_nodes
 
 
 def dense_submesh(groups, free, seed, rings):

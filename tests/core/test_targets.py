@@ -1,4 +1,4 @@
-"""Per-face target shapes (core.targets): quality against targets, the generalised stretch,
+"""Per-face target shapes (core.metrics.targets): quality against targets, the generalised stretch,
 fallbacks, bad input, and whole runs towards anisotropic targets."""
 
 from __future__ import annotations
@@ -17,9 +17,10 @@ from core import (
     untangle_and_smooth,
     untangle_and_smooth_3d,
 )
-from core.faces import as_faceset
-from core.mean_ratio import group_quality
-from core.targets import (
+from core.eegt.transform import _stretch, _target_stretch, transform_polygon
+from core.mesh.faces import as_faceset
+from core.metrics.mean_ratio import group_quality
+from core.metrics.targets import (
     FLAT_TOL,
     THIN_TOL,
     corner_factors,
@@ -28,7 +29,6 @@ from core.targets import (
     regular_polygon,
     stretch_gain,
 )
-from core.transform import _stretch, _target_stretch, transform_polygon
 
 EEGT_ONLY = EEGTParams(untangle="eegt", polish_iterations=0, lift_rounds=0)
 

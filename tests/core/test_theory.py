@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from core.mean_ratio import group_quality
-from core.transform import _stretch, stretch_radius, transform_polygon
+from core.eegt.transform import _stretch, stretch_radius, transform_polygon
+from core.metrics.mean_ratio import group_quality
 
 
 def polygon_quality(p: np.ndarray) -> float:

@@ -8,11 +8,12 @@ import math
 import numpy as np
 from meshdata import spun_hole
 
-from core import EEGTParams, pipeline, untangle_and_smooth
+from core import EEGTParams, untangle_and_smooth
 from core.optimize import untangle_budget, untangle_global
 from core.optimize.energy import FoldoverEnergy
 from core.optimize.options import GlobalOptions
 from core.optimize.stages import BUDGET_NODES
+from core.run import pipeline
 
 
 def test_budget_is_as_given_up_to_budget_nodes_then_scales_with_the_width():

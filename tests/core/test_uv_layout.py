@@ -1,4 +1,4 @@
-"""UV welding, islands and their orientation (core.uv_layout)."""
+"""UV welding, islands and their orientation (core.uv.uv_layout)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from uvdata import grid_uv
 
-from core.uv_layout import components, corner_loops, island_faces, weld_uv
+from core.uv.uv_layout import components, corner_loops, island_faces, weld_uv
 
 
 def test_weld_one_island_shares_every_vertex():

@@ -1,4 +1,4 @@
-"""Overlapping faces inside UV islands (core.uv_overlap)."""
+"""Overlapping faces inside UV islands (core.uv.uv_overlap)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 from uvdata import grid_uv
 
 from core import as_faceset
-from core.uv_layout import weld_uv
-from core.uv_overlap import candidate_pairs, overlapping_faces, triangles_overlap
+from core.uv.uv_layout import weld_uv
+from core.uv.uv_overlap import candidate_pairs, overlapping_faces, triangles_overlap
 
 
 def test_touching_triangles_do_not_overlap_crossing_ones_do():
@@ -73,7 +73,7 @@ def test_fold_with_consistent_orientation_is_found():
     p[10] = (1.5, 1.9)
     faces = [[k, k + 1, k + 7, k + 6] for k in range(5)]
     fs = as_faceset(faces, 12)
-    from core.uv_layout import signed_face_areas
+    from core.uv.uv_layout import signed_face_areas
     assert (signed_face_areas(p, fs) > 0).all()
     p[5] = (0.5, 0.3)  # the last quad lies on the first one
     p[11] = (0.5, 0.8)

@@ -1,4 +1,4 @@
-"""Untangling UV maps island by island (core.uv_untangle)."""
+"""Untangling UV maps island by island (core.uv.uv_untangle)."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 from uvdata import grid_uv, jitter_interior
 
 from core import EEGTParams, boundary_nodes
-from core.uv_layout import weld_uv
-from core.uv_untangle import flipped_faces, measure, untangle_uv
+from core.uv.uv_layout import weld_uv
+from core.uv.uv_untangle import flipped_faces, measure, untangle_uv
 
 
 def tangled(n=9, seam_x=4.0, amount=0.7, seed=0, mirror_right=False, warp=False):

@@ -67,7 +67,8 @@ summary["backend"] = backend
 fell_back = backend.startswith("numpy")
 # Once the extension ships an OpenCL engine, a device being present means it must be used.
 pkg = bpy.types.MESH_OT_eegt_untangle_smooth.__module__.split(".operators")[0]
-summary["has_opencl_engine"] = importlib.util.find_spec(f"{pkg}.core.engine_opencl") is not None
+engine_spec = importlib.util.find_spec(f"{pkg}.core.eegt.engine_opencl")
+summary["has_opencl_engine"] = engine_spec is not None
 if mode == "device" and summary["has_opencl_engine"]:
     assert not fell_back, f"OpenCL device and engine present, but it fell back: {backend!r}"
 if fell_back:

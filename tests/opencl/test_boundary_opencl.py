@@ -9,14 +9,14 @@ import pytest
 from meshdata import load2d
 
 from bench.fuzz import make_case
-from core import backends
-from core.boundary import boundary_motion
-from core.engine_numpy import NumpyEngine
-from core.faces import as_faceset
+from core.eegt import backends
+from core.eegt.boundary import boundary_motion
+from core.eegt.engine_numpy import NumpyEngine
+from core.mesh.faces import as_faceset
 from core.params import EEGTParams
-from core.pipeline import untangle_and_smooth
+from core.run.pipeline import untangle_and_smooth
 
-eo = pytest.importorskip("core.engine_opencl")
+eo = pytest.importorskip("core.eegt.engine_opencl")
 ort = pytest.importorskip("core.opencl.runtime")
 
 

@@ -12,16 +12,16 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from meshdata import load2d, spun_hole
 
-from core.faces import as_faceset
+from core.mesh.faces import as_faceset
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize.energy import LiftEnergy
 from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
 from core.optimize.state import TICK_EVERY, State
 from core.params import EEGTParams
-from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
+from core.run.pipeline import Cancelled, free_nodes, untangle_and_smooth
 
-eo = pytest.importorskip("core.engine_opencl")
+eo = pytest.importorskip("core.eegt.engine_opencl")
 ort = pytest.importorskip("core.opencl.runtime")
 lo = pytest.importorskip("core.optimize.solver_opencl")
 from solver_recorder import Recorder  # noqa: E402  (same folder)
@@ -148,7 +148,7 @@ def test_device_solver_failure_falls_back_to_host(monkeypatch):
 def test_auto_small_mesh_numpy_steps_device_global_stage_same_result(solver):
     """'auto' under AUTO_ENGINE_MIN_FACES: NumPy EEGT steps, device global stage, and still
     the NumPy run's points bit for bit; at or above it, the OpenCL engine."""
-    from core import backends
+    from core.eegt import backends
 
     p, fs, _groups, _free = mesh("quad_hole")
     ra = untangle_and_smooth(p, fs, backend="numpy")
@@ -223,7 +223,7 @@ def test_big_ngon_and_single_free_node(solver, what):
 def test_auto_small_mesh_on_a_gpu_runs_numpy_and_says_so(solver, monkeypatch):
     """With a GPU device, 'auto' on a small mesh is NumPy throughout (the device solver is
     for CPU devices) and its name does not claim OpenCL."""
-    from core import backends
+    from core.eegt import backends
 
     monkeypatch.setattr(backends, "_device_is_cpu", lambda: False)
     p, fs, _groups, _free = mesh("quad_hole")
@@ -250,7 +250,7 @@ def test_on_a_gpu_every_global_solve_runs_on_the_parallel_kernels(solver, monkey
 def test_target_factors_bit_identical_to_host(solver):
     """Per-corner target factors (the faces' own shapes stretched 1 x 2): the device solver
     reads them per corner, the same bits as the host, both energies."""
-    from core.targets import corner_factors
+    from core.metrics.targets import corner_factors
 
     p, fs, groups, free = mesh("mixed_quad_tri")
     T = p[fs.indices] * [1.0, 2.0]
@@ -267,7 +267,7 @@ def test_target_factors_bit_identical_to_host(solver):
 
 
 def test_harmonic_restart_bit_identical_to_host(solver):
-    """The restart from the harmonic start (core.harmonic, host) runs its global stage on
+    """The restart from the harmonic start (core.run.harmonic, host) runs its global stage on
     the device solver: the same points as the NumPy run."""
     pts, groups = spun_hole(8, 48, 270, True)
     prm = EEGTParams(max_untangle_iterations=200, polish_iterations=50)

@@ -14,15 +14,15 @@ from hypothesis import HealthCheck, assume, given, settings
 from meshdata import load2d
 
 from bench.meshgen import holed_square
-from core.faces import as_faceset
+from core.mesh.faces import as_faceset
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize.energy import FoldoverEnergy, LiftEnergy
 from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
 from core.optimize.state import State
-from core.pipeline import free_nodes
+from core.run.pipeline import free_nodes
 
-eo = pytest.importorskip("core.engine_opencl")
+eo = pytest.importorskip("core.eegt.engine_opencl")
 ort = pytest.importorskip("core.opencl.runtime")
 lp = pytest.importorskip("core.optimize.solver_parallel")
 from solver_recorder import Recorder  # noqa: E402  (same folder)

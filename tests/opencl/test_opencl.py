@@ -17,15 +17,15 @@ from hypothesis import strategies as st
 from meshdata import load, load2d
 
 from bench.fuzz import merge_faces
-from core import backends
-from core.engine_numpy import NumpyEngine
-from core.faces import FaceSet, as_faceset
+from core.eegt import backends
+from core.eegt.engine_numpy import NumpyEngine
+from core.mesh.faces import FaceSet, as_faceset
+from core.metrics.targets import prepare_targets
 from core.params import EEGTParams
-from core.pipeline import Cancelled, free_nodes, untangle_and_smooth
-from core.pipeline_3d import untangle_and_smooth_3d
-from core.targets import prepare_targets
+from core.run.pipeline import Cancelled, free_nodes, untangle_and_smooth
+from core.run.pipeline_3d import untangle_and_smooth_3d
 
-eo = pytest.importorskip("core.engine_opencl")
+eo = pytest.importorskip("core.eegt.engine_opencl")
 ort = pytest.importorskip("core.opencl.runtime")
 ocb = pytest.importorskip("core.opencl.build")
 

@@ -22,19 +22,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import fpmath
+from .. import fpmath
+from ..choices import OPENCL_ENGINE
+from ..mesh.csr import bincount_csr
+from ..mesh.faces import FaceSet
+from ..metrics.face_quality import Stats
+from ..metrics.mean_ratio import corner_constants
+from ..metrics.targets import Targets
+from ..opencl.build import NCACHE, program_size
+from ..opencl.runtime import ENV_DEVICE, list_devices, runtime, select_device, unavailable_reason
+from ..params import EEGTParams
 from .boundary import SLIDE_GAP, SLIDE_REACH, BoundaryMotion
-from .choices import OPENCL_ENGINE
-from .csr import bincount_csr
 from .distance import NearestBoundary
 from .engine_numpy import DIST_FLOOR, NumpyEngine, edge_lengths
-from .faces import FaceSet
-from .mean_ratio import corner_constants
-from .opencl.build import NCACHE, program_size
-from .opencl.runtime import ENV_DEVICE, list_devices, runtime, select_device, unavailable_reason
-from .params import EEGTParams
-from .quality import Stats
-from .targets import Targets
 from .transform import stretch_radius
 
 __all__ = [
@@ -113,7 +113,8 @@ def _roundup(n: int, m: int) -> int:
 
 
 class OpenCLEngine:
-    """Holds one run's mesh state on an OpenCL device; same interface as NumpyEngine."""
+    """Holds one run's mesh state on an OpenCL device: an `Engine` (core/eegt/engine.py), the
+    same bits as NumpyEngine."""
 
     name = OPENCL_ENGINE
 

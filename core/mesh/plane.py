@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fpmath import add_reduce
 from .faces import FaceSet, as_faceset
-from .fpmath import add_reduce
 from .points import check_points
 from .topology import EdgeInfo, checked_edges, free_nodes
 

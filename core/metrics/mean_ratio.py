@@ -3,19 +3,19 @@
 For corner k of an n-gon, J_k = [p_{k+1} - p_k, p_{k-1} - p_k] and M_k = J_k W_n^{-1}, with
 W_n the same corner of the regular n-gon; q_k = 2 det(M_k) / |M_k|_F^2 and q(E) = mean_k q_k,
 or 0 when any det(J_k) <= 0 (inverted, reflex corner, degenerate). With per-face targets
-(core.targets) W_k is the target's corner instead: quality 1 = similar to the target.
+(core.metrics.targets) W_k is the target's corner instead: quality 1 = similar to the target.
 
 The engines call `group_quality` on the run's normalised coordinates (no extra pass); the
-public functions (core.quality, core.measures) use the scale-safe `scaled_group_quality`:
-a face whose squared edges would overflow or underflow is computed again at unit size (a
-power of two: exact), so every finite scale reads the same.
+public functions (core.metrics.face_quality, core.metrics.measures) use the scale-safe
+`scaled_group_quality`: a face whose squared edges would overflow or underflow is computed
+again at unit size (a power of two: exact), so every finite scale reads the same.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .fpmath import regular_corner
+from ..fpmath import regular_corner
 
 __all__ = [
     "SAFE_HI",

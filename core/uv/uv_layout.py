@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .faces import FaceSet, faces_from_csr
+from ..mesh.faces import FaceSet, faces_from_csr
 
 # Blender's STD_UV_CONNECT_LIMIT: two corners of one vertex whose UVs differ by less than
 # this in u and in v are one UV vertex for its island tools (Select Linked, UV islands).

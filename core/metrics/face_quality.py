@@ -1,6 +1,6 @@
 """Mean-ratio quality of a mesh (docs/method.md 3): per face (`quality`, or another measure
-of core.measures by name) and the paper's table columns (`Stats`, `mesh_stats`). The formula
-itself, per arity group, is core.mean_ratio's.
+of core.metrics.measures by name) and the paper's table columns (`Stats`, `mesh_stats`). The formula
+itself, per arity group, is core.metrics.mean_ratio's.
 """
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .faces import as_faceset
-from .fpmath import add_reduce
+from ..fpmath import add_reduce
+from ..mesh.faces import as_faceset
+from ..mesh.points import check_points
 from .mean_ratio import scaled_group_quality
 from .measures import face_values
-from .points import check_points
 from .targets import corner_vectors, prepare_targets
 
 __all__ = [
@@ -55,10 +55,10 @@ def stats_of(qs: list[np.ndarray]) -> Stats:
 
 def quality(points, faces, targets=None, measure: str = "mean_ratio") -> np.ndarray:
     """(F,) mean ratio per face in the given face order, 0 for inverted faces; or another
-    measure of `core.measures` (ValueError for an unknown name).
+    measure of `core.metrics.measures` (ValueError for an unknown name).
 
     `targets`: None (against the regular polygon), or an (n_corners, 2) array of per-corner
-    target points in the faces' corner order (or a prepared core.targets.Targets): the mean
+    target points in the faces' corner order (or a prepared core.metrics.targets.Targets): the mean
     ratio against each face's target shape (1 = similar to it); the mean ratio only.
     Every measure is scale-safe: a mesh times 2^k reads the same bits at any finite scale."""
     if measure != "mean_ratio":

@@ -30,10 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import fpmath
-from .faces import FaceSet, as_faceset
-from .params import BOUNDARY_MODES
-from .topology import EdgeInfo, free_nodes
+from .. import fpmath
+from ..mesh.faces import FaceSet, as_faceset
+from ..mesh.topology import EdgeInfo, free_nodes
+from ..params import BOUNDARY_MODES
 
 __all__ = [
     "BOUNDARY_MODES",

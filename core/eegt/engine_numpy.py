@@ -10,15 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..choices import NUMPY_ENGINE
+from ..fpmath import add_reduce, power
+from ..mesh.faces import FaceSet
+from ..metrics.face_quality import Stats, stats_of
+from ..metrics.mean_ratio import group_quality
+from ..metrics.targets import Targets
+from ..params import EEGTParams
 from .boundary import BoundaryMotion
-from .choices import NUMPY_ENGINE
 from .distance import NearestBoundary
-from .faces import FaceSet
-from .fpmath import add_reduce, power
-from .mean_ratio import group_quality
-from .params import EEGTParams
-from .quality import Stats, stats_of
-from .targets import Targets
 from .transform import edge_sum, group_transform_delta
 
 __all__ = ["DIST_FLOOR", "NumpyEngine", "distance_weight", "quality_weight", "step_size", "stitch"]
@@ -118,7 +118,8 @@ _UNIFORM = object()  # distance weights without anchors: f = 1 for every element
 
 
 class NumpyEngine:
-    """Holds the mesh state of one run; the pipeline drives it iteration by iteration."""
+    """Holds the mesh state of one run (an `Engine`, core/eegt/engine.py); the pipeline drives
+    it iteration by iteration."""
 
     name = NUMPY_ENGINE
 
@@ -131,9 +132,7 @@ class NumpyEngine:
         targets: Targets | None = None,
         motion: BoundaryMotion | None = None,
     ):
-        """`targets`: per-face target shapes prepared for `faces` (None: regular polygons);
-        `motion`: a boundary mode's movable nodes, sliding nodes and distance anchors (None:
-        `free` moves, the other used nodes are the anchors: the paper)."""
+        """The arguments are an `EngineInput`'s (core/eegt/engine.py)."""
         self._setup(points, faces, free, params, None, targets, motion)
 
     def restarted(self, points: np.ndarray, distance=None,
@@ -142,7 +141,7 @@ class NumpyEngine:
         are here: it shares the nearest-boundary search (its queries are exact, whatever
         element centroids it was refined for) instead of building another one. `distance`:
         a search over the fixed nodes at their new positions when some moved (an object whose
-        `query(qx, qy)` returns the exact nearest distances, core.live). `keep_quality`:
+        `query(qx, qy)` returns the exact nearest distances, core.run.live). `keep_quality`:
         faces whose nodes all keep this engine's bits keep their quality (a face's quality
         depends on its own corners only: the same bits), the others are measured."""
         engine = NumpyEngine.__new__(NumpyEngine)
@@ -316,7 +315,7 @@ class NumpyEngine:
 
     def _slide(self, moving: np.ndarray) -> None:
         """Sliding nodes that moved go to the nearest point of their curve within their
-        reach (core.boundary.Slide.project), from the parameters before the step."""
+        reach (core.eegt.boundary.Slide.project), from the parameters before the step."""
         s = self.slide
         np.copyto(self.tau_old, self.tau)
         sel = np.flatnonzero(moving[s.node])

@@ -10,27 +10,27 @@ from functools import partial
 
 import numpy as np
 
-from .backends import make_engine, start_warm_up
-from .boundary import BoundaryMotion, SlideView, boundary_motion
-from .faces import FaceSet, as_faceset
-from .fpmath import add_reduce
+from ..eegt.backends import make_engine, start_warm_up
+from ..eegt.boundary import BoundaryMotion, SlideView, boundary_motion
+from ..fpmath import add_reduce
+from ..host.heap import keep_freed_memory
+from ..host.page_advice import pages_for_run
+from ..host.side_by_side import side_by_side
+from ..mesh.faces import FaceSet, as_faceset
+from ..mesh.points import check_points
+from ..mesh.reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
+from ..mesh.topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
+from ..metrics.face_quality import Stats, folded_area, mesh_stats
+from ..metrics.mean_ratio import group_quality
+from ..metrics.reference_shapes import reference_targets
+from ..metrics.targets import Targets, corner_factors, prepare_targets, target_fallback_note
+from ..optimize import GlobalOptions, lift_min_quality, stops, untangle_budget, untangle_global
+from ..optimize.device import solver_for
+from ..optimize.mesh_tables import Factors
+from ..optimize.sampled import Sampled
+from ..optimize.submesh import Neighbourhood
+from ..params import EEGTParams
 from .harmonic import harmonic_positions
-from .heap import keep_freed_memory
-from .mean_ratio import group_quality
-from .optimize import GlobalOptions, lift_min_quality, stops, untangle_budget, untangle_global
-from .optimize.device import solver_for
-from .optimize.mesh_tables import Factors
-from .optimize.sampled import Sampled
-from .optimize.submesh import Neighbourhood
-from .page_advice import pages_for_run
-from .params import EEGTParams
-from .points import check_points
-from .quality import Stats, folded_area, mesh_stats
-from .reference_shapes import reference_targets
-from .reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
-from .side_by_side import side_by_side
-from .targets import Targets, corner_factors, prepare_targets, target_fallback_note
-from .topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -117,14 +117,14 @@ def untangle_and_smooth(
     not strictly convex) fall back to the regular polygon (`n_target_fallback`).
 
     `reference_points` with `params.target == "reference"`: an (N, 2) mesh of the same
-    topology whose faces' shapes are the targets (core.reference_shapes: counterclockwise,
+    topology whose faces' shapes are the targets (core.metrics.reference_shapes: counterclockwise,
     finite; its inverted faces fall back to the regular polygon).
 
     `params.boundary`: "fixed" (boundary nodes never move), "slide" (they move along the
     input boundary polyline; corners above `params.feature_angle`, pinned and non-manifold
-    nodes stay), "free" (only pinned and non-manifold nodes stay); see core.boundary.
+    nodes stay), "free" (only pinned and non-manifold nodes stay); see core.eegt.boundary.
 
-    `edges`: the faces' edge analysis (core.topology.EdgeInfo) when the caller has it
+    `edges`: the faces' edge analysis (core.mesh.topology.EdgeInfo) when the caller has it
     cheaper than the run's own sort of every corner (a mesh's edge table:
     `EdgeInfo.from_table`); it must describe these faces. None: computed.
     """
@@ -183,7 +183,8 @@ class _Mesh:
 
 def _face_count(faces) -> int:
     """How many faces the caller gave, before any check (0 when it cannot be told): the
-    run's page advice and its freed memory depend on it (core/page_advice.py, core/heap.py)."""
+    run's page advice and its freed memory depend on it (core/host/page_advice.py,
+    core/host/heap.py)."""
     if isinstance(faces, FaceSet):
         return faces.n_faces
     try:
@@ -232,7 +233,7 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
 
 def _renumbers(fs: FaceSet, n_nodes: int) -> bool:
     """Whether a run with regular targets and a fixed boundary works renumbered in Z order
-    (core.reorder: memory locality): a large mesh numbered without locality."""
+    (core.mesh.reorder: memory locality): a large mesh numbered without locality."""
     return fs.n_faces >= REORDER_MIN_FACES and scattered(fs, n_nodes)
 
 

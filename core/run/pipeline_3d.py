@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .faces import as_faceset
-from .params import EEGTParams
+from ..mesh.faces import as_faceset
+from ..mesh.plane import PlaneFrame
+from ..mesh.points import check_points
+from ..mesh.topology import EdgeInfo, free_nodes
+from ..metrics.reference_shapes import reference_to_2d
+from ..params import EEGTParams
 from .pipeline import EEGTResult, Progress, normalisation, untangle_and_smooth
-from .plane import PlaneFrame
-from .points import check_points
-from .reference_shapes import reference_to_2d
-from .topology import EdgeInfo, free_nodes
 
 __all__ = ["untangle_and_smooth_3d"]
 

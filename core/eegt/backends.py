@@ -11,18 +11,19 @@ import threading
 
 import numpy as np
 
-from .boundary import BoundaryMotion
-from .choices import (
+from ..choices import (
     BACKEND,
     HYBRID,
     NUMPY_ENGINE,
     SMALL_ON_GPU,
     ids,
 )
+from ..mesh.faces import FaceSet
+from ..metrics.targets import Targets
+from ..params import EEGTParams
+from .boundary import BoundaryMotion
+from .engine import Engine, EngineInput
 from .engine_numpy import NumpyEngine
-from .faces import FaceSet
-from .params import EEGTParams
-from .targets import Targets
 
 __all__ = ["AUTO_ENGINE_MIN_FACES", "BACKENDS", "HYBRID", "SMALL_ON_GPU", "make_engine",
            "start_warm_up", "uses_device_engine", "warm_up"]
@@ -43,7 +44,7 @@ def _opencl_engine_class():
 
 def _device_is_cpu() -> bool:
     """Whether the OpenCL device runs would use is a CPU (pocl and the like)."""
-    from .opencl.runtime import runtime
+    from ..opencl.runtime import runtime
 
     return runtime().is_cpu
 
@@ -61,9 +62,9 @@ def warm_up(backend: str, max_face_size: int = 4) -> str | None:
     if cls is None:
         return why
     try:
+        from ..opencl.runtime import runtime
+        from ..optimize.solver_parallel import device_solver
         from . import engine_opencl
-        from .opencl.runtime import runtime
-        from .optimize.solver_parallel import device_solver
 
         rt = runtime()
         rt.program(engine_opencl.program_size(max_face_size))
@@ -98,10 +99,10 @@ def make_engine(
     params: EEGTParams,
     targets: Targets | None = None,
     motion: BoundaryMotion | None = None,
-):
-    """Build the engine for `backend`; returns (engine, name actually used). `targets`:
-    per-face target shapes prepared for `faces` (None: regular polygons); `motion`: the
-    boundary mode's sliding nodes and distance anchors (None: the paper's fixed boundary)."""
+) -> tuple[Engine, str]:
+    """Build the engine for `backend`; returns (engine, name actually used). The arguments
+    are an `EngineInput`'s (core/eegt/engine.py)."""
+    setup = EngineInput(points, faces, free, params, targets, motion)
     if backend not in BACKENDS:
         raise ValueError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend in ("opencl", "auto"):
@@ -109,10 +110,10 @@ def make_engine(
         if cls is not None and not uses_device_engine(backend, faces.n_faces):
             # the global stage's device solver runs on CPU devices only (one work-item)
             name = HYBRID if _device_is_cpu() else SMALL_ON_GPU
-            return NumpyEngine(points, faces, free, params, targets, motion), name
+            return NumpyEngine(*setup), name
         if cls is not None:
             try:
-                return cls(points, faces, free, params, targets, motion), cls.name
+                return cls(*setup), cls.name
             except RuntimeError as exc:  # device refused the kernels: fall back, say why
                 why = f"OpenCL backend failed ({exc}); using NumPy"
         name = NUMPY_ENGINE
@@ -121,6 +122,6 @@ def make_engine(
             import warnings
 
             warnings.warn(why, RuntimeWarning, stacklevel=3)
-        engine = NumpyEngine(points, faces, free, params, targets, motion)
+        engine = NumpyEngine(*setup)
         return engine, f"{name} ({why})" if why else name
-    return NumpyEngine(points, faces, free, params, targets, motion), NUMPY_ENGINE
+    return NumpyEngine(*setup), NUMPY_ENGINE

@@ -16,7 +16,7 @@ from itertools import pairwise
 
 import numpy as np
 
-from .csr import morton, ragged_arange
+from ..mesh.csr import morton, ragged_arange
 
 __all__ = ["NearestBoundary"]
 

@@ -1,4 +1,4 @@
-"""What a live drag keeps between its frames (core.live), each piece the same bits as
+"""What a live drag keeps between its frames (core.run.live), each piece the same bits as
 measuring again: the still fixed nodes' distances per element, the grabbed nodes' distances
 where they can matter, the quality of the faces as the caller has them.
 """
@@ -7,11 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .distance import NearestBoundary
-from .faces import FaceSet
-from .mean_ratio import scaled_group_quality
-from .quality import Stats, stats_of
-from .targets import Targets
+from ..eegt.distance import NearestBoundary
+from ..mesh.faces import FaceSet
+from ..metrics.face_quality import Stats, stats_of
+from ..metrics.mean_ratio import scaled_group_quality
+from ..metrics.targets import Targets
 
 __all__ = ["AnchorSearch", "GivenQuality", "StillDistances"]
 

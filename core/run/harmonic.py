@@ -16,9 +16,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .faces import FaceSet
-from .fpmath import add_reduce
-from .topology import boundary_nodes
+from ..fpmath import add_reduce
+from ..mesh.faces import FaceSet
+from ..mesh.topology import boundary_nodes
 
 __all__ = ["HARMONIC_MAX_ITER", "HARMONIC_TICK", "HARMONIC_TOL", "harmonic_positions"]
 

@@ -7,10 +7,10 @@ expensive, those faults cost more than the arithmetic on the arrays: on a virtua
 that hands its free memory back to the host (free page reporting works in 2 MB blocks), the
 host backs every such page again on first touch. On the 2-core development VM, the 1.06M
 Triangle mesh's `auto` run spent 2.9 s of system time with the advice and 1.1-2.0 s without
-(docs/scale.md). Heap memory advised once stays advised, so the choice must be made before
-the mesh's arrays exist: importing `core` turns the advice off for the process, unless the
-environment sets EEGT_HUGE_PAGES=1. Only the mapping changes: every result is the same bits
-either way (tested).
+(docs/scale.md). Heap memory advised once stays advised, so the choice is made before a
+run's own arrays exist: the first run turns the advice off for the process (importing `core`
+changes nothing), unless the environment sets EEGT_HUGE_PAGES=1. Only the mapping changes:
+every result is the same bits either way (tested).
 
 Large runs are the exception. From HUGE_PAGES_FROM_FACES faces on, a run's arrays are tens
 of MB each and their page tables no longer fit the caches, so with ordinary pages every
@@ -22,6 +22,7 @@ ordinary, 9.5-11.3 s advised). Such a run turns the advice on for its duration
 
 from __future__ import annotations
 
+import functools
 import importlib
 import os
 import threading
@@ -83,11 +84,18 @@ def prefer_ordinary_pages() -> bool | None:
     return huge_page_advice()
 
 
+@functools.cache
+def _first_run() -> bool | None:
+    """The process's setting, made once, when the first run starts."""
+    return prefer_ordinary_pages()
+
+
 @contextmanager
 def pages_for_run(n_faces: int) -> Iterator[None]:
-    """The advice on inside the block for a run of at least HUGE_PAGES_FROM_FACES faces (the
-    process's setting back when the last such run ends, also on an exception); smaller runs
-    leave it as it is."""
+    """The process's setting made on the first run (`prefer_ordinary_pages`); the advice on
+    inside the block for a run of at least HUGE_PAGES_FROM_FACES faces (the process's setting
+    back when the last such run ends, also on an exception); smaller runs leave it as it is."""
+    _first_run()
     if _SETTER is None or n_faces < HUGE_PAGES_FROM_FACES:
         yield
         return

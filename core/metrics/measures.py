@@ -1,8 +1,8 @@
 """Element quality measures engineers check, for polygons of any arity (docs/measures.md).
 
 Every measure is computed per arity group on (n, F) corner coordinates, like the mean ratio
-of `core.quality` (reused here, docs/method.md 3). Notation for corner k of an n-gon with
-nodes p_0..p_{n-1} counterclockwise: e1 = p_{k+1} - p_k, e2 = p_{k-1} - p_k; its interior
+of `core.metrics.face_quality` (reused here, docs/method.md 3). Notation for corner k of an
+n-gon with nodes p_0..p_{n-1} counterclockwise: e1 = p_{k+1} - p_k, e2 = p_{k-1} - p_k; its interior
 angle is the counterclockwise turn from e1 to e2, so a corner of a valid convex polygon has
 0 < angle < 180 deg, a reflex corner more than 180 and a corner of an inverted element too.
 theta_e = 180 (n - 2) / n is the regular polygon's interior angle.
@@ -33,10 +33,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .faces import FaceSet, as_faceset
-from .fpmath import add_reduce, atan2, regular_corner, tan_pi_over
+from ..fpmath import add_reduce, atan2, regular_corner, tan_pi_over
+from ..mesh.faces import FaceSet, as_faceset
+from ..mesh.points import check_points
 from .mean_ratio import scaled_group_quality, unit_scaled
-from .points import check_points
 
 __all__ = [
     "ASPECT_MAX",
@@ -90,7 +90,7 @@ def _corners(X: np.ndarray, Y: np.ndarray):
     UX, UY, _, pos = _edges(*unit_scaled(X, Y))
     PX = np.roll(UX, 1, axis=0)  # edge k-1, e2 = -edge k-1
     PY = np.roll(UY, 1, axis=0)
-    sin = PX * UY - PY * UX  # det[e1, e2], the same sign as core.quality's corner det
+    sin = PX * UY - PY * UX  # det[e1, e2], the same sign as core.metrics.face_quality's corner det
     cos = -(UX * PX + UY * PY)
     return sin, cos, pos & np.roll(pos, 1, axis=0)
 

@@ -28,12 +28,12 @@ from typing import Any
 
 import numpy as np
 
-from . import choices
-from .faces import FaceSet
-from .params import EEGTParams
-from .pipeline import untangle_and_smooth
-from .quality import Stats, quality, stats_of
-from .topology import boundary_nodes, free_nodes, pinched_faces
+from .. import choices
+from ..mesh.faces import FaceSet
+from ..mesh.topology import boundary_nodes, free_nodes, pinched_faces
+from ..metrics.face_quality import Stats, quality, stats_of
+from ..params import EEGTParams
+from ..run.pipeline import untangle_and_smooth
 from .uv_layout import UVLayout, island_faces, signed_face_areas
 from .uv_overlap import overlapping_faces
 

@@ -9,11 +9,11 @@ input (EEGT untangling while a movable face is inverted, then EEGT smoothing, at
 iterations each, the best iterate kept, never worse than its input), except that a frame may
 stop early when its time budget is spent and that a frame which ends still tangled returns its
 last iterate (where the next frame's untangling goes on) instead of the best one. Meshes the
-cold run renumbers for memory locality (``core.reorder``, 50 000 faces and more in a
+cold run renumbers for memory locality (``core.mesh.reorder``, 50 000 faces and more in a
 scattered numbering) run in their own order here.
 
 ``uv_region`` cuts what a UV drag moves out of a welded UV map: the grabbed UV vertices'
-islands (or their selected faces), mirrored islands reflected as ``core.uv_untangle`` does.
+islands (or their selected faces), mirrored islands reflected as ``core.uv.uv_untangle`` does.
 docs/live.md describes the tools built on it.
 """
 
@@ -24,16 +24,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .distance import NearestBoundary
-from .engine_numpy import NumpyEngine, edge_lengths
-from .faces import FaceSet, as_faceset
+from ..eegt.distance import NearestBoundary
+from ..eegt.engine_numpy import NumpyEngine, edge_lengths
+from ..mesh.faces import FaceSet, as_faceset
+from ..mesh.topology import checked_edges, free_nodes
+from ..metrics.face_quality import Stats
+from ..metrics.targets import prepare_targets
+from ..params import EEGTParams
+from ..uv.uv_layout import UVLayout, island_faces
 from .live_reuse import AnchorSearch, GivenQuality, StillDistances
-from .params import EEGTParams
 from .pipeline import as_given, frozen_faces, normalisation
-from .quality import Stats
-from .targets import prepare_targets
-from .topology import checked_edges, free_nodes
-from .uv_layout import UVLayout, island_faces
 
 __all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession", "UVRegion",
            "live_params", "uv_region"]
@@ -246,7 +246,7 @@ def uv_region(layout: UVLayout, grab: np.ndarray, selected: np.ndarray | None = 
               points: np.ndarray | None = None) -> UVRegion:
     """The region a drag of the UV vertices ``grab`` moves: the faces of their islands (scope
     "selection": only the ``selected`` faces of them); UV vertices used by a face outside the
-    region and ``pins`` stay, as in ``core.uv_untangle.untangle_uv``. ``points``: the UV
+    region and ``pins`` stay, as in ``core.uv.uv_untangle.untangle_uv``. ``points``: the UV
     vertices' current values (default the layout's). ValueError (one line) when a grabbed
     UV vertex is in no usable island."""
     grab = np.unique(np.asarray(grab, dtype=np.int64).ravel())

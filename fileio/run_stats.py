@@ -3,7 +3,7 @@
 
 A run result (``operators/shared/result.py``) has a ``before`` and an ``after`` stats dict; their
 keys depend on the kind of run: ``mesh`` (core ``Stats`` of the mesh's faces) or ``uv``
-(``core.uv_untangle.UVMeasures`` of the UV faces). This description is what the result's
+(``core.uv.uv_untangle.UVMeasures`` of the UV faces). This description is what the result's
 sidebar store and panel section (``operators/shared/result.py``) and the batch summary (a file's
 totals and its CSV columns, ``batch/summary.py``) read. Plain data: no bpy, no NumPy (the
 batch package imports it outside Blender).

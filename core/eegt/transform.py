@@ -4,7 +4,7 @@ Stretch: p'_k = p_k + lambda n_k with n_k = sum_{r=1..R} rot(p_{k+r} - p_{k-r}),
 R = ceil((n - 1) / 4), rot(x, y) = (y, -x). Shrink: scale p' about the (preserved) vertex
 centroid so the mean edge length (default) or the absolute area is that of the input.
 
-Towards a target shape (core.targets): with T the face's centred target nodes (2 x n), P its
+Towards a target shape (core.metrics.targets): with T the face's centred target nodes (2 x n), P its
 centred nodes and M = P T^T (T T^T)^-1 the least-squares affine map target -> face, split M
 into its conformal part S and anti-conformal part A = M - S; the stretch is
 n_k = c_n (S - A) t_k = c_n cof(M) t_k, c_n = sum_{r=1..R} 2 sin(2 pi r / n). For the regular
@@ -47,7 +47,7 @@ def _stretch(X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _target_stretch(X: np.ndarray, Y: np.ndarray, target) -> tuple[np.ndarray, np.ndarray]:
     """Generalised stretch vectors c_n cof(M) t_k of every corner towards the group's targets
-    (`target`: a core.targets.GroupTargets), as (n, F) arrays."""
+    (`target`: a core.metrics.targets.GroupTargets), as (n, F) arrays."""
     n = X.shape[0]
     CX = X.sum(axis=0)
     CX /= n
@@ -91,7 +91,7 @@ def group_transform_delta(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(DX, DY) = p^s - p for every corner of an (n, F) group, lam an (F,) array: the stretch
     p' = p + lambda n_k, then the shrink about the centroid (OpenCL: transform_moves). `target`
-    (a core.targets.GroupTargets) stretches towards per-face targets, None as the paper."""
+    (a core.metrics.targets.GroupTargets) stretches towards per-face targets, None as the paper."""
     NX, NY = _stretch(X, Y) if target is None else _target_stretch(X, Y, target)
     NX *= lam
     NY *= lam  # now lambda n_k
@@ -133,8 +133,8 @@ def transform_polygon(points, lam: float, scaling: str = "edge", target=None) ->
     X, Y = p[:, 0:1].copy(), p[:, 1:2].copy()
     gt = None
     if target is not None:
-        from .faces import as_faceset
-        from .targets import prepare_targets
+        from ..mesh.faces import as_faceset
+        from ..metrics.targets import prepare_targets
 
         gt = prepare_targets(target, as_faceset([list(range(len(p)))], len(p))).groups[0]
     DX, DY = group_transform_delta(X, Y, np.array([lam], dtype=np.float64), scaling, gt)

@@ -2,8 +2,8 @@
 
 Runs may nest (the 3D pipeline calls the 2D one) and may run in threads at once (a batch
 in one process), and the setting belongs to the whole process: the first run to enter
-switches it, the last one to leave puts it back, also when a run raises. core/page_advice.py
-(NumPy's huge-page advice) and core/heap.py (the allocator's trim thresholds) share this.
+switches it, the last one to leave puts it back, also when a run raises. core/host/page_advice.py
+(NumPy's huge-page advice) and core/host/heap.py (the allocator's trim thresholds) share this.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 own shape in a mesh of the same topology, e.g. the undeformed mesh of a mesh deformed by a
 moving body, so that grading and anisotropy (boundary layers) survive the untangling.
 
-The reference's per-corner points become the per-face targets of core.targets (only each
+The reference's per-corner points become the per-face targets of core.metrics.targets (only each
 face's shape counts: a reference in other units, moved or turned, gives the same targets).
 A reference face that is inverted, degenerate or not strictly convex falls back to the
 regular polygon (`n_target_fallback`). A reference of the wrong size, with non-finite
@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .faces import FaceSet, as_faceset
-from .fpmath import add_reduce, float64_copy
-from .plane import PlaneFrame
+from ..fpmath import add_reduce, float64_copy
+from ..mesh.faces import FaceSet, as_faceset
+from ..mesh.plane import PlaneFrame
 
 __all__ = ["reference_targets", "reference_to_2d"]
 

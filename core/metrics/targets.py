@@ -10,7 +10,7 @@ consumer needs, per arity group as (n, F_n) arrays aligned with `ArityGroup.node
   U_k upper triangular). The mean ratio needs U_k only up to scale: (cos_a, inv_sin) =
   (u01 / u00, u00 / u11), which are (cos a, 1 / sin a) for the regular n-gon;
 - the centred, normalised target nodes T (2 x n) and c_n K, K = T^T (T T^T)^-1, for the
-  generalised stretch (core.transform).
+  generalised stretch (core.eegt.transform).
 
 A face whose target has a non-finite value, a corner with det(W_k) <= FLAT_TOL |w1| |w2|
 (concave, straight, degenerate or clockwise) or a width below THIN_TOL of its length falls
@@ -25,8 +25,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import fpmath
-from .faces import FaceSet, as_faceset
+from .. import fpmath
+from ..mesh.faces import FaceSet, as_faceset
 
 __all__ = [
     "FLAT_TOL",

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .faces import FaceSet
+from ..mesh.faces import FaceSet
 
 __all__ = ["candidate_pairs", "face_triangles", "overlapping_faces", "triangles_overlap"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .fpmath import float64_copy
+from ..fpmath import float64_copy
 
 __all__ = ["check_points"]
 

@@ -1,0 +1,22 @@
+"""The mesh model: faces grouped by arity, their edges and boundary, node orders, the plane
+a 3D mesh lies in, input checks and OBJ files. Every other room builds on this one; it
+imports only `core.fpmath`.
+
+- faces by arity (`faces.FaceSet`, `as_faceset`, `faces_from_csr`); flat tables
+  (`csr.ragged_arange`, `csr.bincount_csr`, Morton orders).
+- edges, boundary and free nodes (`topology.EdgeInfo`, `edge_info`, `boundary_nodes`,
+  `free_nodes`); cache-friendly renumbering of large meshes (`reorder`).
+- input points (`points.check_points`); the plane of a 3D mesh (`plane.PlaneFrame`).
+- OBJ and legacy VTK files (`obj_io`).
+"""
+
+from .csr import bincount_csr, ragged_arange
+from .faces import ArityGroup, FaceSet, as_faceset, faces_from_csr
+from .obj_io import read_legacy_vtk, read_obj, write_obj
+from .plane import PlaneFrame, open_edges
+from .points import check_points
+from .topology import EdgeInfo, boundary_nodes, edge_info, free_nodes
+
+__all__ = ["ArityGroup", "EdgeInfo", "FaceSet", "PlaneFrame", "as_faceset", "bincount_csr",
+           "boundary_nodes", "check_points", "edge_info", "faces_from_csr", "free_nodes",
+           "open_edges", "ragged_arange", "read_legacy_vtk", "read_obj", "write_obj"]

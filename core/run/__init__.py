@@ -1,0 +1,18 @@
+"""A whole run: Algorithm 1 (untangle, smooth, keep the best iterate) with the global
+stage, on a plane in 2D or 3D, in one go or frame by frame under a cursor.
+
+- 2D: `pipeline.untangle_and_smooth` -> `EEGTResult`; 3D (a planar mesh in space):
+  `pipeline_3d.untangle_and_smooth_3d`.
+- the harmonic start for large folds: `harmonic.harmonic_positions`.
+- live drags, a frame at a time: `live.LiveSession`, `LiveFrame`; what a frame reuses from
+  the last: `live_reuse`.
+"""
+
+from .harmonic import harmonic_positions
+from .live import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, live_params, uv_region
+from .pipeline import Cancelled, EEGTResult, frozen_note, untangle_and_smooth
+from .pipeline_3d import untangle_and_smooth_3d
+
+__all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "Cancelled", "EEGTResult", "LiveFrame",
+           "LiveSession", "frozen_note", "harmonic_positions", "live_params",
+           "untangle_and_smooth", "untangle_and_smooth_3d", "uv_region"]

@@ -1,0 +1,19 @@
+"""UV maps: the layout (welded UV vertices, islands), overlaps between faces, and the run
+per island (`uv_untangle.untangle_uv`, docs/uv.md).
+"""
+
+from .uv_layout import UVLayout, components, corner_loops, island_faces, weld_uv
+from .uv_overlap import overlapping_faces
+from .uv_untangle import (
+    UVMeasures,
+    UVResult,
+    flipped_faces,
+    measure,
+    overlaps_around,
+    tangled_faces,
+    untangle_uv,
+)
+
+__all__ = ["UVLayout", "UVMeasures", "UVResult", "components", "corner_loops", "flipped_faces",
+           "island_faces", "measure", "overlapping_faces", "overlaps_around", "tangled_faces",
+           "untangle_uv", "weld_uv"]
