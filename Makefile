@@ -6,7 +6,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: venv numpy2 test test-fast lint test-core test-blender test-compat e2e demo build bench bench-paper bench-batch clean
+.PHONY: venv numpy2 test test-fast lint test-core test-blender test-bench test-compat e2e demo build bench bench-paper bench-batch clean
 
 venv: $(STAMP)
 
@@ -34,6 +34,11 @@ test-core: $(STAMP)
 
 test-blender: $(STAMP)
 	$(PY) -m pytest -q -m blender tests
+
+# The tests of the benchmark scripts alone (tests/bench, marked bench); test, test-fast and
+# test-core run them with the rest.
+test-bench: $(STAMP)
+	$(PY) -m pytest -q -m bench tests/bench
 
 # Pure zip + per-platform zips bundling pyopencl for CPython 3.11/3.13 (downloads into
 # build/wheels), each checked with Blender's own validator.

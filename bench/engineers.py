@@ -10,7 +10,7 @@ Run `python -m bench.engineers [--out docs] [--no-pictures]`. Prints markdown ta
    whose cyclic order changed, boundary vertices that slid.
 2. Free boundary: our three-quads-around-a-triangle case (Mesquite's fixed-flag convention:
    only boundary nodes, six pinned, the triangle's three start at one point) and the
-   paper's Table 1 mesh (read from ../shared, third-party) with its fixed flags as pins
+   paper's Table 1 mesh (third-party, not bundled: docs/testing.md) with its fixed flags as pins
    (= the fixed mode) and without.
 3. Reference target shapes: naca_deform with naca_undeformed as reference, and a generated
    boundary-layer O-grid (sizes 1:257, aspect up to 105) whose body moved: regular vs

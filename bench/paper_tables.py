@@ -2,14 +2,14 @@
 
 Run: `python -m bench.paper_tables [--quick] [--out out/bench] [--readme]`.
 
-For each mesh (the paper's Table 1 mesh read in place from ../shared, and tests/data OBJs)
-prints one markdown table with rows: the paper's published values (Tables 1-3), our
-paper-faithful mode (`EEGTParams.paper()`), our defaults (`EEGTParams()`), Blender's Smooth
-Vertices (factor 0.5, repeat 100, boundary vertices not selected, i.e. fixed) measured in the
-same run through the PyPI bpy module, and quoted peer values (measured earlier on the same
-machine class, not rerun here). Quality is the mean ratio (docs/method.md 3,
-`core.mesh_stats`) on the 2D coordinates; seconds are medians of
-repeated runs (3, or 1 with --quick; paper mode on naca_deform and two_holes_twist runs once).
+For each mesh (the paper's Table 1 mesh, third-party and read in place: docs/testing.md; and
+the tests/data OBJs) prints one markdown table with rows: the paper's published values (Tables
+1-3), our paper-faithful mode (`EEGTParams.paper()`), our defaults (`EEGTParams()`), Blender's
+Smooth Vertices (factor 0.5, repeat 100, boundary vertices not selected, i.e. fixed) measured
+in the same run through the PyPI bpy module, and quoted peer values (measured earlier on the
+same machine class, not rerun here). Quality is the mean ratio (docs/method.md 3,
+`core.mesh_stats`) on the 2D coordinates; seconds are medians of repeated runs (3, or 1 with
+--quick; paper mode on naca_deform and two_holes_twist runs once).
 Then the robustness table (`bench.robustness`), and before/after PNGs in --out.
 `--readme` also rewrites the block between `<!-- results:begin -->` and
 `<!-- results:end -->` in README.md and writes docs/results.md.
@@ -100,7 +100,7 @@ PEERS = {
 }
 
 MESHES = [
-    ("table1", "Table 1 mesh: Mesquite's `hole_in_square_tanglap` (read in place from ../shared)"),
+    ("table1", "Table 1 mesh: Mesquite's `hole_in_square_tanglap` (third-party, not bundled: docs/testing.md)"),
     ("quad_hole", "quad_hole (our remake of Sec. 4.1)"),
     ("naca_deform", "naca_deform (Sec. 4.2, Table 2)"),
     ("tri_two_holes", "tri_two_holes (Sec. 4.3, Table 3)"),

@@ -1,7 +1,8 @@
 """Robustness: untangling success over runs with tiny random perturbations of interior nodes.
 
-naca_deform's untangling is chaotic under round-off (issue 6): each run adds Gaussian noise of
-1e-9 of the domain size to the free nodes. Prints one markdown row per (mesh, parameters).
+naca_deform's untangling is chaotic under round-off (docs/usage.md: round-off changes the
+iteration count): each run adds Gaussian noise of 1e-9 of the domain size to the free nodes.
+Prints one markdown row per (mesh, parameters).
 """
 
 from __future__ import annotations

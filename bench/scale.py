@@ -4,8 +4,8 @@ Each run is a child process (its own peak RSS) that loads a cached mesh (build/m
 made once by `bench.meshgen`) and runs `untangle_and_smooth` with default parameters.
 Prints a markdown table (elements, backend, seconds, q_min, q_avg, inverted, iterations, peak
 RSS, nanoseconds per element) and, with --plot, a picture of time against size beside the
-peer's measured point (the single-threaded foldover-free untangler: 45 s at 1M triangles, on
-this machine class, issue 11).
+peer's measured point (the single-threaded foldover-free untangler: 45 s at 1M triangles,
+measured earlier on this machine class, not rerun: README.md, "Results").
 
 Run: `make bench` (or `python -m bench.scale [--sizes 100000 1000000] [--plot docs/scale.png]`).
 """
@@ -27,7 +27,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "build" / "meshes"
-PEER = {"label": "foldover-free untangler (C++, 1 thread; issue 11)", "elements": 1_058_228,
+PEER = {"label": "foldover-free untangler (C++, 1 thread; quoted)", "elements": 1_058_228,
         "seconds": 45.0, "q_min": 0.654, "q_avg": 0.968}
 
 

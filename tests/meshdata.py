@@ -1,5 +1,5 @@
 """The tests' one mesh loader: the OBJ meshes of tests/data and the paper's Table 1 mesh,
-read in place from ../shared/meshes (third-party, never copied here).
+read in place (third-party, never copied here: docs/testing.md says where it is looked for).
 
 Every test folder imports it as ``meshdata`` (tests/conftest.py puts tests/ on ``sys.path``);
 a child Python process started by a test gets it with ``tests`` on its PYTHONPATH. The meshes

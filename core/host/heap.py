@@ -4,8 +4,8 @@ A large run frees and allocates arrays of tens of MB all the time. glibc hands t
 memory at the top of its heap back to the system once it passes the trim threshold (at most
 64 MB under its own rules), so the next array maps fresh pages again, and mapping is slow
 where the kernel must zero and, on a virtual machine, the host must back every new page. On
-the 2-core development VM the 1.06M NumPy run spent 2.6-3.0 s of system time so; with the
-freed memory kept, 1.0-1.3 s (docs/scale.md). A run therefore raises the trim threshold and
+a 2-core virtual machine (docs/scale.md) the 1.06M NumPy run spent 2.6-3.0 s of system time
+so; with the freed memory kept, 1.0-1.3 s. A run therefore raises the trim threshold and
 grows the heap in large steps while it works; when the last run ends it hands the free
 memory back (`malloc_trim`) and sets the thresholds to the values glibc's own rule settles
 at for arrays of this size. Only addresses change: every result is the same bits (tested).

@@ -5,9 +5,9 @@ more. A large run makes and drops many such arrays (set-up tables, per-corner pa
 device tables), so fresh pages are mapped throughout. Where a fresh 2 MB page is
 expensive, those faults cost more than the arithmetic on the arrays: on a virtual machine
 that hands its free memory back to the host (free page reporting works in 2 MB blocks), the
-host backs every such page again on first touch. On the 2-core development VM, the 1.06M
-Triangle mesh's `auto` run spent 2.9 s of system time with the advice and 1.1-2.0 s without
-(docs/scale.md). Heap memory advised once stays advised, so the choice is made before a
+host backs every such page again on first touch. On a 2-core virtual machine (docs/scale.md),
+the 1.06M Triangle mesh's `auto` run spent 2.9 s of system time with the advice and 1.1-2.0 s
+without. Heap memory advised once stays advised, so the choice is made before a
 run's own arrays exist: the first run turns the advice off for the process (importing `core`
 changes nothing), unless the environment sets EEGT_HUGE_PAGES=1. Only the mapping changes:
 every result is the same bits either way (tested).

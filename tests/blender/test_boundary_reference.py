@@ -9,6 +9,7 @@ import os
 
 import numpy as np
 import pytest
+from oracles import boundary_loops
 
 from bench.meshgen import boundary_layer_annulus, moved_body
 from core.mesh.obj_io import write_obj
@@ -19,28 +20,9 @@ pytestmark = pytest.mark.blender
 
 
 def loops_of(obj) -> list[np.ndarray]:
-    """Boundary loops of a mesh object (faces counterclockwise: interior on the left)."""
-    me = obj.data
-    nxt = {}
-    und: dict[tuple[int, int], list[tuple[int, int]]] = {}
-    for poly in me.polygons:
-        vs = list(poly.vertices)
-        for a, b in zip(vs, vs[1:] + vs[:1]):
-            und.setdefault((min(a, b), max(a, b)), []).append((a, b))
-    for pairs in und.values():
-        if len(pairs) == 1:
-            nxt[pairs[0][0]] = pairs[0][1]
-    seen, loops = set(), []
-    for s in nxt:
-        if s in seen:
-            continue
-        loop, v = [], s
-        while v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = nxt[v]
-        loops.append(np.array(loop))
-    return loops
+    """Boundary loops of a mesh object (faces counterclockwise: interior on the left), by the
+    tests' oracle (tests/oracles.py)."""
+    return boundary_loops([list(poly.vertices) for poly in obj.data.polygons])
 
 
 def polyline_distance(q: np.ndarray, a: np.ndarray) -> np.ndarray:

