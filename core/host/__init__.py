@@ -6,13 +6,12 @@ last run ends; none is made at import, and none changes a result's bits.
   EEGT_HUGE_PAGES=1): docs/scale.md.
 - freed memory kept while a large run works: `heap.keep_freed_memory`.
 - the shared counter behind both: `run_scoped.RunScoped`; two pieces of set-up at once:
-  `side_by_side.side_by_side`.
+  `side_by_side.side_by_side` (the module keeps the name; the face does not export the
+  function, so `core.host.side_by_side` stays the module).
 """
 
 from .heap import keep_freed_memory
 from .page_advice import pages_for_run, prefer_ordinary_pages
 from .run_scoped import RunScoped
-from .side_by_side import side_by_side
 
-__all__ = ["RunScoped", "keep_freed_memory", "pages_for_run", "prefer_ordinary_pages",
-           "side_by_side"]
+__all__ = ["RunScoped", "keep_freed_memory", "pages_for_run", "prefer_ordinary_pages"]
