@@ -31,6 +31,7 @@ from ..optimize.sampled import Sampled
 from ..optimize.submesh import Neighbourhood
 from ..params import EEGTParams
 from .harmonic import harmonic_positions
+from .hopeless import hopeless_nodes, hopeless_note
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -142,6 +143,8 @@ def untangle_and_smooth(
         except _CancelRun:
             status, message = "cancelled", "cancelled: mesh left unchanged"
         tg = mesh.targets
+        if mesh.hopeless:
+            message += f"; {mesh.hopeless}"
         if tg is not None and tg.n_fallback:
             message += f"; {target_fallback_note(tg.n_fallback)}"
         out, before, after, status, message = _never_worse(mesh, run, order, status, message)
@@ -179,6 +182,7 @@ class _Mesh:
     motion: BoundaryMotion | None
     frozen: np.ndarray
     renumbered: tuple[Renumbering, FaceSet] | None
+    hopeless: str = ""  # why certified-hopeless nodes are held (core/run/hopeless.py)
 
 
 def _face_count(faces) -> int:
@@ -227,8 +231,16 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
         free = motion.movable
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
-    frozen = frozen_faces(as_given(p, fs, center, scale), fs, free)
-    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered)
+    given = as_given(p, fs, center, scale)
+    # free nodes that no position can fix (neighbours all fixed) are held: their inverted
+    # faces are frozen from the start instead of costing the optimizer minutes
+    held = hopeless_nodes(given, fs, free, None if motion is None else ~motion.sliding)
+    if held.nodes.size:
+        free = free.copy()
+        free[held.nodes] = False
+    frozen = frozen_faces(given, fs, free)
+    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered,
+                 hopeless_note(held))
 
 
 def _renumbers(fs: FaceSet, n_nodes: int) -> bool:

@@ -243,8 +243,12 @@ def readme_shots(before):
 
 def big_impossible_mesh(n=120, seed=1):
     """A jittered n x n triangle grid (tangled but fixable) plus a separate U-star component
-    (data/u_star_impossible.obj: cannot be untangled), so the run goes on to the iteration
-    limit: long enough to press ESC in the middle of it."""
+    (data/u_star_impossible.obj: cannot be untangled) with its first triangle split at a
+    second free vertex, so the run goes on to the iteration limit: long enough to press ESC
+    in the middle of it. The split matters: the plain U-star's centre has only fixed
+    neighbours, so the run recognises it as hopeless before it starts and ends at once
+    (core/run/hopeless.py); with a free neighbour it is not examined, and the optimizer
+    spends its whole budget on it (about a minute of core time on the component alone)."""
     rng = np.random.default_rng(seed)
     g = np.arange(n, dtype=np.float64)
     x, y = np.meshgrid(g, g)
@@ -255,6 +259,9 @@ def big_impossible_mesh(n=120, seed=1):
     tris = np.concatenate([np.stack([i, i + 1, i + n + 1], 1), np.stack([i, i + n + 1, i + n], 1)])
     uv, uf = meshcheck.read_obj(os.path.join(os.path.dirname(__file__), "data",
                                              "u_star_impossible.obj"))
+    a, b, c = (int(k) for k in uf[0])  # (centre, 0, 1): split at its centroid, vertex 9
+    uv = np.concatenate([uv, uv[[a, b, c]].mean(axis=0, keepdims=True)])
+    uf = [np.array([a, b, 9]), np.array([b, c, 9]), np.array([c, a, 9]), *uf[1:]]
     uv = uv + np.array([n + 5.0, 0.0, 0.0])  # to the right of the grid
     faces = tris.tolist() + [(f + len(v)).tolist() for f in uf]
     me = bpy.data.meshes.new("BigImpossible")
