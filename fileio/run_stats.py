@@ -4,8 +4,9 @@
 A run result (``operators/shared/result.py``) has a ``before`` and an ``after`` stats dict; their
 keys depend on the kind of run: ``mesh`` (core ``Stats`` of the mesh's faces) or ``uv``
 (``core.uv.uv_untangle.UVMeasures`` of the UV faces). This description is what the result's
-sidebar store and panel section (``operators/shared/result.py``) and the batch summary (a file's
-totals and its CSV columns, ``batch/summary.py``) read. Plain data: no bpy, no NumPy (the
+sidebar store and panel section (``operators/shared/result.py``), the report lines of a run
+(``operators/shared/report_lines.py``) and the batch summary (a file's totals and its CSV
+columns, ``batch/summary.py``) read. Plain data: no bpy, no NumPy (the
 batch package imports it outside Blender).
 """
 
@@ -27,6 +28,12 @@ class Stat:
     label: str  # its name in the sidebar
     combine: str  # how the objects of one file add up: sum | min | max | mean (face-weighted)
     integer: bool = False  # a count (else a float, written with 6 decimals in the CSV)
+    word: str = ""  # its name in a report line, when not its name
+
+    @property
+    def report_word(self) -> str:
+        """Its name in a report line."""
+        return self.word or self.name
 
 
 @dataclass(frozen=True)
@@ -76,8 +83,9 @@ UV = Kind("uv", (
     Stat("flipped", "flipped", "Flipped", "sum", integer=True),
     Stat("inverted", "inverted", "Inverted", "sum", integer=True),
     Stat("overlapping", "overlapping", "Overlapping", "sum", integer=True),
-    Stat("distortion_mean", "distortion_mean", "Distortion mean", "mean"),
-    Stat("distortion_worst", "distortion_worst", "Distortion worst", "min"),
+    Stat("distortion_mean", "distortion_mean", "Distortion mean", "mean",
+         word="distortion mean"),
+    Stat("distortion_worst", "distortion_worst", "Distortion worst", "min", word="worst"),
 ), column_prefix="uv_")
 KINDS: dict[str, Kind] = {k.name: k for k in (MESH, UV)}
 

@@ -24,6 +24,7 @@ from ...core.run import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, 
 from ...core.uv import weld_uv
 from ..mesh import mesh_io, runner
 from ..shared import modes
+from ..shared.refusal import refusal
 from ..uv import uv_mesh
 
 
@@ -62,7 +63,7 @@ class UVDrag:
                  *, radius: float = 0.0, grab: np.ndarray | None = None, use_pins: bool = True,
                  target_shape: str = "3D", scope: str = "tangles", sync: bool = True,
                  select_mode: str = "VERTEX"):
-        why = runner.refusal(obj)
+        why = refusal(obj)
         if why:
             raise ValueError(why)
         me = obj.data

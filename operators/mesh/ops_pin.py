@@ -14,7 +14,8 @@ import numpy as np
 from bpy.props import BoolProperty
 
 from ..shared import modes
-from . import mesh_io, runner
+from ..shared.refusal import refusal
+from . import mesh_io
 
 
 def set_pins(obj: bpy.types.Object, mask: np.ndarray, value: bool) -> str | None:
@@ -56,7 +57,7 @@ class _PinBase(modes.TargetObjectsMixin):
         everything = bool(getattr(self, "all", False))
         todo = []
         for obj in objs:
-            why = runner.refusal(obj)
+            why = refusal(obj)
             if why:
                 self.report({"WARNING"}, f"{obj.name}: {why}")
                 continue

@@ -11,7 +11,10 @@ from bpy.props import BoolProperty, FloatProperty
 from ...core import MEASURES, faces_from_csr, quality, summarize
 from ...core.mesh import PlaneFrame
 from ...core.metrics import goodness
+from ...fileio.run_stats import MESH
 from ..shared import modes
+from ..shared.refusal import refusal
+from ..shared.report_lines import stat_values
 from ..ui import props
 from . import mesh_io, runner
 
@@ -149,9 +152,8 @@ def _stats_line(obj: bpy.types.Object, q: np.ndarray, measure: str = "mean_ratio
         return f"{obj.name}: {summary.line()}"
     s = runner.stats_from_quality(q)
     poor = MEASURES["mean_ratio"].threshold(3)  # the same for every arity
-    return (f"{obj.name}: {q.size} faces, {s['n_inverted']} inverted, q_min {s['q_min']:.3f}, "
-            f"q_avg {s['q_avg']:.3f}, q_max {summary.max:.3f}, {summary.n_beyond} below "
-            f"{poor:g}")
+    return (f"{obj.name}: {q.size} faces, {stat_values(MESH, s, counts_first=True)}, "
+            f"q_max {summary.max:.3f}, {summary.n_beyond} below {poor:g}")
 
 
 class MESH_OT_eegt_analyze(modes.TargetObjectsMixin, bpy.types.Operator):
@@ -174,8 +176,8 @@ class MESH_OT_eegt_analyze(modes.TargetObjectsMixin, bpy.types.Operator):
         written = False
         if self.store and found:
             for obj, q in found:
-                if runner.refusal(obj):
-                    self.report({"WARNING"}, f"{obj.name}: {runner.refusal(obj)}")
+                if refusal(obj):
+                    self.report({"WARNING"}, f"{obj.name}: {refusal(obj)}")
                     continue
                 err = write_quality_attributes(obj, q, self.measure)
                 if err:

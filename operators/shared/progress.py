@@ -8,6 +8,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from ...fileio.run_stats import MESH
+from .report_lines import stat_values
+
 Progress = Callable[[int, str, Any], bool]
 
 PRINT_EVERY = 1.0  # seconds: the longest a background run stays silent between progress lines
@@ -22,10 +25,8 @@ def printer(name: str, clock: Callable[[], float] = time.monotonic) -> Progress:
         now = clock()
         if phase != state["phase"] or iteration % 100 == 0 or now - state["at"] >= PRINT_EVERY:
             state["phase"], state["at"] = phase, now
-            print(f"EEGT {name}: {phase} iteration {iteration}: "
-                  f"inverted {getattr(stats, 'n_inverted', '?')}, "
-                  f"q_min {getattr(stats, 'q_min', float('nan')):.3f}, "
-                  f"q_avg {getattr(stats, 'q_avg', float('nan')):.3f}", flush=True)
+            print(f"EEGT {name}: {phase} iteration {iteration}: {stat_values(MESH, stats)}",
+                  flush=True)
         return True
 
     return progress

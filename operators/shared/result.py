@@ -4,8 +4,9 @@
 object and the one sidebar section that shows it.
 
 ``runner.ObjectResult`` (kind "mesh") and ``uv_runner.UVObjectResult`` (kind "uv") add their
-own fields and their report line. No bpy import here: the store and the panel section only
-set and read properties of the object and draw into a given layout.
+own fields and their report line (its stats part from ``report_lines.py``). No bpy import
+here: the store and the panel section only set and read properties of the object and draw
+into a given layout.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from ...fileio.run_stats import KINDS, Kind
+from .report_lines import stat_change, stat_changes
 
 OK_STATUSES = ("valid", "untangled")
 # The property group (props.py / uv_props.py) that keeps an object's last run, per kind.
@@ -58,6 +60,10 @@ class RunResult:
 
     def line(self) -> str:  # pragma: no cover - each kind words its own
         raise NotImplementedError
+
+    def stats_text(self) -> str:
+        """The stats part of the report line: each stat of the kind, before -> after."""
+        return stat_changes(self.stats_kind(), self.before, self.after)
 
     def unchanged_line(self, name: str) -> str | None:
         """The report line of a run that changed nothing (an error or a cancel), else None;
@@ -116,8 +122,7 @@ def draw_last_run(layout: Any, obj: Any, kind: str, title: str) -> None:
         return
     for s in KINDS[kind].stats:
         b, a = getattr(lr, f"{s.name}_before"), getattr(lr, f"{s.name}_after")
-        col.label(text=f"{s.label}: {b} -> {a}" if s.integer else
-                  f"{s.label}: {b:.3f} -> {a:.3f}")
+        col.label(text=stat_change(s, b, a, f"{s.label}:"))
     if hasattr(lr, "untangle_iterations"):
         its = f"{lr.untangle_iterations} + {lr.smooth_iterations}"
         if lr.global_iterations:

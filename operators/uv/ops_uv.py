@@ -3,8 +3,9 @@
 
 Both act on the active UV map of every mesh in Edit Mode (multi-object editing too), on the
 faces selected in the UV editor (UV Sync Selection on: the mesh selection; off: the UV
-selection of the faces shown). Untangle & Smooth UVs runs like the mesh operator (its
-``EEGTRunMixin``: redo panel, progress, ESC, one undo step, one report line per object).
+selection of the faces shown). Untangle & Smooth UVs runs like the mesh operator
+(``shared/run_mixin.py``'s ``EEGTRunMixin``: redo panel, progress, ESC, one undo step, one
+report line per object).
 """
 
 from __future__ import annotations
@@ -18,9 +19,8 @@ from bpy.props import BoolProperty, EnumProperty
 
 from ...core.uv import flipped_faces, overlapping_faces, weld_uv
 from ..mesh import mesh_io
-from ..mesh.ops_untangle import EEGTRunMixin
 from ..shared import modes
-from ..shared.result import store_last_run
+from ..shared.run_mixin import EEGTRunMixin
 from ..ui import props
 from . import uv_mesh, uv_props, uv_runner
 
@@ -91,9 +91,7 @@ class UV_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
         """Write the UV maps back (Object Mode), report one line per object."""
         results = [uv_runner.apply(o, j) for o, j in zip(objs, jobs, strict=True)]
         LAST_RESULTS[:] = results
-        for obj, res in zip(objs, results, strict=True):
-            store_last_run(obj, res)
-            self.report({"INFO"} if res.ok else {"WARNING"}, res.line())
+        self._report_results(objs, results)
         return {"FINISHED"} if any(r.written for r in results) else {"CANCELLED"}
 
 

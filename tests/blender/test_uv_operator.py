@@ -357,7 +357,7 @@ def test_select_flipped_and_overlapping(bpy, ext):
 
 
 def test_worker_runs_uv_jobs_and_cancels(bpy, ext):
-    ops = ext.operators.mesh.ops_untangle
+    ops = ext.operators.shared.run_mixin
     uvr = ext.operators.uv.uv_runner
     obj = tangled(bpy, "sphere", "jitter")
     uv0 = uv_values(obj)

@@ -10,12 +10,12 @@ pytestmark = pytest.mark.blender
 
 
 def test_worker_runs_and_cancels(bpy, ext):
-    ops = ext.operators.mesh.ops_untangle
+    ops = ext.operators.shared.run_mixin
     runner = ext.operators.mesh.runner
     obj = import_obj(bpy, "quad_hole")
     params = ext.core.EEGTParams()
     job = runner.prepare(obj)
-    w = ops._Worker([job], params, "numpy", None)
+    w = ops._Worker([job], params, "numpy", None, runner.compute)
     w.thread.start()
     w.thread.join(timeout=60)
     assert not w.thread.is_alive() and w.error is None
@@ -26,7 +26,7 @@ def test_worker_runs_and_cancels(bpy, ext):
     # nothing is left to write (ESC is simulated at iteration 3, deterministically)
     before = positions(obj)
     job = runner.prepare(obj)
-    w = ops._Worker([job], params, "numpy", None)
+    w = ops._Worker([job], params, "numpy", None, runner.compute)
     own_progress = w._progress
 
     def esc_at_3(iteration, phase, stats):
