@@ -49,6 +49,13 @@ MAX_TRIPLES = 1 << 23  # triples examined per run at most (stars beyond: left to
 _CHUNK = 1 << 20  # triples examined per NumPy pass
 
 
+def _length(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """|(x, y)| with IEEE-exact operations only (NumPy's hypot is dispatched by CPU feature:
+    the same bits on every machine); the caller's coordinates are scaled to a power-of-two
+    unit size, so the squares neither overflow nor underflow."""
+    return np.sqrt(x * x + y * y)
+
+
 @dataclass(frozen=True)
 class Hopeless:
     """The certified nodes and, per node, the faces (one to three) whose corners cannot all
@@ -132,7 +139,7 @@ def _certify(c: np.ndarray, d: np.ndarray, size: np.ndarray
     k_n, m = d.shape
     found = np.zeros(k_n, dtype=bool)
     which = np.zeros((k_n, 3), dtype=np.int64)
-    norm = np.hypot(c[..., 0], c[..., 1])
+    norm = _length(c[..., 0], c[..., 1])
     ok = norm > 0.0
     safe = np.where(ok, norm, 1.0)
     u = c / safe[..., None]  # unit normals (0 for a row that does not depend on the node)
@@ -186,12 +193,12 @@ def hopeless_nodes(p: np.ndarray, fs: FaceSet, free: np.ndarray,
     d = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
     starts = np.flatnonzero(np.r_[True, node[1:] != node[:-1]])
     counts = np.diff(np.r_[starts, node.size])
-    reach = np.maximum(np.hypot(a[:, 0], a[:, 1]), np.hypot(b[:, 0], b[:, 1]))
+    reach = np.maximum(_length(a[:, 0], a[:, 1]), _length(b[:, 0], b[:, 1]))
     size = np.maximum.reduceat(reach, starts)
     # a star whose corners are all positive where the node is now is not hopeless; the
     # others need a corner below -MARGIN * size (a certificate's constant is a mean of them)
     with np.errstate(invalid="ignore", divide="ignore"):
-        dist = d / np.hypot(c[:, 0], c[:, 1])
+        dist = d / _length(c[:, 0], c[:, 1])
     worst = np.minimum.reduceat(np.where(np.isnan(dist), np.inf, dist), starts)
     tangled = worst < -MARGIN * size
     held, witness, n_faces = [], [], []
