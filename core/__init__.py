@@ -29,7 +29,9 @@ file is named). The method is docs/method.md, the backends' contract docs/opencl
 
 - the run (Algorithm 1: untangle, smooth, keep the best iterate):
   `run.pipeline.untangle_and_smooth`; engine choice `eegt.backends.make_engine`; a plane in
-  3D `run.pipeline_3d.untangle_and_smooth_3d` (the plane itself: `mesh.plane.PlaneFrame`).
+  3D `run.pipeline_3d.untangle_and_smooth_3d` (the plane itself: `mesh.plane.PlaneFrame`);
+  the EEGT loops and their stop rule, shared with live frames: `run.algorithm1`; "no worse
+  than the input", the one rule of every path: `run.acceptance.accept`.
 - one EEGT iteration: `eegt.engine_numpy.NumpyEngine.step`;
   `eegt.engine_opencl.OpenCLEngine.step`.
   - stretch n_k: `eegt.transform._stretch`; `stretch_vector`, `TRI_PAPER_STRETCH`.

@@ -2,17 +2,23 @@
 stage, on a plane in 2D or 3D, in one go or frame by frame under a cursor.
 
 - 2D: `pipeline.untangle_and_smooth` -> `EEGTResult`; 3D (a planar mesh in space):
-  `pipeline_3d.untangle_and_smooth_3d`.
+  `pipeline_3d.untangle_and_smooth_3d` (``stored=np.float32``: judged as Blender stores it).
+- Algorithm 1's EEGT loops (untangle, then smooth, optionally under a deadline), shared by
+  the whole run and live frames: `algorithm1.untangle_loop`, `smooth_loop`, `Deadline`.
+- the acceptance rule ("no worse than the input", every path's one decision, with the
+  storage type's ties): `acceptance.accept`, `tie_tolerance`.
 - the harmonic start for large folds: `harmonic.harmonic_positions`.
 - live drags, a frame at a time: `live.LiveSession`, `LiveFrame`; what a frame reuses from
   the last: `live_reuse`.
 """
 
+from .acceptance import FLOAT32_TIE, accept, tie_tolerance
 from .harmonic import harmonic_positions
 from .live import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, live_params, uv_region
 from .pipeline import Cancelled, EEGTResult, frozen_note, untangle_and_smooth
 from .pipeline_3d import untangle_and_smooth_3d
 
-__all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "Cancelled", "EEGTResult", "LiveFrame",
-           "LiveSession", "frozen_note", "harmonic_positions", "live_params",
-           "untangle_and_smooth", "untangle_and_smooth_3d", "uv_region"]
+__all__ = ["FLOAT32_TIE", "FRAME_BUDGET", "FRAME_ITERATIONS", "Cancelled", "EEGTResult",
+           "LiveFrame", "LiveSession", "accept", "frozen_note", "harmonic_positions",
+           "live_params", "tie_tolerance", "untangle_and_smooth", "untangle_and_smooth_3d",
+           "uv_region"]

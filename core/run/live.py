@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -32,6 +33,8 @@ from ..metrics.face_quality import Stats
 from ..metrics.targets import prepare_targets
 from ..params import EEGTParams
 from ..uv.uv_layout import UVLayout, island_faces
+from .acceptance import accept
+from .algorithm1 import Deadline, smooth_loop, untangle_loop
 from .live_reuse import AnchorSearch, GivenQuality, StillDistances
 from .pipeline import as_given, frozen_faces, normalisation
 
@@ -158,43 +161,33 @@ class LiveSession:
         frozen = frozen_faces(given, fs, free)
         n_frozen = int(frozen.sum())
         engine = self._engine_at(work, (float(center[0]), float(center[1]), float(scale)))
-        deadline = None if budget is None else t0 + budget - self._tail
+        clock = Deadline(None if budget is None else t0 + budget - self._tail)
         best = engine.stats()
         engine.save_best()
         current = best
         n_untangle = n_smooth = 0
-        step = 0.0
-
-        def late() -> bool:
-            return deadline is not None and time.perf_counter() + step > deadline
+        timed = clock.timed(engine.step)
 
         def advance(phase: str) -> Stats:
-            nonlocal best, step
-            t = time.perf_counter()
-            s = engine.step(phase)
-            step = time.perf_counter() - t
+            nonlocal best
+            s = timed(phase)
             if s.better_than(best):
                 best = s
                 engine.save_best()
             return s
 
+        def tangled(s: Stats) -> bool:
+            return s.n_inverted > n_frozen
+
         failed = False
-        if current.n_inverted > n_frozen:
-            for _ in range(prm.max_untangle_iterations):
-                current = advance("untangle")
-                n_untangle += 1
-                if current.n_inverted <= n_frozen or late():
-                    break
-            failed = best.n_inverted > n_frozen
-        if not failed and (n_untangle == 0 or not late()):
-            for _ in range(prm.max_smooth_iterations):
-                previous = current
-                current = advance("smooth")
-                n_smooth += 1
-                d_avg, d_min = current.q_avg - previous.q_avg, current.q_min - previous.q_min
-                worst = prm.tol_min > 0.0 and d_avg >= 0.0 and d_min >= prm.tol_min
-                if (d_avg < prm.tol and not worst) or late():
-                    break
+        if tangled(current):
+            last, n_untangle = untangle_loop(partial(advance, "untangle"), tangled,
+                                             prm.max_untangle_iterations, clock.late)
+            current = current if last is None else last
+            failed = tangled(best)
+        if not failed and (n_untangle == 0 or not clock.late()):
+            current, n_smooth = smooth_loop(partial(advance, "smooth"), current, prm,
+                                            clock.late)
         t_tail = time.perf_counter()
         before = self._given.stats(given)
         out, after = p.copy(), before
@@ -205,11 +198,11 @@ class LiveSession:
         out[changed] = reached[changed] * scale + center
         if changed.any():
             after = self._given.stats(as_given(out, fs, center, scale))
-            if not failed and not (after == before or after.better_than(before)):
+            if not failed and not accept(before, after):
                 out, after = p.copy(), before
         self.points = out
         if n_untangle + n_smooth:
-            self.step_seconds = step
+            self.step_seconds = clock.step
         status = "tangled" if after.n_inverted else (
             "untangled" if before.n_inverted else "valid")
         t1 = time.perf_counter()

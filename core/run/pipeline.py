@@ -30,6 +30,8 @@ from ..optimize.mesh_tables import Factors
 from ..optimize.sampled import Sampled
 from ..optimize.submesh import Neighbourhood
 from ..params import EEGTParams
+from .acceptance import accept
+from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
 
@@ -286,7 +288,7 @@ def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
                                      fs.n_corners)
     else:
         before = after = measured(p)
-    if not (after == before or after.better_than(before)):  # judged in the caller's units
+    if not accept(before, after):  # judged in the caller's units
         out, after = p.copy(), before
         status = "failed" if before.n_inverted else "valid"
         note = "the result was not better than the input in its own coordinates: input returned"
@@ -578,26 +580,29 @@ class _Run:
         (no new low of the inverted count for `stall_iterations`), 'eegt+local' as soon as
         three iterations no longer halve the count (what is left goes to `untangle_local`)."""
         prm = self.params
-        current = self.before
-        low, since = current.n_inverted, 0
-        counts = [current.n_inverted]
-        for _ in range(prm.max_untangle_iterations):
+        low, since = self.before.n_inverted, 0
+        counts = [self.before.n_inverted]
+
+        def step() -> Stats:
             current = self.engine.step("untangle")
             self.n_untangle += 1
             self.track(current)
             self.report(self.n_untangle, "untangle", current)
-            if not self.tangled(current):
-                break
+            return current
+
+        def stalled(current: Stats) -> bool:
+            nonlocal low, since
             counts.append(current.n_inverted)
             if self.mode == "eegt+local" and len(counts) > 3 and 2 * counts[-1] > counts[-4]:
-                break
+                return True
             if current.n_inverted < low:
                 low, since = current.n_inverted, 0
-            else:
-                since += 1
-                if self.mode == "eegt+global" and since >= prm.stall_iterations:
-                    break
-        return current
+                return False
+            since += 1
+            return self.mode == "eegt+global" and since >= prm.stall_iterations
+
+        current, _ = untangle_loop(step, self.tangled, prm.max_untangle_iterations, stalled)
+        return self.before if current is None else current
 
     def untangle_local(self) -> Stats:
         """The foldover-free optimization on the sub-mesh within a few rings of the inverted
@@ -804,15 +809,12 @@ class _Run:
         return out
 
     def smooth_eegt(self, current: Stats) -> None:
-        prm = self.params
-        for _ in range(prm.max_smooth_iterations):
-            previous = current
-            current = self.engine.step("smooth")
+        """EEGT smoothing from the iterate `current` until `smoothing_done` (or the cap)."""
+        def step() -> Stats:
+            s = self.engine.step("smooth")
             self.n_smooth += 1
-            self.track(current)
-            self.report(self.n_untangle + self.n_global + self.n_smooth, "smooth", current)
-            # go on while the mean improves by tol, or holds while the worst face improves
-            d_avg, d_min = current.q_avg - previous.q_avg, current.q_min - previous.q_min
-            worst = prm.tol_min > 0.0 and d_avg >= 0.0 and d_min >= prm.tol_min
-            if d_avg < prm.tol and not worst:
-                break
+            self.track(s)
+            self.report(self.n_untangle + self.n_global + self.n_smooth, "smooth", s)
+            return s
+
+        smooth_loop(step, current, self.params)

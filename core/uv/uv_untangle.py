@@ -7,10 +7,11 @@ where they are. A mirrored island is reflected (u -> -u, exact) before the runs 
 them, so the core always sees counterclockwise faces. With scope "tangles" only the tangled
 faces and a few rings around them run first, grown until they untangle (see
 ``untangle_uv``). Results are rounded to the UV map's storage type and an island is only
-changed when its rounded result is better than its input (``accept``). A run never claims
-more than its result: an island whose selected faces are still inverted at the end is
-``failed``, with the reason (``UVResult.message``: how many faces stay inverted, and whether
-every corner of them is fixed, so that no move could change them).
+changed when its rounded result is accepted over its input (``core.run.accept`` with the
+storage type's ties). A run never claims more than its result: an island whose selected
+faces are still inverted at the end is ``failed``, with the reason (``UVResult.message``: how
+many faces stay inverted, and whether every corner of them is fixed, so that no move could
+change them).
 
 Measures of a selection (``measure``): flipped faces (zero area or against their island's
 orientation), inverted faces (flipped, or a reflex or crossed corner: what the core removes),
@@ -33,6 +34,7 @@ from ..mesh.faces import FaceSet
 from ..mesh.topology import boundary_nodes, free_nodes, pinched_faces
 from ..metrics.face_quality import Stats, quality, stats_of
 from ..params import EEGTParams
+from ..run import acceptance
 from ..run.pipeline import untangle_and_smooth
 from .uv_layout import UVLayout, island_faces, signed_face_areas
 from .uv_overlap import overlapping_faces
@@ -48,7 +50,7 @@ __all__ = [
     "untangle_uv",
 ]
 
-Accept = Callable[[Stats, Stats], bool]
+Accept = Callable[[Stats, Stats], bool]  # (before, after) -> keep after
 
 
 @dataclass(frozen=True)
@@ -169,10 +171,6 @@ class UVResult:
                 sum(r.smooth_iterations for r in self.islands))
 
 
-def _strictly_better(after: Stats, before: Stats) -> bool:
-    return after.better_than(before)
-
-
 SCOPES = choices.ids(choices.UV_SCOPE)
 
 
@@ -240,7 +238,7 @@ class _Attempt:
 def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None = None,
                 targets: np.ndarray | None = None, params: EEGTParams | None = None,
                 backend: str = "numpy", progress: Callable[[int, str, Any], Any] | None = None,
-                store: type = np.float32, accept: Accept = _strictly_better,
+                store: type = np.float32, accept: Accept | None = None,
                 scope: str = "tangles", tangled: np.ndarray | None = None,
                 rings: int = 2) -> UVResult:
     """Untangle and smooth the ``selected`` faces (bool (F,)) of a welded UV map.
@@ -251,9 +249,11 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     moves them and the faces within ``rings`` rings of them, the rings doubled until it
     untangles or the whole selection of the island is in; an island without tangles is
     smoothed as a whole) or "selection" (every selected face moves). Results are rounded to
-    ``store`` and an island changes only when ``accept(rounded stats, input stats)``, both
-    over its selected faces. ValueError (one line) when nothing can move: no face selected,
-    only islands without area, or every selected UV vertex fixed.
+    ``store`` and an island changes only when its rounded stats are accepted over its input
+    stats, both over its selected faces: ``core.run.accept(before, after, store)`` (float32:
+    qualities within 1e-6 tie and keep the input), or ``accept(before, after)`` when given.
+    ValueError (one line) when nothing can move: no face selected, only islands without area,
+    or every selected UV vertex fixed.
     """
     t0 = time.perf_counter()
     selected = _checked_selection(layout, selected, scope)
@@ -294,7 +294,9 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         change = np.any(best.points != start, axis=1)
         if not change.any():
             continue
-        if not accept(best.after, run.before):
+        kept = acceptance.accept(run.before, best.after, store) if accept is None else \
+            accept(run.before, best.after)
+        if not kept:
             run.message += "; no improvement once stored: island unchanged"
             if run.status == "untangled":  # the stored result would keep a flipped face
                 run.status = "failed"

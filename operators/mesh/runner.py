@@ -15,31 +15,17 @@ from typing import Any, ClassVar
 import bpy
 import numpy as np
 
-from ...core import EEGTParams, faces_from_csr, mesh_stats, untangle_and_smooth
+from ...core import EEGTParams, faces_from_csr
 from ...core.mesh import EdgeInfo, PlaneFrame, ragged_arange
 from ...core.metrics import reference_targets, reference_to_2d
-from ...core.run import frozen_note
+from ...core.run import frozen_note, untangle_and_smooth_3d
 from ..shared.progress import Progress
+from ..shared.refusal import refusal
 from ..shared.result import RunResult
 from . import mesh_io, reference_mesh
 from .reference_mesh import ReferenceSource
 
 PLANE_TOL = 1e-5
-QUALITY_EPS = 1e-6  # quality changes smaller than this are float32 round-off, not a gain
-
-
-def improves(after: Any, before: Any, eps: float = QUALITY_EPS) -> bool:
-    """Whether core Stats ``after`` are worth writing over ``before``: fewer inverted faces,
-    else (as ``Stats.better_than``) a higher q_min, then a higher q_avg, where differences
-    of at most ``eps`` count as ties. Positions are stored as float32: re-running on a
-    valid, already smooth mesh otherwise rewrites a few vertices by one float32 step for a
-    q gain of ~1e-13.
-    """
-    if after.n_inverted != before.n_inverted:
-        return after.n_inverted < before.n_inverted
-    if abs(after.q_min - before.q_min) > eps:
-        return after.q_min > before.q_min
-    return after.q_avg > before.q_avg + eps
 
 
 def stats_dict(stats: Any) -> dict[str, Any] | None:
@@ -81,11 +67,7 @@ class ObjectResult(RunResult):
         unchanged = self.unchanged_line(self.object)
         if unchanged:
             return unchanged
-        b, a = self.before or {}, self.after or {}
-        text = (f"{self.object}: inverted {b.get('n_inverted')} -> {a.get('n_inverted')}, "
-                f"q_min {b.get('q_min', 0):.3f} -> {a.get('q_min', 0):.3f}, "
-                f"q_avg {b.get('q_avg', 0):.3f} -> {a.get('q_avg', 0):.3f}, "
-                f"{self.iterations_text()}, "
+        text = (f"{self.object}: {self.stats_text()}, {self.iterations_text()}, "
                 f"{self.seconds:.2f} s, {self.backend}")
         if self.status == "failed":
             text += f"; FAILED to untangle: {self.message}"
@@ -117,7 +99,8 @@ class Job:
     edges: EdgeInfo | None = None  # their edge analysis (from the mesh's edge table if it fits)
     fixed: np.ndarray | None = None  # (n,) extra pinned nodes (boundary is added by the core)
     frame: Any = None
-    points2d: np.ndarray | None = None
+    points3d: np.ndarray | None = None  # (n, 3) float64 node positions (float32 values)
+    points2d: np.ndarray | None = None  # (n, 2) in ``frame`` (live drags, measures)
     project: bool = False  # put every free node on the fixed nodes' plane (PlaneFrame.fit)
     reference2d: np.ndarray | None = None  # (n, 2) reference positions (target "reference")
     targets: np.ndarray | None = None  # (n_corners, 2) their face corners: the stats' targets
@@ -126,19 +109,6 @@ class Job:
     result: Any = None
     new_co: np.ndarray | None = None  # (N, 3) float32 to write, None when nothing changed
     after: dict[str, Any] | None = None
-
-
-def refusal(obj: bpy.types.Object) -> str | None:
-    """Why this object's mesh cannot be written (linked, library override), or None."""
-    me = obj.data
-    if obj.library is not None or me.library is not None:
-        lib = (me.library or obj.library).filepath
-        return f"mesh is linked from a library ({lib}), make it local first"
-    if me.override_library is not None:
-        return "mesh is a library override (its geometry cannot be saved), make it local first"
-    if not me.is_editable:
-        return "mesh data is not editable"
-    return None
 
 
 def _fail(job: Job, message: str) -> Job:
@@ -174,6 +144,7 @@ def prepare(obj: bpy.types.Object, *, selected_only: bool = False, use_pinned: b
         return _fail(job, "a face uses a vertex index out of range")
     sub = sub_mesh(topo, face_mask, job.co)
     job.nodes = sub.nodes
+    job.points3d = sub.points3d
     if not np.isfinite(sub.points3d).all():
         bad = int(np.count_nonzero(~np.isfinite(sub.points3d).all(axis=1)))
         return _fail(job, f"{bad} vertices have NaN or infinite coordinates")
@@ -336,62 +307,49 @@ def select_opencl_device(device: str | None) -> None:
 
 def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Progress | None = None,
             device: str | None = None) -> None:
-    """Run the core on a prepared job (no bpy here: safe in a worker thread)."""
+    """Run the core's 3D entry on a prepared job (no bpy here: safe in a worker thread): it
+    fits the plane, runs, and judges the float32 positions Blender will store
+    (``untangle_and_smooth_3d`` with ``stored=np.float32``)."""
     if job.error:
         return
     if backend in ("opencl", "auto"):
         select_opencl_device(device)
     try:
-        res = untangle_and_smooth(job.points2d, job.faces, fixed=job.fixed, params=params,
-                                  backend=backend, progress=progress,
-                                  reference_points=job.reference2d, edges=job.edges)
+        res = untangle_and_smooth_3d(job.points3d, job.faces, fixed=job.fixed, params=params,
+                                     backend=backend, progress=progress, tol=PLANE_TOL,
+                                     project=job.project, reference_points=job.reference2d,
+                                     edges=job.edges, stored=np.float32)
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return
     job.result = res
     if res.status == "cancelled":
         return
-    new_co, written = _positions_to_write(job, res)
+    new_co = _positions_to_write(job, res.points)
     if new_co is None:
         job.after = stats_dict(res.before)
         if res.status != "failed":
             job.notes.append("no improvement over the input: mesh unchanged")
         return
     job.new_co = new_co
-    job.after = stats_dict(written)
+    job.after = stats_dict(res.after)
     if job.project:
         job.notes.append(f"projected onto the plane of the fixed vertices (largest offset "
                          f"{job.frame.max_offset:.3g})")
 
 
-def _positions_to_write(job: Job, res: Any) -> tuple[np.ndarray | None, Any]:
-    """(N, 3) float32 positions to write and their Stats, or (None, None) to write nothing.
-
-    A node changes only when its 2D result differs from its 2D input (the 3D round trip
-    differs from the float32 input by round-off, which is no change), and the result is
-    used only when the core's Stats are better than the input's (``Stats.better_than``)
-    and those of the float32 positions actually written are too, by more than round-off
-    (``improves``). With ``project``, the free nodes not moved go to their orthogonal
-    projection onto the plane (what the user asked for), so the mesh is written whenever
-    one of them was off the plane, even when the optimization gained nothing.
-    """
-    free = np.asarray(res.moved, dtype=bool)
-    pts = np.asarray(res.points)
-    moved = free & ((pts[:, 0] != job.points2d[:, 0]) | (pts[:, 1] != job.points2d[:, 1]))
-    if not res.after.better_than(res.before):
-        moved[:] = False
-    before = res.before  # the core's stats of job.points2d as given (= mesh_stats of them)
-    if moved.any():
-        out = _placed(job, res.points, moved, free)
-        if out is not None:
-            written = _written_stats(job, out)
-            if improves(written, before):
-                return out, written
-    if job.project:  # the projection alone
-        out = _placed(job, res.points, np.zeros_like(moved), free)
-        if out is not None:
-            return out, _written_stats(job, out)
-    return None, None
+def _positions_to_write(job: Job, points: np.ndarray) -> np.ndarray | None:
+    """(N, 3) float32 positions to write: ``job.co`` with the job's nodes at the core's
+    float32 ``points``, or None when no position changes."""
+    given = node_rows(job, job.co)
+    changed = np.any(points != given, axis=1)
+    if not changed.any():
+        return None
+    if given is job.co:  # every vertex is a node
+        return np.array(points, dtype=np.float32)
+    out = job.co.copy()
+    out[job.nodes[changed]] = points[changed]
+    return out
 
 
 def node_rows(job: Job, co: np.ndarray) -> np.ndarray:
@@ -403,38 +361,6 @@ def node_rows(job: Job, co: np.ndarray) -> np.ndarray:
 def written_2d(job: Job, co: np.ndarray) -> np.ndarray:
     """The job's nodes of float32 vertex positions ``co``, in its plane's 2D coordinates."""
     return job.frame.to_2d(node_rows(job, co).astype(np.float64))
-
-
-def _written_stats(job: Job, co: np.ndarray) -> Any:
-    """Stats of the positions ``co`` as they would be written."""
-    return mesh_stats(written_2d(job, co), job.faces, targets=job.targets)
-
-
-def _placed(job: Job, points2d: np.ndarray, moved: np.ndarray,
-            free: np.ndarray) -> np.ndarray | None:
-    """A copy of ``job.co`` with the ``moved`` nodes at their 2D result on the plane (and,
-    with ``project``, the other free nodes projected onto it), or None if no float32
-    position changes."""
-    given = node_rows(job, job.co)
-    if job.project:
-        target = given.astype(np.float64)
-        target[moved] = job.frame.to_3d(np.asarray(points2d)[moved])
-        rest = free & ~moved
-        target[rest] = job.frame.foot(target[rest])
-        new3d = target.astype(np.float32)
-    else:  # the others keep their float32 input, as the float64 round trip would
-        rows = np.flatnonzero(moved)
-        new3d = given.copy()
-        new3d[rows] = job.frame.to_3d(np.asarray(points2d)[rows])
-    changed = (new3d[:, 0] != given[:, 0]) | (new3d[:, 1] != given[:, 1]) | \
-        (new3d[:, 2] != given[:, 2])
-    if not changed.any():
-        return None
-    if given is job.co:  # every vertex is a node: new3d is the whole copy
-        return new3d
-    out = job.co.copy()
-    out[job.nodes[changed]] = new3d[changed]
-    return out
 
 
 def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResult:

@@ -11,6 +11,7 @@ import dataclasses
 from typing import Any
 
 import bpy
+import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from ...core import MEASURES, EEGTParams
@@ -153,9 +154,19 @@ def param_annotations(options: set[str] | None = None) -> dict[str, Any]:
     return {f.name: blender_property(f, options) for f in param_fields()}
 
 
+def as_typed(value: Any) -> Any:
+    """A property's value as the user typed it: Blender keeps a FloatProperty as float32
+    (0.2 reads back 0.20000000298023224), so a float becomes the shortest decimal that
+    float32 holds as that value (0.2), the number the sidebar shows and the command takes."""
+    if isinstance(value, float):
+        return float(str(np.float32(value)))
+    return value
+
+
 def params_from(owner: Any) -> EEGTParams:
-    """EEGTParams from an operator's or a property group's parameter properties."""
-    return EEGTParams(**{f.name: getattr(owner, f.name) for f in param_fields()})
+    """EEGTParams from an operator's or a property group's parameter properties, floats as
+    typed (`as_typed`): the operators run the same parameters as the command and the core."""
+    return EEGTParams(**{f.name: as_typed(getattr(owner, f.name)) for f in param_fields()})
 
 
 def _settings_class() -> type:

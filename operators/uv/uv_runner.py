@@ -32,6 +32,7 @@ from ...core.uv import (
 )
 from ..mesh import mesh_io, runner
 from ..shared.progress import Progress
+from ..shared.refusal import refusal
 from ..shared.result import RunResult
 from . import uv_mesh
 
@@ -60,14 +61,8 @@ class UVObjectResult(RunResult):
         unchanged = self.unchanged_line(name)
         if unchanged:
             return unchanged
-        b, a = self.before or {}, self.after or {}
-        text = (f"{name}: flipped {b.get('flipped')} -> {a.get('flipped')}, "
-                f"inverted {b.get('inverted')} -> {a.get('inverted')}, "
-                f"overlapping {b.get('overlapping')} -> {a.get('overlapping')}, "
-                f"distortion mean {b.get('distortion_mean', 0):.3f} -> "
-                f"{a.get('distortion_mean', 0):.3f}, worst {b.get('distortion_worst', 0):.3f} "
-                f"-> {a.get('distortion_worst', 0):.3f} (1 = "
-                f"{'as in 3D' if self.targets == '3D' else 'regular'}), "
+        text = (f"{name}: {self.stats_text()} "
+                f"(1 = {'as in 3D' if self.targets == '3D' else 'regular'}), "
                 f"{self.islands_run}/{self.islands} islands, {self.seconds:.2f} s, {self.backend}")
         if self.status == "failed":
             text += f"; FAILED: {self.message}" if self.message else \
@@ -115,7 +110,7 @@ def prepare(obj: bpy.types.Object, uv_name: str | None = None, *, selected_only:
     ``core.uv.uv_untangle.untangle_uv``."""
     me = obj.data
     job = UVJob(object=obj.name, mesh=me.name, target_kind=targets, scope=scope)
-    why = runner.refusal(obj)
+    why = refusal(obj)
     if why:
         return _fail(job, why)
     try:
@@ -172,7 +167,7 @@ def compute(job: UVJob, params: EEGTParams, backend: str = "numpy",
     try:
         res = untangle_uv(lay, job.selected, fixed=job.fixed, targets=job.targets,
                           params=params, backend=backend, progress=progress,
-                          accept=runner.improves, scope=job.scope,
+                          scope=job.scope,
                           tangled=tangled_faces(lay, lay.points, job.selected, side, over))
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__

@@ -4,27 +4,22 @@ Mesh: Untangle & Smooth (``mesh.eegt_untangle_smooth``, NumPy backend, default p
 on a tangled mesh of tests/data, against the core called directly on the same mesh read
 from the OBJ file by tests/meshdata.py (the test first checks that Blender holds exactly
 those float32 positions and faces). The core (this checkout's ``core`` package, not the
-extension's installed copy) runs on the float32 positions: the mesh's plane frame
-(``PlaneFrame.fit``), ``untangle_and_smooth`` in it, and the nodes whose 2D result differs
-from their 2D input put back with ``to_3d`` and rounded to float32. Shared with the
-operator: the mesh file and the parameters, read from the scene's settings as the operator
-reads them (Blender keeps them as float32, see
-``test_operator_defaults_are_the_core_defaults``, a strict xfail).
-
-``core.untangle_and_smooth_3d``, the core's own entry point for a plane in 3D, gives those
-bits on quad_hole but not on mixed_quad_tri or tilted_plane: it centres the points on the
-boundary's bounding box and scales them before it fits the plane, while the operator
-(operators/mesh/runner.py ``prepare``) fits the plane on the positions as they are. The two 2D
-inputs differ by round-off, which the iterations turn into results up to ~3e-4 apart (both
-untangled). ``test_mesh_operator_is_the_core_3d_entry`` says so with strict xfails: it
-starts failing (XPASS) the day the two paths agree.
+extension's installed copy) runs its own 3D entry ``core.untangle_and_smooth_3d`` on the
+float32 positions with ``stored=np.float32``: it centres and scales the points, fits the
+plane, runs in it, and judges the float32 positions it returns with the one acceptance rule
+(``core.run.accept``, float32 ties). The operator (operators/mesh/runner.py ``compute``)
+makes that same call, so the written positions are the returned ones, bit for bit, on a
+mesh at z = 0 and on a tilted one alike. Shared with the operator: the mesh file and the
+parameters, read from the scene's settings as the operator reads them (Blender keeps them
+as float32; the operators read them back as typed, ``props.params_from``, so they run the
+core's and the command's defaults exactly: ``test_operator_defaults_are_the_core_defaults``).
 
 UV: Untangle & Smooth UVs (``uv.eegt_untangle_smooth``, Edit Mode, every face selected,
 defaults: 3D target shapes, scope "tangles") on a jittered UV sphere (bench.uv_assets),
 against ``core.uv.uv_untangle.untangle_uv`` on the UV map welded by ``core.uv.uv_layout.weld_uv``
 from the mesh's arrays read here with ``foreach_get``, targets
-``core.metrics.targets.face_shapes_2d`` of its 3D faces and the core's default acceptance (the
-operator passes ``runner.improves``; both accept this run). Shared with the operator: the
+``core.metrics.targets.face_shapes_2d`` of its 3D faces and the core's default acceptance
+(``core.run.accept`` with float32 ties, the operator's too). Shared with the operator: the
 Blender mesh being read and the parameters, as for the mesh.
 """
 
@@ -35,9 +30,9 @@ import pytest
 from meshdata import load
 
 from bench import uv_assets
-from core import EEGTParams, PlaneFrame, faces_from_csr, untangle_and_smooth
+from core import EEGTParams, faces_from_csr, untangle_and_smooth_3d
 from core.metrics.targets import face_shapes_2d
-from core.run.pipeline_3d import untangle_and_smooth_3d
+from core.run import accept
 from core.uv.uv_layout import weld_uv
 from core.uv.uv_untangle import untangle_uv
 
@@ -47,32 +42,37 @@ from .uvtools import tangled, uv_values
 pytestmark = pytest.mark.blender
 
 MESHES = ["quad_hole", "mixed_quad_tri", "tilted_plane"]
-FLOAT32_PARAMS = ("Blender stores FloatProperty values as float32: the operators run a = 0.2 "
-                  "and tol = tol_min = 0.001 rounded to float32, the core and the CLI the "
-                  "float64 values (quad_hole: float64 results ~5e-11 apart, the same float32 "
-                  "positions written)")
-PLANE_FIT = ("untangle_and_smooth_3d normalises before fitting the plane, the operator fits it "
-             "on the positions as they are: round-off apart 2D inputs, different result bits")
 
 
-def operator_params(settings) -> EEGTParams:
-    """The parameters the operators run with: the scene's settings as Blender holds them
-    (a FloatProperty is float32: ``a`` = 0.2 reads back 0.20000000298023224)."""
-    return EEGTParams(**{name: getattr(settings, name) for name in EEGTParams.field_names()})
+def operator_params(ext, settings) -> EEGTParams:
+    """The parameters the operators run with, read as they read them (as this checkout's
+    EEGTParams: the extension's installed copy has a class of its own)."""
+    got = ext.operators.ui.props.params_from(settings)
+    return EEGTParams(**{name: getattr(got, name) for name in EEGTParams.field_names()})
 
 
-def test_operator_defaults_are_the_core_defaults_rounded_to_float32(bpy, ext):
-    got, core = operator_params(bpy.context.scene.eegt_settings), EEGTParams()
+def test_blender_holds_the_float_defaults_as_float32(bpy, ext):
+    settings, core = bpy.context.scene.eegt_settings, EEGTParams()
     for name in EEGTParams.field_names():
         want = getattr(core, name)
         if isinstance(want, float):
             want = float(np.float32(want))
-        assert getattr(got, name) == want, name
+        assert getattr(settings, name) == want, name
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=FLOAT32_PARAMS)
 def test_operator_defaults_are_the_core_defaults(bpy, ext):
-    assert operator_params(bpy.context.scene.eegt_settings) == EEGTParams()
+    assert operator_params(ext, bpy.context.scene.eegt_settings) == EEGTParams()
+
+
+def test_a_typed_value_reads_back_as_typed(bpy, ext):
+    settings = bpy.context.scene.eegt_settings
+    old = settings.a
+    try:
+        settings.a = 0.3
+        assert settings.a == float(np.float32(0.3)) != 0.3
+        assert operator_params(ext, settings).a == 0.3
+    finally:
+        settings.a = old
 
 
 def operator_run(bpy, name: str) -> tuple[np.ndarray, np.ndarray, object]:
@@ -91,46 +91,23 @@ def operator_run(bpy, name: str) -> tuple[np.ndarray, np.ndarray, object]:
 
 
 @pytest.mark.parametrize("name", MESHES)
-def test_mesh_operator_writes_the_core_result_bit_for_bit(bpy, ext, name):
-    params = operator_params(bpy.context.scene.eegt_settings)
-    before, written, faces = operator_run(bpy, name)
-    p3 = before.astype(np.float64)
-    frame = PlaneFrame.fit(p3, faces, tol=1e-5)
-    flat = frame.to_2d(p3)
-    res = untangle_and_smooth(flat, faces, params=params, backend="numpy")
-    assert res.status == "untangled" and res.after.better_than(res.before)
-    moved = res.moved & np.any(res.points != flat, axis=1)
-    expected = before.copy()
-    expected[moved] = frame.to_3d(res.points[moved])
-    assert moved.any() and not np.array_equal(written, before)
-    changed = np.any(written != expected, axis=1)
-    assert not changed.any(), (
-        f"{int(changed.sum())} of {len(written)} vertices differ from the core's, by up to "
-        f"{float(np.abs(written.astype(np.float64) - expected).max()):.3g}")
-    assert written.tobytes() == expected.tobytes()  # -0.0 and +0.0 too
-
-
-@pytest.mark.parametrize("name", [
-    "quad_hole",
-    *(pytest.param(n, marks=pytest.mark.xfail(strict=True, raises=AssertionError,
-                                              reason=PLANE_FIT))
-      for n in ("mixed_quad_tri", "tilted_plane")),
-])
 def test_mesh_operator_is_the_core_3d_entry(bpy, ext, name):
-    params = operator_params(bpy.context.scene.eegt_settings)
+    params = operator_params(ext, bpy.context.scene.eegt_settings)
     before, written, faces = operator_run(bpy, name)
     res = untangle_and_smooth_3d(before.astype(np.float64), faces, params=params,
-                                 backend="numpy")
-    assert res.status == "untangled"
-    expected = res.points.astype(np.float32)
+                                 backend="numpy", stored=np.float32)
+    assert res.status == "untangled" and accept(res.before, res.after, np.float32)
+    expected = res.points
+    assert expected.dtype == np.float32 and not np.array_equal(written, before)
     changed = np.any(written != expected, axis=1)
     assert not changed.any(), (
         f"{int(changed.sum())} of {len(written)} vertices differ from untangle_and_smooth_3d's, "
         f"by up to {float(np.abs(written.astype(np.float64) - expected).max()):.3g}")
+    assert written.tobytes() == expected.tobytes()  # -0.0 and +0.0 too
 
 
 def test_uv_operator_writes_the_core_result_bit_for_bit(bpy, ext):
-    params = operator_params(bpy.context.scene.eegt_settings)
+    params = operator_params(ext, bpy.context.scene.eegt_settings)
     uv_settings = bpy.context.scene.eegt_uv_settings
     assert (uv_settings.target_shape, uv_settings.scope, uv_settings.use_pins) == (
         "3D", "TANGLES", True)
