@@ -6,6 +6,11 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
+# pytest on every core (pytest-xdist): each worker is its own process with its own Blender
+# sandbox; XDIST= runs in one process.
+XDIST ?= -n auto
+E2E_ROOT := .e2e-root/rootfs
+
 .PHONY: venv numpy2 test test-fast lint test-core test-blender test-bench test-compat e2e demo build bench bench-paper bench-batch clean
 
 venv: $(STAMP)
@@ -27,7 +32,7 @@ lint: $(STAMP)
 
 # Lint and every test not marked slow or e2e: the check while working; `make test` runs all.
 test-fast: lint
-	$(PY) -m pytest -q -m "not slow and not e2e" tests
+	$(PY) -m pytest -q $(XDIST) -m "not slow and not e2e" tests
 
 test-core: $(STAMP)
 	$(PY) -m pytest -q -m "not blender and not e2e" tests
@@ -59,8 +64,12 @@ test-compat:
 	    failed="$$failed $$v"; \
 	done; [ -z "$$failed" ] || { echo "test-compat failed for bpy$$failed"; exit 1; }
 
+# The e2e root (Debian packages: mostly download and unpack) is made while pytest runs.
 test: lint numpy2
-	EEGT_NUMPY2_PYTHON=$(NUMPY2)/bin/python $(PY) -m pytest -q -m "not e2e" tests
+	@mkdir -p build; [ "$$(id -u)" != 0 ] || { bash tests/e2e/setup_root.sh $(E2E_ROOT) \
+	  >build/e2e-root.log 2>&1 & }; \
+	EEGT_NUMPY2_PYTHON=$(NUMPY2)/bin/python $(PY) -m pytest -q $(XDIST) -m "not e2e" tests; \
+	rc=$$?; wait; exit $$rc
 	$(MAKE) e2e
 
 # A second interpreter with NumPy >= 2.3 (whose long sums are ordered differently from
