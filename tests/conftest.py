@@ -4,7 +4,6 @@ whatever pytest's import mode."""
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -12,15 +11,6 @@ TESTS = str(Path(__file__).resolve().parent)
 if TESTS not in sys.path:
     sys.path.insert(0, TESTS)
 
-# The checkout as the package the extension is installed as: batch/ and fileio/ import each
-# other as siblings inside it (relative imports need a parent package), so their tests import
-# them as `eegt_blender.batch` and `eegt_blender.fileio`. The package's own __init__ imports
-# no bpy (it registers the operators only when Blender calls register()).
-PACKAGE = "eegt_blender"
-if PACKAGE not in sys.modules:
-    _root = Path(__file__).resolve().parents[1]
-    _spec = importlib.util.spec_from_file_location(
-        PACKAGE, _root / "__init__.py", submodule_search_locations=[str(_root)])
-    _package = importlib.util.module_from_spec(_spec)
-    sys.modules[PACKAGE] = _package
-    _spec.loader.exec_module(_package)
+import checkout_package  # noqa: E402 (tests/ on the path first)
+
+checkout_package.register()  # eegt_blender.batch, eegt_blender.fileio

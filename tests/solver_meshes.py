@@ -73,6 +73,9 @@ def every_format(msh: Path, folder: Path) -> dict[str, Path]:
     """The Gmsh mesh converted by meshio into every other format, with each format's own
     tag arrays (medit:ref, su2:tag) and 2D points where the format is 2D; name -> path."""
     import meshio
+    from checkout_package import register
+
+    register()
     from eegt_blender.fileio.solver_mesh import write_mesh
 
     m = meshio.read(msh)

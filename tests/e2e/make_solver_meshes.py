@@ -9,7 +9,7 @@ import os
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: batch
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # the repository: core
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: solver_meshes
 from solver_meshes import channel_msh, every_format
 
