@@ -8,9 +8,12 @@ the groups and the file's format version (Gmsh 2.2 or 4.1, ASCII or binary; VTK 
 ASCII or binary; VTU ASCII, binary or compressed) pass through: `write_moved` changes only
 the coordinates of the nodes given as moved.
 
-Groups are named by name or by tag: meshio's cell sets, Gmsh's physical names (field data
-``name -> [tag, dim]``) and the tag arrays of the formats' cells (``gmsh:physical``,
-``medit:ref``, ``su2:tag``, ``CellEntityIds``).
+Groups are named by name or by tag: meshio's cell sets and point sets (Abaqus element and
+node sets), Gmsh's physical names and SU2's marker names (field data ``name -> [tag, dim]``)
+and the tag arrays of the formats' cells (``gmsh:physical``, ``medit:ref``, ``su2:tag``,
+``CellEntityIds``). SU2 is read and written by `su2` (meshio's SU2 code drops marker names);
+Gmsh sections meshio does not model are refused at read; a conversion to another format is
+checked first by `can_write`.
 
 No bpy and no core: the command, its batches and the Blender import/export all call this
 module (faces come out as CSR arrays, which ``core.faces_from_csr`` takes). Every problem
@@ -23,13 +26,15 @@ import contextlib
 import copy
 import hashlib
 import io
-import itertools
+import os
 import re
+import tempfile
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from . import su2
 from .solver_formats import SOLVER_FORMATS, solver_format
 
 FACE_TYPES = ("triangle", "quad", "polygon")  # the 2D cells the untangler moves
@@ -37,6 +42,10 @@ TAG_ARRAYS = ("gmsh:physical", "medit:ref", "su2:tag", "CellEntityIds")
 _POINT_TYPES = ("vertex",)
 _LINE_PREFIX = "line"
 _FACE_PREFIXES = ("triangle", "quad", "polygon")
+# the Gmsh sections meshio reads and writes back; any other is refused at read
+GMSH_SECTIONS = ("MeshFormat", "PhysicalNames", "Entities", "Nodes", "Elements", "Periodic",
+                 "NodeData", "ElementData")
+_GMSH_TAGS = ("gmsh:physical", "gmsh:geometrical", "cell_tags")
 
 
 class SolverMeshError(ValueError):
@@ -102,6 +111,8 @@ def write_options(path: str, fmt: str) -> dict[str, Any]:
         return {"binary": binary, "compression": compression if binary else None}
     if fmt == "mesh" or fmt == "inp":
         return {"float_fmt": ".16e"}
+    if fmt == "su2":
+        return su2.read(path)[1]
     return {}
 
 
@@ -153,6 +164,7 @@ class SolverMesh:
         """The names groups can be given by (names first, then tags), each once."""
         names = [n for n in self.mesh.cell_sets if not n.startswith("gmsh:")]
         names += [n for n in self.mesh.field_data if n not in names]
+        names += [n for n in self.mesh.point_sets if n not in names]
         tags = sorted({int(t) for arr in self._tag_arrays() for t in np.unique(arr)})
         return names + [str(t) for t in tags if str(t) not in names]
 
@@ -188,8 +200,22 @@ class SolverMesh:
         have = ", ".join(self.group_names()[:20]) or "none"
         raise SolverMeshError(f"no group '{name}' in '{self.path}' (its groups: {have})")
 
+    def _point_set(self, name: str) -> np.ndarray | None:
+        """(N,) bool of node set `name` (Abaqus ``*NSET``) when `name` is one and no cell
+        group, else None."""
+        if name not in self.mesh.point_sets or name in self.mesh.cell_sets or \
+                name in self.mesh.field_data:
+            return None
+        out = np.zeros(self.n_points, dtype=bool)
+        idx = np.asarray(self.mesh.point_sets[name], dtype=np.int64).ravel()
+        out[idx[(idx >= 0) & (idx < self.n_points)]] = True
+        return out
+
     def group_nodes(self, name: str) -> np.ndarray:
-        """(N,) bool: the nodes of the cells of group `name`."""
+        """(N,) bool: the nodes of the cells of group `name`, or of node set `name`."""
+        nodes = self._point_set(name)
+        if nodes is not None:
+            return nodes
         out = np.zeros(self.n_points, dtype=bool)
         for block, mask in zip(self.mesh.cells, self.group_cells(name)):
             if mask.any():
@@ -197,7 +223,9 @@ class SolverMesh:
         return out
 
     def group_faces(self, name: str) -> np.ndarray:
-        """(F,) bool: the faces (2D cells) of group `name`."""
+        """(F,) bool: the faces (2D cells) of group `name` (none for a node set)."""
+        if self._point_set(name) is not None:
+            return np.zeros(self.n_faces, dtype=bool)
         masks = self.group_cells(name)
         return np.concatenate([masks[b] for b in self.face_blocks])
 
@@ -223,6 +251,23 @@ class SolverMesh:
         arr = np.asarray(data[name])
         return (arr.reshape(arr.shape[0], -1) != 0).any(axis=1)
 
+    # nodes that must stay --------------------------------------------------------------
+
+    def periodic_nodes(self) -> np.ndarray:
+        """(K, 2) int64: the point indices of every Gmsh ``$Periodic`` pair (node, master);
+        (0, 2) when the file has none."""
+        links = getattr(self.mesh, "gmsh_periodic", None) or []
+        pairs = [np.asarray(sm_, dtype=np.int64).reshape(-1, 2) for *_, sm_ in links]
+        return np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
+
+    def volume_nodes(self) -> np.ndarray:
+        """(N,) bool: the nodes of cells of dimension 3 (tetrahedra, hexahedra, ...)."""
+        out = np.zeros(self.n_points, dtype=bool)
+        for block in self.mesh.cells:
+            if cell_dim(block.type) == 3 and len(block.data):
+                out[np.asarray(block.data, dtype=np.int64).ravel()] = True
+        return out
+
     # writing ---------------------------------------------------------------------------
 
     def with_positions(self, positions: np.ndarray, moved: np.ndarray) -> Any:
@@ -238,25 +283,60 @@ class SolverMesh:
         return out
 
 
+def _gmsh_sections(path: str) -> None:
+    """Refuse a Gmsh file with a section meshio does not model (it would be dropped)."""
+    with open(path, "rb") as fh:
+        text = fh.read()
+    for m in re.finditer(rb"(?m)^\$(\w+)\r?$", text):
+        name = m.group(1).decode("ascii", "replace")
+        if not name.startswith("End") and name not in GMSH_SECTIONS:
+            raise SolverMeshError(f"cannot read '{path}' as msh: its ${name} section would "
+                                  f"be lost (kept: {', '.join(GMSH_SECTIONS)})")
+
+
+def _read_mesh(path: str, fmt: str) -> tuple[Any, dict[str, Any]]:
+    """The meshio mesh of `path` and its writer options; meshio's and the SU2 reader's own
+    errors (SystemExit too) as they are."""
+    if fmt == "su2":
+        return su2.read(path)
+    import meshio
+
+    if fmt == "msh":
+        _gmsh_sections(path)
+    with _quiet():
+        mesh = getattr(meshio, SOLVER_FORMATS[fmt][1]).read(path)
+    return mesh, write_options(path, fmt)
+
+
+def _shown(text: str, path: str, shown: str | None) -> str:
+    """`text` with `path` replaced by the name the user knows (`shown`)."""
+    if not shown or shown == path:
+        return text
+    return text.replace(path, shown).replace(os.path.basename(path), os.path.basename(shown))
+
+
 def read(path: str, fmt: str | None = None) -> SolverMesh:
     """Read a solver mesh; SolverMeshError (one line) when it cannot be read or has no 2D
     cells to work on."""
-    import meshio
-
     fmt = fmt or solver_format(path)
     if fmt not in SOLVER_FORMATS:
         raise SolverMeshError(f"'{path}' is not a solver mesh (use "
                               f"{', '.join(e for e, _ in SOLVER_FORMATS.values())})")
     try:
-        with _quiet():
-            mesh = meshio.read(path, file_format=SOLVER_FORMATS[fmt][1])
-        options = write_options(path, fmt)
+        mesh, options = _read_mesh(path, fmt)
+    except SolverMeshError:
+        raise
     except OSError as exc:
         raise SolverMeshError(f"cannot read '{path}': "
                               f"{(exc.strerror or str(exc)).lower()}") from None
     except (Exception, SystemExit) as exc:  # meshio exits on some files it cannot parse
         raise SolverMeshError(f"cannot read '{path}' as {fmt}: {_one_line(exc)}") from None
-    return _checked(path, fmt, mesh, options)
+    sm = _checked(path, fmt, mesh, options)
+    pairs = sm.periodic_nodes()
+    if pairs.size and (pairs.min() < 0 or pairs.max() >= sm.n_points):
+        raise SolverMeshError(f"cannot read '{path}' as msh: its $Periodic pairs name nodes "
+                              "the file does not have (nodes must be numbered 1..N)")
+    return sm
 
 
 def _checked(path: str, fmt: str, mesh: Any, options: dict[str, Any]) -> SolverMesh:
@@ -295,81 +375,118 @@ def _checked(path: str, fmt: str, mesh: Any, options: dict[str, Any]) -> SolverM
 
 
 def write(sm: SolverMesh, path: str, positions: np.ndarray | None = None,
-          moved: np.ndarray | None = None) -> None:
+          moved: np.ndarray | None = None, shown: str | None = None) -> None:
     """Write `sm` to `path` in the format of its extension: the moved nodes take
     `positions`, everything else is the file's own. Same format as the source: its own
-    version and encoding. SolverMeshError (one line) when the writer refuses."""
+    version and encoding; another format: `convert`ed. SolverMeshError (one line, naming
+    `shown` or `path`) when the writer refuses."""
     mesh = sm.mesh if positions is None or moved is None else \
         sm.with_positions(positions, moved)
-    same = solver_format(path) == sm.fmt
-    write_mesh(mesh, path, sm.options if same else None)
+    fmt = solver_format(path)
+    if fmt is not None and fmt != sm.fmt:
+        why = _convert_refusal(sm, fmt)
+        if why:
+            raise SolverMeshError(f"cannot write '{shown or path}' as {fmt}: {why}")
+        mesh = convert(mesh, fmt)
+    write_mesh(mesh, path, sm.options if fmt == sm.fmt else None, shown)
 
 
-def write_mesh(mesh: Any, path: str, options: dict[str, Any] | None = None) -> None:
+def convert(mesh: Any, fmt: str) -> Any:
+    """A copy of `mesh` for another format's writer: Gmsh's private arrays (entity tags,
+    bounding entities) dropped, cell sets as integer arrays (a Gmsh set's missing blocks
+    empty: NumPy 1 made them float Abaqus numbers), the cell tags (the first of
+    `TAG_ARRAYS`) under the target's name (``gmsh:physical`` and ``gmsh:geometrical``,
+    ``medit:ref``), SU2 left to `su2.write` (it takes any of them)."""
+    out = copy.copy(mesh)
+    out.point_data = {k: v for k, v in mesh.point_data.items() if not k.startswith("gmsh:")}
+    out.cell_sets = {k: [np.zeros(0, dtype=np.int64) if x is None else
+                         np.asarray(x, dtype=np.int64) for x in v]
+                     for k, v in mesh.cell_sets.items() if not k.startswith("gmsh:")}
+    out.gmsh_periodic = None
+    tag = next((k for k in TAG_ARRAYS if k in mesh.cell_data), None)
+    data = {k: v for k, v in mesh.cell_data.items() if k != "gmsh:geometrical"}
+    if tag is not None:
+        tags = [np.asarray(a).reshape(len(a), -1)[:, 0].astype(np.int32)
+                for a in mesh.cell_data[tag]]
+        target = {"msh": ("gmsh:physical", "gmsh:geometrical"), "mesh": ("medit:ref",)}
+        if fmt in target:
+            data.pop(tag)
+            data.update({k: [t.copy() for t in tags] for k in target[fmt]})
+    out.cell_data = data
+    return out
+
+
+def _convert_refusal(sm: SolverMesh, fmt: str) -> str | None:
+    """Why `sm` cannot go to `fmt` at all (before any writing), or None."""
+    if sm.periodic_nodes().size and fmt != "msh":
+        return f"its Gmsh $Periodic pairs have no place in .{fmt}"
+    if fmt == "su2":
+        return su2.plan(sm.mesh)[1]
+    return None
+
+
+def _gmsh_ascii_safe(mesh: Any) -> Any:
+    """A copy whose data arrays (not tags) hold Python numbers: meshio 5.3 writes Gmsh ASCII
+    data with ``{!r}``, which under NumPy 2 gives ``np.float64(1.0)`` and a file that
+    does not read back."""
+    def plain(a: Any) -> np.ndarray:
+        a = np.asarray(a)
+        out = np.empty(a.shape, dtype=object)
+        out[...] = a.tolist() if a.ndim else a.item()
+        return out
+
+    out = copy.copy(mesh)
+    out.point_data = {k: (v if k.startswith("gmsh:") else plain(v))
+                      for k, v in mesh.point_data.items()}
+    out.cell_data = {k: (v if k in _GMSH_TAGS else [plain(a) for a in v])
+                     for k, v in mesh.cell_data.items()}
+    return out
+
+
+def write_mesh(mesh: Any, path: str, options: dict[str, Any] | None = None,
+               shown: str | None = None) -> None:
     """Write a meshio mesh to `path` in the format of its extension with these writer
-    options (default: full precision text). SolverMeshError (one line) when the writer
-    refuses it; OSError as it is."""
+    options (default: `write_options_default`). SolverMeshError (one line, meshio's reason,
+    naming `shown` or `path`) when the writer refuses it or exits; OSError as it is."""
     import meshio
 
     fmt = solver_format(path)
+    where = shown or path
     if fmt is None:
-        raise SolverMeshError(f"'{path}' is not a solver mesh path")
-    writer = getattr(meshio, SOLVER_FORMATS[fmt][1]).write
-    if fmt == "su2":
-        mesh = _su2_ready(mesh)
+        raise SolverMeshError(f"'{where}' is not a solver mesh path")
+    opts = write_options_default(fmt) if options is None else options
     try:
+        if fmt == "su2":
+            su2.write(path, mesh, opts)
+            return
+        if fmt == "msh" and not opts.get("binary", False):
+            mesh = _gmsh_ascii_safe(mesh)
         with _quiet():
-            writer(path, mesh, **(write_options_default(fmt) if options is None else options))
+            getattr(meshio, SOLVER_FORMATS[fmt][1]).write(path, mesh, **opts)
     except OSError:
         raise
-    except Exception as exc:
-        raise SolverMeshError(f"cannot write '{path}' as {fmt}: {_one_line(exc)}") from None
-
-
-def _su2_ready(mesh: Any) -> Any:
-    """A copy of `mesh` as meshio 5.3's SU2 writer needs it: cell blocks that also unpack
-    as (type, data) pairs (its marker loop reads them so), and boundary blocks cut into
-    runs of one ``su2:tag`` each (it writes a block's markers in sorted tag order, the
-    runs keep the file's order)."""
-    import meshio
-
-    class PairBlock(meshio.CellBlock):
-        def __iter__(self):
-            return iter((self.type, self.data))
-
-    tags = mesh.cell_data.get("su2:tag")
-    blocks, data = [], {k: [] for k in mesh.cell_data}
-    for i, b in enumerate(mesh.cells):
-        cuts = [0, len(b.data)]
-        if tags is not None and cell_dim(b.type) < 2 and len(b.data):
-            t = np.asarray(tags[i]).reshape(-1)
-            cuts = [0, *(np.flatnonzero(t[1:] != t[:-1]) + 1).tolist(), len(b.data)]
-        for lo, hi in itertools.pairwise(cuts):
-            blocks.append(PairBlock(b.type, np.asarray(b.data)[lo:hi], b.tags))
-            for k in data:
-                data[k].append(np.asarray(mesh.cell_data[k][i])[lo:hi])
-    out = copy.copy(mesh)
-    out.cells, out.cell_data = blocks, data
-    return out
+    except (Exception, SystemExit) as exc:  # meshio exits on some meshes it cannot write
+        why = _shown(_one_line(exc), path, shown)
+        raise SolverMeshError(f"cannot write '{where}' as {fmt}: {why}") from None
 
 
 def write_options_default(fmt: str) -> dict[str, Any]:
     """Writer options for a format other than the source's: full precision text where
-    the writer takes a number format."""
-    return {"float_fmt": ".16e"} if fmt in ("msh", "inp", "mesh") else {}
+    the writer takes a number format; Gmsh 2.2 ASCII (meshio's 4.1 writer needs Gmsh's
+    entity arrays, which only a Gmsh source has); SU2 with point and element indices."""
+    if fmt == "msh":
+        return {"fmt_version": "2.2", "binary": False, "float_fmt": ".16e"}
+    return {"float_fmt": ".16e"} if fmt in ("inp", "mesh") else {}
 
 
-def check_written(sm: SolverMesh, path: str) -> str | None:
+def check_written(sm: SolverMesh, path: str, shown: str | None = None) -> str | None:
     """Why the freshly written `path` is not whole (read back: the same number of points
     and cells per type as `sm`), or None."""
-    import meshio
-
     fmt = solver_format(path)
     try:
-        with _quiet():
-            back = meshio.read(path, file_format=SOLVER_FORMATS[fmt][1])
-    except Exception as exc:
-        return f"the written file does not read back: {_one_line(exc)}"
+        back, _ = _read_mesh(path, fmt)
+    except (Exception, SystemExit) as exc:
+        return f"the written file does not read back: {_shown(_one_line(exc), path, shown)}"
     if back.points.shape[0] != sm.n_points:
         return f"the written file has {back.points.shape[0]} of {sm.n_points} points"
     want = sorted((b.type, len(b.data)) for b in sm.mesh.cells)
@@ -377,6 +494,31 @@ def check_written(sm: SolverMesh, path: str) -> str | None:
     if _totals(want) != _totals(have):
         return "the written file does not hold every cell"
     return None
+
+
+def can_write(sm: SolverMesh, fmt: str, path: str | None = None) -> str | None:
+    """None when `sm` can be written as `fmt` (a --format name) and read back whole, else
+    the one-line reason, naming `path` (else 'a .FMT file'). Explicit rules first
+    (periodic pairs outside Gmsh, what SU2 cannot hold), then a dry write of the mesh into
+    a temporary folder and its read-back: costs one write and one read of the mesh."""
+    if fmt not in SOLVER_FORMATS:
+        return f"'{fmt}' is not a solver format ({', '.join(SOLVER_FORMATS)})"
+    ext = SOLVER_FORMATS[fmt][0]
+    where = path or f"a {ext} file"
+    if fmt != sm.fmt:
+        why = _convert_refusal(sm, fmt)
+        if why:
+            return f"cannot write '{where}' as {fmt}: {why}"
+    with tempfile.TemporaryDirectory(prefix="eegt-can-write-") as folder:
+        tmp = os.path.join(folder, "dry" + ext)
+        try:
+            write(sm, tmp, shown=where)
+        except SolverMeshError as exc:
+            return _shown(str(exc), tmp, where)
+        except OSError as exc:
+            return f"cannot write '{where}': {(exc.strerror or str(exc)).lower()}"
+        why = check_written(sm, tmp, shown=where)
+    return f"cannot write '{where}' as {fmt}: {why}" if why else None
 
 
 def _totals(blocks: list[tuple[str, int]]) -> dict[str, int]:
@@ -402,10 +544,21 @@ def node_choice(sm: SolverMesh, boundary: str, on_boundary: np.ndarray,
     fixed groups' nodes stay; the slide groups' boundary nodes slide along the boundary
     (run in mode ``slide`` with every other boundary node pinned, unless `boundary` is
     already ``slide``); the rest of the boundary follows `boundary`. A node in a fixed and
-    a slide group stays. `on_boundary`: (N,) bool, the faces' boundary nodes
+    a slide group stays. Always held, with a note: the nodes of Gmsh ``$Periodic`` pairs
+    and the nodes of volume cells. `on_boundary`: (N,) bool, the faces' boundary nodes
     (``core.boundary_nodes``)."""
     pinned = np.zeros(sm.n_points, dtype=bool)
     notes = []
+    pairs = sm.periodic_nodes()
+    if pairs.size:
+        pinned[pairs.ravel()] = True
+        notes.append(f"{int(np.count_nonzero(pinned))} nodes of Gmsh $Periodic pairs held "
+                     "(moving one end of a pair and not the other breaks the pair)")
+    volume = sm.volume_nodes()
+    if volume.any():
+        pinned |= volume
+        notes.append(f"{int(np.count_nonzero(volume))} nodes shared with volume cells held "
+                     "(the 2D run does not see those cells and could invert them)")
     if pin_field:
         pinned |= sm.pin_field(pin_field)
         notes.append(f"{int(np.count_nonzero(pinned))} nodes pinned by '{pin_field}'")
@@ -424,6 +577,29 @@ def node_choice(sm: SolverMesh, boundary: str, on_boundary: np.ndarray,
             mode = "slide"
             notes.append("boundary outside the slide groups kept fixed")
     return NodeChoice(pinned, mode, tuple(notes))
+
+
+def volume_cells_inverted(sm: SolverMesh, positions: np.ndarray) -> int:
+    """How many tetrahedra of `sm` have a signed volume at `positions` ((N, 3) or the
+    file's (N, d)) that is zero or of the other sign than in the file: a result that
+    inverts one must not be written. Other volume cells are held by `node_choice`."""
+    before = sm.points3d()
+    after = np.zeros_like(before)
+    pos = np.asarray(positions, dtype=np.float64)
+    after[:, :pos.shape[1]] = pos[:, :3]
+    bad = 0
+    for block in sm.mesh.cells:
+        if block.type != "tetra" or not len(block.data):
+            continue
+        t = np.asarray(block.data, dtype=np.int64)
+        v0, v1 = (_tet_volumes(p, t) for p in (before, after))
+        bad += int(np.count_nonzero((v0 != 0) & (np.sign(v1) != np.sign(v0))))
+    return bad
+
+
+def _tet_volumes(p: np.ndarray, t: np.ndarray) -> np.ndarray:
+    a, b, c, d = (p[t[:, i]] for i in range(4))
+    return np.einsum("ij,ij->i", np.cross(b - a, c - a), d - a) / 6.0
 
 
 def parse_groups(text: str | None) -> tuple[str, ...]:

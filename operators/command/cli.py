@@ -82,6 +82,8 @@ def _reference(ns: argparse.Namespace, params: EEGTParams) -> ReferenceSource | 
     if ns.reference and ns.reference_key:
         raise UsageError("eegt: give --reference or --reference-key, not both")
     if ns.reference:
+        if solver_run.is_solver(ns.input):  # read and matched by solver_run.plan
+            return ReferenceSource(file=ns.reference)
         try:
             return from_file(ns.reference)
         except ValueError as exc:
@@ -281,22 +283,16 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
         rep["backend_requested"] = backend
         warming = _warm_device(backend, device)
         if solver_run.is_solver(ns.input):
-            params, rep["solver_mesh"] = solver_run.load(ns, params)
+            params, rep["solver_mesh"], plan = solver_run.plan(ns, params)
             rep["params"] = params.as_dict()
+            rep["skipped"] = []
+            outcome = _run_solver(plan, ns, params, backend, device, rep)
+            staged, results = outcome.staged, [outcome.result]
         else:
-            _load(ns.input)
-        objs, skipped = _objects(ns.object, ns.input)
-        rep["skipped"] = [{"object": name, "reason": "no faces"} for name in skipped]
-        if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
-            bpy.ops.object.mode_set(mode="OBJECT")
-        if ns.uv is not None:
-            objs = _uv_objects(objs, ns.uv, rep)
-        if reference is not None:
-            _check_reference(objs, reference)
-        results = _run_objects(objs, ns, params, backend, device, reference, rep)
-        if ns.output:
-            staged = output_files.stage(ns.output)
-        else:
+            results = _run_blender(ns, params, backend, device, reference, rep)
+            if ns.output:
+                staged = output_files.stage(ns.output)
+        if not ns.output:
             print("EEGT: no --output given, nothing written", flush=True)
         code = EXIT_OK if all(r.ok for r in results) else EXIT_FAILED
     except UsageError as exc:
@@ -314,6 +310,40 @@ def run(argv: list[str]) -> tuple[int, dict[str, Any]]:
     if warming is not None:
         warming.join()
     return _commit(ns, rep, code, staged), rep
+
+
+def _run_blender(ns: argparse.Namespace, params: EEGTParams, backend: str,
+                 device: str | None, reference: ReferenceSource | None,
+                 rep: dict[str, Any]) -> list:
+    """Load a Blender-readable input and run its chosen mesh objects (not written yet)."""
+    _load(ns.input)
+    objs, skipped = _objects(ns.object, ns.input)
+    rep["skipped"] = [{"object": name, "reason": "no faces"} for name in skipped]
+    if bpy.context.mode != "OBJECT" and bpy.ops.object.mode_set.poll():
+        bpy.ops.object.mode_set(mode="OBJECT")
+    if ns.uv is not None:
+        objs = _uv_objects(objs, ns.uv, rep)
+    if reference is not None:
+        _check_reference(objs, reference)
+    return _run_objects(objs, ns, params, backend, device, reference, rep)
+
+
+def _run_solver(plan: solver_run.SolverPlan, ns: argparse.Namespace, params: EEGTParams,
+                backend: str, device: str | None,
+                rep: dict[str, Any]) -> solver_run.SolverOutcome:
+    """Run a solver mesh on its own numbers (solver_run.py): its report line and entry, the
+    staged output; no Blender mesh in between."""
+    progress = None if ns.quiet else printer(plan.name)
+    outcome = solver_run.run(plan, ns, params, backend, device, progress)
+    res = outcome.result
+    print("EEGT " + res.line(), flush=True)
+    rep["objects"] = [res.as_dict()]
+    if ns.metrics:
+        rep["objects"][0]["metrics"] = solver_run.object_metrics(plan, outcome.after2d,
+                                                                 ns.metrics)
+        rep["solver_mesh"]["metrics"] = solver_run.group_metrics(plan, outcome.after2d,
+                                                                 ns.metrics)
+    return outcome
 
 
 def _run_objects(objs, ns, params, backend: str, device, reference,
@@ -353,8 +383,6 @@ def _run_mesh_object(obj, ns, params, backend: str, device, reference, progress,
         job.result.status in ("valid", "untangled")
     res = runner.apply(obj, job, write=ok or not ns.no_write_on_fail)
     m = metrics.run_metrics(job, res, ns.metrics) if ns.metrics else None
-    if ns.metrics and "solver_mesh" in rep:
-        rep["solver_mesh"]["metrics"] = solver_run.group_metrics(job, res, ns.metrics)
     return res, m
 
 

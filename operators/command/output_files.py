@@ -1,8 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The command's output file: exported to a hidden temporary file beside the target, checked
-for the format's own end (Blender's writers report success on a full disk) or, for a solver
-mesh, read back whole, then renamed into place by the caller; see ``cli.py`` for the whole
-promise."""
+for the format's own end (Blender's writers report success on a full disk), then renamed into
+place by the caller; see ``cli.py`` for the whole promise. A solver mesh output is staged by
+``solver_run.py`` through ``fileio.checked_write`` (written, read back whole)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,6 @@ from typing import Any
 
 import bpy
 
-from ...fileio import solver_mesh
-from ...fileio.solver_formats import solver_format
-from ..solver_io import blender_mesh
 from .usage import UsageError, why
 
 # A compressed .blend is zstd frames closed by a seek table (a skippable frame whose last
@@ -49,13 +46,8 @@ def stage(path: str) -> str:
     ext = os.path.splitext(path)[1].lower()
     tmp = tmp_path(path)
     try:
-        if solver_format(path) is not None:
-            problem = _write_solver(tmp)
-        else:
-            _export(tmp, ext)
-            problem = incomplete(tmp, ext)
-    except solver_mesh.SolverMeshError as exc:
-        problem = str(exc)
+        _export(tmp, ext)
+        problem = incomplete(tmp, ext)
     except RuntimeError as exc:
         problem = first_line(exc, "write error")
     except OSError as exc:
@@ -79,16 +71,6 @@ def _export(path: str, ext: str) -> None:
         bpy.ops.wm.ply_export(filepath=path, forward_axis="Y", up_axis="Z", ascii_format=False)
     else:  # binary: its size is 84 + 50 * triangles
         bpy.ops.wm.stl_export(filepath=path, forward_axis="Y", up_axis="Z", ascii_format=False)
-
-
-def _write_solver(path: str) -> str | None:
-    """Write the scene's one solver mesh object into `path` (its input file's blocks and
-    data, the moved nodes' positions); why it does not read back whole, or None."""
-    objs = blender_mesh.solver_objects()
-    if len(objs) != 1:
-        return f"{len(objs)} solver mesh objects: one is written into a solver mesh"
-    blender_mesh.write_object(objs[0], path)
-    return solver_mesh.check_written(blender_mesh.source_of(objs[0].data), path)
 
 
 def incomplete(path: str, ext: str) -> str | None:

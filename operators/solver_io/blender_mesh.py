@@ -16,7 +16,7 @@ import os
 import bpy
 import numpy as np
 
-from ...fileio import solver_mesh
+from ...fileio import checked_write, solver_mesh
 from ...fileio.solver_mesh import SolverMesh, SolverMeshError
 from ..mesh.mesh_io import PIN_NAME, read_positions
 
@@ -128,10 +128,12 @@ def moved_positions(me: bpy.types.Mesh, sm: SolverMesh) -> tuple[np.ndarray, np.
 
 def write_object(obj: bpy.types.Object, path: str) -> int:
     """Write `obj`'s mesh into a solver mesh file at `path` (its source file's blocks and
-    data, the moved vertices' positions); the number of moved nodes."""
+    data, the moved vertices' positions); the number of moved nodes. The file is written
+    beside `path`, read back whole and only then put in place (``fileio.checked_write``):
+    a failed write (SolverMeshError, one line naming `path`) leaves `path` as it was."""
     sm = source_of(obj.data)
     positions, moved = moved_positions(obj.data, sm)
-    solver_mesh.write(sm, path, positions, moved)
+    checked_write.write(sm, path, positions, moved)
     return int(np.count_nonzero(moved))
 
 

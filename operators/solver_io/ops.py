@@ -77,8 +77,8 @@ class EEGT_OT_export_solver_mesh(bpy.types.Operator, ExportHelper):
             return {"CANCELLED"}
         try:
             moved = blender_mesh.write_object(context.active_object, self.filepath)
-        except (solver_mesh.SolverMeshError, OSError) as exc:
-            self.report({"ERROR"}, str(exc))
+        except (solver_mesh.SolverMeshError, OSError) as exc:  # the file at `filepath` is
+            self.report({"ERROR"}, str(exc))  # as it was: written beside, then replaced
             return {"CANCELLED"}
         self.report({"INFO"}, f"wrote {self.filepath} ({moved} nodes moved)")
         return {"FINISHED"}

@@ -1,0 +1,227 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""SU2 meshes (single zone, NDIME 2 or 3) read and written without meshio's SU2 code, which
+drops marker names and cannot read its own 3D output (docs/engineers.md).
+
+A read gives a meshio mesh: the interior elements (``NELEM``) as cell blocks in file order
+(a new block where the element type changes) with ``su2:tag`` 0, then every marker's
+elements in file order with the marker's tag (its name when it is a number, else the
+previous tag + 1: meshio's own numbering) and ``field_data[name] = [tag, NDIME - 1]``.
+A write takes the interior from the cells of dimension NDIME and the markers from the
+cells of dimension NDIME - 1, grouped by tag in the order they come, named from
+``field_data`` (else the tag). Points are written with Python's shortest exact repr.
+Anything the format has no place for is a `Su2Error` of one line.
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import numpy as np
+
+# SU2 (VTK) element type -> (meshio type, corners)
+SU2_TYPES = {3: ("line", 2), 5: ("triangle", 3), 9: ("quad", 4), 10: ("tetra", 4),
+             12: ("hexahedron", 8), 13: ("wedge", 6), 14: ("pyramid", 5)}
+MESHIO_TO_SU2 = {name: code for code, (name, _) in SU2_TYPES.items()}
+_DIM = {"line": 1, "triangle": 2, "quad": 2, "tetra": 3, "hexahedron": 3, "wedge": 3,
+        "pyramid": 3}
+TAG_NAMES = ("su2:tag", "gmsh:physical", "medit:ref", "CellEntityIds")
+
+
+class Su2Error(ValueError):
+    """An SU2 file that cannot be read, or a mesh SU2 cannot hold (one line)."""
+
+
+def _records(path: str) -> list[tuple[int, str]]:
+    """(line number, text) of every line with its ``%`` comment and blanks removed."""
+    out = []
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        for no, line in enumerate(fh, 1):
+            text = line.split("%", 1)[0].strip()
+            if text:
+                out.append((no, text))
+    return out
+
+
+def _keyword(text: str) -> tuple[str, str] | None:
+    if "=" not in text:
+        return None
+    key, value = text.split("=", 1)
+    key = key.strip().upper()
+    return (key, value.strip()) if key.replace("_", "").isalpha() else None
+
+
+def read(path: str) -> tuple[Any, dict[str, Any]]:
+    """The meshio mesh of an SU2 file and its layout (``ndime``, whether point and element
+    records carry their index): what `write` needs to give the same records back."""
+    import meshio
+
+    recs = _records(path)
+    i, ndime, points, layout = 0, 0, None, {"point_index": False, "elem_index": False}
+    blocks: list[tuple[str, list[list[int]], int]] = []  # (type, rows, tag)
+    field_data: dict[str, np.ndarray] = {}
+    tag, n_mark, marker = 0, None, None
+
+    def elements(count: int, at: int, tag_: int, interior: bool) -> int:
+        for k in range(count):
+            if at + k >= len(recs):
+                raise Su2Error(f"{'NELEM' if interior else 'MARKER_ELEMS'} promises {count} "
+                               f"elements, the file ends after {k}")
+            no, text = recs[at + k]
+            words = text.split()
+            try:
+                code = int(words[0])
+                kind, n = SU2_TYPES[code]
+                nodes = [int(w) for w in words[1:1 + n]]
+            except (ValueError, KeyError):
+                raise Su2Error(f"line {no}: not an SU2 element ('{text[:40]}')") from None
+            extra = len(words) - 1 - n
+            if len(nodes) != n or extra not in (0, 1):
+                raise Su2Error(f"line {no}: element type {code} takes {n} nodes")
+            if interior and extra:
+                layout["elem_index"] = True
+            if k and blocks[-1][0] == kind:
+                blocks[-1][1].append(nodes)
+            else:
+                blocks.append((kind, [nodes], tag_))
+        return at + count
+
+    while i < len(recs):
+        no, text = recs[i]
+        kw = _keyword(text)
+        if kw is None:
+            raise Su2Error(f"line {no}: expected a KEYWORD= line, got '{text[:40]}'")
+        key, value = kw
+        i += 1
+        try:
+            if key == "NDIME":
+                ndime = int(value)
+                if ndime not in (2, 3):
+                    raise Su2Error(f"line {no}: NDIME= {value} (2 or 3)")
+            elif key == "NELEM":
+                i = elements(int(value), i, 0, True)
+            elif key == "NPOIN":
+                if ndime == 0:
+                    raise Su2Error(f"line {no}: NPOIN before NDIME")
+                n = int(value.split()[0])
+                rows = recs[i:i + n]
+                if len(rows) < n:
+                    raise Su2Error(f"NPOIN promises {n} points, the file ends after "
+                                   f"{len(rows)}")
+                width = len(rows[0][1].split()) if rows else ndime
+                if width not in (ndime, ndime + 1, ndime + 2):
+                    raise Su2Error(f"line {rows[0][0]}: a point of NDIME= {ndime} has "
+                                   f"{width} numbers")
+                try:
+                    flat = np.array(" ".join(t for _, t in rows).split(), dtype=np.float64)
+                    points = flat.reshape(n, width)[:, :ndime].copy()
+                except ValueError:
+                    raise Su2Error(f"the {n} points after line {no} are not {width} numbers "
+                                   "each") from None
+                layout["point_index"] = width > ndime
+                i += n
+            elif key == "NMARK":
+                n_mark = int(value)
+            elif key == "MARKER_TAG":
+                marker = value
+                try:
+                    tag = int(value)
+                except ValueError:
+                    tag += 1
+                field_data[marker] = np.array([tag, max(ndime - 1, 0)], dtype=np.int64)
+            elif key == "MARKER_ELEMS":
+                if marker is None:
+                    raise Su2Error(f"line {no}: MARKER_ELEMS before MARKER_TAG")
+                i = elements(int(value), i, tag, False)
+                marker = None
+            else:
+                raise Su2Error(f"line {no}: '{key}' is not kept (single-zone meshes: NDIME, "
+                               "NELEM, NPOIN, NMARK, MARKER_TAG, MARKER_ELEMS)")
+        except ValueError as exc:
+            if isinstance(exc, Su2Error):
+                raise
+            raise Su2Error(f"line {no}: '{text[:40]}' is not a number") from None
+    if points is None:
+        raise Su2Error("no NPOIN section")
+    if n_mark is not None and n_mark != len(field_data):
+        raise Su2Error(f"NMARK= {n_mark} but {len(field_data)} markers")
+    cells = [meshio.CellBlock(kind, np.array(rows, dtype=np.int64)) for kind, rows, _ in
+             blocks]
+    tags = [np.full(len(rows), t, dtype=np.int32) for _, rows, t in blocks]
+    layout["ndime"] = ndime
+    mesh = meshio.Mesh(points, cells, cell_data={"su2:tag": tags} if cells else {},
+                       field_data=field_data)
+    return mesh, layout
+
+
+def _tags(mesh: Any) -> tuple[str | None, list[np.ndarray]]:
+    for name in TAG_NAMES:
+        if name in mesh.cell_data:
+            return name, [np.asarray(a).reshape(len(a), -1)[:, 0].astype(np.int64)
+                          for a in mesh.cell_data[name]]
+    return None, [np.zeros(len(b.data), dtype=np.int64) for b in mesh.cells]
+
+
+def plan(mesh: Any, layout: dict[str, Any] | None = None) -> tuple[int, str | None]:
+    """(NDIME, None) when SU2 can hold `mesh`, else (0, the one-line reason)."""
+    dims = {_DIM.get(b.type, -1) for b in mesh.cells if len(b.data)}
+    odd = sorted({b.type for b in mesh.cells if b.type not in MESHIO_TO_SU2 and len(b.data)})
+    if odd:
+        return 0, f"SU2 has no element type for {', '.join(odd)} cells"
+    ndime = (layout or {}).get("ndime") or max(dims | {2})
+    pts = np.asarray(mesh.points)
+    if ndime == 2 and pts.shape[1] == 3 and np.any(pts[:, 2] != 0):
+        return 0, "a 2D SU2 mesh lies in z = 0 and these points do not"
+    low = sorted({b.type for b in mesh.cells if len(b.data) and _DIM[b.type] < ndime - 1})
+    if low:
+        return 0, f"SU2 (NDIME= {ndime}) has no place for {', '.join(low)} cells"
+    if ndime not in dims:
+        return 0, f"SU2 needs interior elements of dimension {ndime}"
+    return ndime, None
+
+
+def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
+    """Write `mesh` as SU2 (the `layout` of a read file gives its records back)."""
+    ndime, why = plan(mesh, layout)
+    if why:
+        raise Su2Error(why)
+    layout = layout or {}
+    tag_name, tags = _tags(mesh)
+    names = {}
+    for name, value in mesh.field_data.items():
+        v = np.asarray(value).ravel().tolist()
+        if v and (len(v) < 2 or int(v[1]) == ndime - 1):
+            names.setdefault(int(v[0]), name)
+    interior, markers = [], {}
+    for block, t in zip(mesh.cells, tags):
+        dim = _DIM[block.type]
+        data = np.asarray(block.data, dtype=np.int64)
+        if dim == ndime and (tag_name != "su2:tag" or not np.any(t)):
+            interior.append((block.type, data))
+            continue
+        cuts = [0, *(np.flatnonzero(t[1:] != t[:-1]) + 1).tolist(), len(data)]
+        for lo, hi in itertools.pairwise(cuts):
+            if hi > lo:
+                markers.setdefault(int(t[lo]), []).append((block.type, data[lo:hi]))
+    pts = np.asarray(mesh.points, dtype=np.float64)[:, :ndime]
+    out = [f"NDIME= {ndime}\n", f"NELEM= {sum(len(d) for _, d in interior)}\n"]
+    k = 0
+    for kind, data in interior:
+        code = MESHIO_TO_SU2[kind]
+        for row in data.tolist():
+            out.append(" ".join(map(str, [code, *row, k] if layout.get("elem_index", True)
+                                    else [code, *row])) + "\n")
+            k += 1
+    out.append(f"NPOIN= {len(pts)}\n")
+    index = layout.get("point_index", True)
+    for j, row in enumerate(pts.tolist()):
+        out.append(" ".join(map(repr, row)) + (f" {j}\n" if index else "\n"))
+    out.append(f"NMARK= {len(markers)}\n")
+    for t, parts in markers.items():
+        out.append(f"MARKER_TAG= {names.get(t, str(t))}\n")
+        out.append(f"MARKER_ELEMS= {sum(len(d) for _, d in parts)}\n")
+        for kind, data in parts:
+            code = MESHIO_TO_SU2[kind]
+            out.extend(" ".join(map(str, [code, *row])) + "\n" for row in data.tolist())
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.writelines(out)
