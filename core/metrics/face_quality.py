@@ -12,9 +12,10 @@ import numpy as np
 from ..fpmath import add_reduce
 from ..mesh.faces import as_faceset
 from ..mesh.points import check_points
+from .kept import Kept
 from .mean_ratio import scaled_group_quality
 from .measures import face_values
-from .targets import corner_vectors, prepare_targets
+from .targets import Targets, corner_vectors, prepare_targets
 
 __all__ = [
     "Stats",
@@ -53,14 +54,24 @@ def stats_of(qs: list[np.ndarray]) -> Stats:
     return Stats(n_inv, q_min, q_avg)
 
 
-def quality(points, faces, targets=None, measure: str = "mean_ratio") -> np.ndarray:
+def quality(points, faces, targets=None, measure: str = "mean_ratio",
+            kept: Kept | None = None) -> np.ndarray:
     """(F,) mean ratio per face in the given face order, 0 for inverted faces; or another
     measure of `core.metrics.measures` (ValueError for an unknown name).
 
     `targets`: None (against the regular polygon), or an (n_corners, 2) array of per-corner
     target points in the faces' corner order (or a prepared core.metrics.targets.Targets): the mean
     ratio against each face's target shape (1 = similar to it); the mean ratio only.
-    Every measure is scale-safe: a mesh times 2^k reads the same bits at any finite scale."""
+    Every measure is scale-safe: a mesh times 2^k reads the same bits at any finite scale.
+
+    `kept`: the corners kept as given (core.metrics.kept.kept_corners of these faces): the
+    faces are measured without them (targets in either faces' corner order); None:
+    every corner counts (the paper's rule, and every mesh without such corners)."""
+    if kept is not None:
+        if (targets is not None and not isinstance(targets, Targets)
+                and len(targets) == kept.faces.n_corners):  # the caller's corner order
+            targets = np.asarray(targets, dtype=np.float64)[~kept.corner]
+        return kept.check(points, quality(points, kept.measured, targets, measure))
     if measure != "mean_ratio":
         if targets is not None:
             raise ValueError(f"targets apply to the mean ratio only, not to {measure!r}")
@@ -75,9 +86,10 @@ def quality(points, faces, targets=None, measure: str = "mean_ratio") -> np.ndar
     return out
 
 
-def mesh_stats(points, faces, targets=None) -> Stats:
-    """n_inverted, q_min, q_avg of a mesh (quality against `targets`, as in `quality`)."""
-    q = quality(points, faces, targets=targets)
+def mesh_stats(points, faces, targets=None, kept: Kept | None = None) -> Stats:
+    """n_inverted, q_min, q_avg of a mesh (quality against `targets`, with the corners
+    `kept` as given left out, as in `quality`)."""
+    q = quality(points, faces, targets=targets, kept=kept)
     return stats_of([q])
 
 

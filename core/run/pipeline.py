@@ -21,6 +21,7 @@ from ..mesh.points import check_points
 from ..mesh.reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from ..mesh.topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
 from ..metrics.face_quality import Stats, folded_area, mesh_stats
+from ..metrics.kept import Kept, kept_corners, kept_note
 from ..metrics.mean_ratio import group_quality
 from ..metrics.reference_shapes import reference_targets
 from ..metrics.targets import Targets, corner_factors, prepare_targets, target_fallback_note
@@ -71,6 +72,8 @@ class EEGTResult:
     global_iterations: int = 0  # optimization iterations of the global stage (beyond the paper)
     n_frozen: int = 0  # faces with a non-positive corner of fixed nodes only: never changeable
     n_target_fallback: int = 0  # faces whose target shape was unusable: regular polygon used
+    n_kept: int = 0  # valid faces with a straight or concave corner of fixed vertices only
+    kept: Kept | None = None  # those corners (core.metrics.kept): how the stats measure them
 
     def as_dict(self) -> dict:
         return {
@@ -85,6 +88,7 @@ class EEGTResult:
             "message": self.message,
             "frozen_faces": self.n_frozen,
             "target_fallback_faces": self.n_target_fallback,
+            "kept_faces": self.n_kept,
         }
 
 
@@ -98,6 +102,7 @@ def untangle_and_smooth(
     targets=None,
     reference_points=None,
     edges: EdgeInfo | None = None,
+    keep_as_given: bool = True,
 ) -> EEGTResult:
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
@@ -130,6 +135,10 @@ def untangle_and_smooth(
     `edges`: the faces' edge analysis (core.mesh.topology.EdgeInfo) when the caller has it
     cheaper than the run's own sort of every corner (a mesh's edge table:
     `EdgeInfo.from_table`); it must describe these faces. None: computed.
+
+    `keep_as_given`: straight or concave corners of fixed vertices only in simple faces are
+    kept as given (core.metrics.kept: valid, measured without those vertices, `n_kept`);
+    False, or the paper's mode (`untangle="eegt"`), counts them inverted and frozen.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
@@ -138,7 +147,8 @@ def untangle_and_smooth(
     n_faces = _face_count(faces)
     start_warm_up(backend, n_faces)  # the device gets ready while the input is checked
     with pages_for_run(n_faces), keep_freed_memory(n_faces):
-        mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges)
+        mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges,
+                        keep_as_given)
         run, order = _start(mesh, params, backend, progress)
         try:
             status, message = run.execute()
@@ -147,6 +157,8 @@ def untangle_and_smooth(
         tg = mesh.targets
         if mesh.hopeless:
             message += f"; {mesh.hopeless}"
+        if mesh.kept is not None:
+            message += f"; {kept_note(mesh.kept)}"
         if tg is not None and tg.n_fallback:
             message += f"; {target_fallback_note(tg.n_fallback)}"
         out, before, after, status, message = _never_worse(mesh, run, order, status, message)
@@ -164,6 +176,8 @@ def untangle_and_smooth(
         run.n_global,
         int(mesh.frozen.sum()),
         0 if tg is None else tg.n_fallback,
+        0 if mesh.kept is None else mesh.kept.n_faces,
+        mesh.kept,
     )
 
 
@@ -172,7 +186,8 @@ class _Mesh:
     """A run's checked input: the caller's points `p` and faces, the targets, which nodes
     move (and how, `motion`), the normalisation (centre, scale) with the normalised points
     `work`, the frozen faces, and the Z-order renumbering a large run works in (None: the
-    caller's numbering)."""
+    caller's numbering), and the corners kept as given (None: none; then `fs` is the
+    caller's faces, else `kept.measured`: the faces as the run measures them)."""
 
     p: np.ndarray
     fs: FaceSet
@@ -185,6 +200,7 @@ class _Mesh:
     frozen: np.ndarray
     renumbered: tuple[Renumbering, FaceSet] | None
     hopeless: str = ""  # why certified-hopeless nodes are held (core/run/hopeless.py)
+    kept: Kept | None = None
 
 
 def _face_count(faces) -> int:
@@ -200,7 +216,7 @@ def _face_count(faces) -> int:
 
 
 def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points,
-             edges: EdgeInfo | None) -> _Mesh:
+             edges: EdgeInfo | None, keep_as_given: bool = True) -> _Mesh:
     """Check the input (one-line ValueErrors), prepare the targets, the boundary's motion and
     the normalised points."""
     p = check_points(points)
@@ -234,6 +250,16 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
     # frozen = straight or inverted in the caller's coordinates (where the stats are judged;
     # a straight fixed corner can turn 1e-17 positive once translated), scaled exactly
     given = as_given(p, fs, center, scale)
+    # straight or concave corners of fixed vertices only in simple faces: kept as given (not
+    # in the paper's mode); the run then works on the faces without those vertices
+    paper = params.untangle == "eegt" or not keep_as_given
+    kept = None if paper else kept_corners(given, fs, free)
+    if kept is not None and isinstance(targets, Targets):
+        kept = None  # prepared targets: their corners cannot be left out (the paper's rule)
+    if kept is not None:
+        fs, renumbered = kept.measured, None
+        if targets is not None:
+            tg = prepare_targets(np.asarray(targets, dtype=np.float64)[~kept.corner], fs)
     # free nodes that no position can fix (neighbours all fixed) are held: their inverted
     # faces are frozen from the start instead of costing the optimizer minutes
     held = hopeless_nodes(given, fs, free, None if motion is None else ~motion.sliding)
@@ -242,7 +268,7 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
         free[held.nodes] = False
     frozen = frozen_faces(given, fs, free)
     return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered,
-                 hopeless_note(held))
+                 hopeless_note(held), kept)
 
 
 def _renumbers(fs: FaceSet, n_nodes: int) -> bool:
@@ -273,7 +299,8 @@ def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
     only where it moved, and only when it is no worse than the input judged in the caller's
     coordinates (else the input, status and message saying so)."""
     p, fs, center, scale = mesh.p, mesh.fs, mesh.center, mesh.scale
-    measured = partial(stats_as_given, fs=fs, center=center, scale=scale, targets=mesh.targets)
+    measured = partial(stats_as_given, fs=fs, center=center, scale=scale, targets=mesh.targets,
+                       kept=mesh.kept)
     out = p.copy()
     if status == "cancelled":
         before = measured(p)
@@ -359,10 +386,12 @@ def as_given(p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float) -> np
 
 
 def stats_as_given(
-    p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float, targets: Targets | None = None
+    p: np.ndarray, fs: FaceSet, center: np.ndarray, scale: float, targets: Targets | None = None,
+    kept: Kept | None = None,
 ) -> Stats:
-    """Stats of the points as the caller has them (what `mesh_stats` of the result says)."""
-    return mesh_stats(as_given(p, fs, center, scale), fs, targets)
+    """Stats of the points as the caller has them (what `mesh_stats` of the result says,
+    with the corners `kept` as given left out)."""
+    return mesh_stats(as_given(p, fs, center, scale), fs, targets, kept)
 
 
 def _check_orientation(p: np.ndarray, fs: FaceSet) -> None:

@@ -110,9 +110,10 @@ class _Placing:
         return out
 
     def stats(self, points: np.ndarray, fs: FaceSet, targets) -> Stats:
-        """The stats of (N, 3) ``points`` in the plane, measured as the input's are."""
+        """The stats of (N, 3) ``points`` in the plane, measured as the input's are (the
+        run's corners kept as given left out)."""
         flat = self.frame.to_2d((points.astype(np.float64) - self.center) / self.scale)
-        return mesh_stats(flat, fs, targets)
+        return mesh_stats(flat, fs, targets, self.res.kept)
 
 
 def _stored_float32(res: EEGTResult, out: np.ndarray, place: _Placing, moved: np.ndarray,

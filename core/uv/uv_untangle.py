@@ -433,7 +433,8 @@ class _Island:
 
         res = untangle_and_smooth(base[local], part_fs, fixed=part_pin, params=self.params,
                                   backend=self.backend, progress=relay if progress else None,
-                                  targets=None if self.tk is None else self.tk[prow])
+                                  targets=None if self.tk is None else self.tk[prow],
+                                  keep_as_given=False)  # the island's measures: every corner
         if res.status == "cancelled":
             raise _Cancel
         run.untangle_iterations += int(res.untangle_iterations)

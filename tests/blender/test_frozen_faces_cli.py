@@ -1,6 +1,8 @@
-"""A face with a straight corner made of fixed (boundary) vertices only stays inverted, so
-the run is a failure: the command line exits 3, still writes the untangled and smoothed
-mesh (the default --write-on-fail) and names the face and why."""
+"""A face with a straight corner made of fixed (boundary) vertices only: kept as given by
+default (the face is simple and counterclockwise: valid, exit 0); under the paper's rule
+(--untangle eegt) it stays inverted, so the run is a failure: the command line exits 3,
+still writes the untangled and smoothed mesh (the default --write-on-fail) and names the
+face and why."""
 
 from __future__ import annotations
 
@@ -27,11 +29,23 @@ def _obj_with_straight_boundary_corner(path, tangle: bool) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
+def test_cli_straight_corner_kept_as_given_exits_0(ext, bpy, tmp_path):
+    src, out, rep = tmp_path / "kept.obj", tmp_path / "out.obj", tmp_path / "r.json"
+    _obj_with_straight_boundary_corner(src, tangle=True)
+    code = ext.operators.command.entry.execute([str(src), "-o", str(out), "--report", str(rep),
+                                                "--quiet"])
+    assert code == 0
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert o["status"] == "untangled" and o["written"] is True
+    assert o["before"]["n_inverted"] > 1 and o["after"]["n_inverted"] == 0
+    assert "1 face kept as given" in o["message"]
+
+
 def test_cli_frozen_straight_corner_exits_3_and_names_the_face(ext, bpy, tmp_path):
     src, out, rep = tmp_path / "frozen.obj", tmp_path / "out.obj", tmp_path / "r.json"
     _obj_with_straight_boundary_corner(src, tangle=True)
     code = ext.operators.command.entry.execute([str(src), "-o", str(out), "--report", str(rep),
-                                      "--quiet"])
+                                                "--untangle", "eegt", "--quiet"])
     assert code == 3
     (o,) = json.loads(rep.read_text())["objects"]
     assert o["status"] == "failed" and o["written"] is True

@@ -129,13 +129,24 @@ def _grid_with_straight_boundary_corner(tangle: bool):
     return p, faces
 
 
-def test_frozen_straight_corner_of_fixed_nodes_is_a_named_failure():
-    """A grid whose boundary n-gon has a 180 degree corner made only of fixed nodes: that
-    face is inverted by the validity rule and no move can change it, so the run is 'failed'
-    (CLI exit 3), never 'valid', and its message says which face and why."""
+def test_straight_corner_of_fixed_nodes_is_kept_as_given():
+    """A grid whose boundary n-gon has a 180 degree corner made only of fixed nodes (a knife
+    cut): the face is simple and counterclockwise, so the corner is kept as given and the
+    run is 'valid' (issue 40); measured without that vertex, the face is a unit square."""
     p, f = _grid_with_straight_boundary_corner(tangle=False)
     res = untangle_and_smooth(p, f)
-    assert res.status == "failed" and res.n_frozen == 1
+    assert res.status == "valid" and res.n_frozen == 0 and res.n_kept == 1
+    assert res.before.n_inverted == 0 == res.after.n_inverted and res.after.q_min == 1.0
+    assert "1 face kept as given" in res.message and "failed" not in res.message
+
+
+def test_frozen_straight_corner_of_fixed_nodes_is_a_named_failure_in_the_paper_mode():
+    """The paper's rule (untangle='eegt'): every corner counts, so that face is inverted and
+    no move can change it: the run is 'failed' (CLI exit 3), never 'valid', and its message
+    says which face and why."""
+    p, f = _grid_with_straight_boundary_corner(tangle=False)
+    res = untangle_and_smooth(p, f, params=EEGTParams(untangle="eegt"))
+    assert res.status == "failed" and res.n_frozen == 1 and res.n_kept == 0
     assert res.before.n_inverted == 1 == res.after.n_inverted
     assert res.message.startswith("failed: face 1 stays inverted: a corner made of fixed "
                                   "vertices only"), res.message
@@ -146,11 +157,14 @@ def test_frozen_corner_does_not_stop_untangling_the_rest():
     p, f = _grid_with_straight_boundary_corner(tangle=True)
     before = mesh_stats(p, f)
     assert before.n_inverted > 1
-    for untangle in ("global", "eegt", "eegt+global"):
+    for untangle in ("global", "eegt+global"):  # the corner kept as given: untangled
         res = untangle_and_smooth(p, f, params=EEGTParams(untangle=untangle))
-        assert res.status == "failed" and res.n_frozen == 1, (untangle, res.message)
-        assert "face 1 stays inverted" in res.message and "untangled in" in res.message
-        assert res.after.n_inverted == 1 == mesh_stats(res.points, f).n_inverted
+        assert res.status == "untangled" and res.n_frozen == 0, (untangle, res.message)
+        assert res.after.n_inverted == 0 == mesh_stats(res.points, f, kept=res.kept).n_inverted
+    res = untangle_and_smooth(p, f, params=EEGTParams(untangle="eegt"))  # the paper's rule
+    assert res.status == "failed" and res.n_frozen == 1, res.message
+    assert "face 1 stays inverted" in res.message and "untangled in" in res.message
+    assert res.after.n_inverted == 1 == mesh_stats(res.points, f).n_inverted
 
 
 # -- progress -------------------------------------------------------------------------------
