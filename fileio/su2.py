@@ -186,7 +186,7 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
     if why:
         raise Su2Error(why)
     layout = layout or {}
-    tag_name, tags = _tags(mesh)
+    _, tags = _tags(mesh)
     names = {}
     for name, value in mesh.field_data.items():
         v = np.asarray(value).ravel().tolist()
@@ -196,7 +196,7 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
     for block, t in zip(mesh.cells, tags):
         dim = _DIM[block.type]
         data = np.asarray(block.data, dtype=np.int64)
-        if dim == ndime and (tag_name != "su2:tag" or not np.any(t)):
+        if dim == ndime:  # elements of the mesh's own dimension are interior, whatever tag
             interior.append((block.type, data))
             continue
         cuts = [0, *(np.flatnonzero(t[1:] != t[:-1]) + 1).tolist(), len(data)]
