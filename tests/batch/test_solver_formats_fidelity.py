@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from eegt_blender.fileio import solver_mesh
 from eegt_blender.fileio.solver_mesh import SolverMeshError
-from solver_meshes import channel_msh, every_format
+from solver_meshes import CHANNEL_TRIANGLES, channel_msh, every_format
 
 pytest.importorskip("meshio", reason="meshio is not installed")
 
@@ -200,6 +200,14 @@ def test_su2_from_gmsh_names_its_markers(files, tmp_path):
     assert np.array_equal(np.array(p["points"]), sm.points3d()[:, :2])
     back = solver_mesh.read(str(out))
     assert np.array_equal(back.group_nodes("cylinder"), sm.group_nodes("cylinder"))
+
+
+
+def test_su2_whose_triangles_carry_a_tag_writes_them_as_its_elements(files):
+    # every_format's SU2 file gives every cell its Gmsh physical tag, the triangles too
+    p = parse_su2(files["su2"])
+    assert p["ndime"] == 2 and len(p["elems"]) == CHANNEL_TRIANGLES
+    assert [m for m, _ in p["markers"]] == ["4", "1", "2", "3"]
 
 
 # Gmsh ---------------------------------------------------------------------------------
