@@ -493,7 +493,9 @@ PRIMITIVE_COUNTS = {"grid": (121, 81, 0), "plane": (4, 0, 0), "cube": (14, 0, 0)
                     "monkey": (555, 415, 1)}
 
 
-@pytest.mark.parametrize("kind", sorted(PRIMITIVES))
+# the monkey's case runs its engine to the iteration limit (2 minutes): make test only
+@pytest.mark.parametrize("kind", [pytest.param(k, marks=pytest.mark.slow) if k == "monkey" else k
+                                  for k in sorted(PRIMITIVES)])
 def test_blender_primitives_with_uvs_a_float32_step_apart_untangle(bpy, ext, kind):
     """Every primitive of the Add menu with a UV map, its interior UVs jittered, one loop of
     each UV vertex one float32 step off (as Blender 4.2-4.5 store part of the Grid's UVs):
