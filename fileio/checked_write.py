@@ -29,8 +29,9 @@ class WriteError(SolverMeshError):
 
 
 def tmp_path(path: str) -> str:
-    """A hidden temporary name beside `path` (beside its target when it is a symbolic link),
-    with the same extension."""
+    """A hidden temporary name beside `path` (beside its target when it is a symbolic link,
+    which then keeps pointing at the new file), with the same extension (exporters insist
+    on it): ``.NAME.eegt-tmp-PID.EXT``, the pattern a resumed batch clears."""
     real = os.path.realpath(path)
     name = os.path.basename(real)
     return os.path.join(os.path.dirname(real),

@@ -12,6 +12,7 @@ from typing import Any
 
 import bpy
 
+from ...fileio.checked_write import discard, tmp_path
 from .usage import UsageError, why
 
 # A compressed .blend is zstd frames closed by a seek table (a skippable frame whose last
@@ -23,21 +24,6 @@ def first_line(exc: RuntimeError, default: str) -> str:
     """A Blender operator's error as one line, without its "Error: " prefix."""
     text = str(exc).strip()
     return text.splitlines()[0].removeprefix("Error: ") if text else default
-
-
-def tmp_path(path: str) -> str:
-    """A hidden temporary name beside `path` (beside its target if it is a symbolic link,
-    which then keeps pointing at the new file), same extension (exporters insist on it)."""
-    real = os.path.realpath(path)
-    name = os.path.basename(real)
-    return os.path.join(os.path.dirname(real),
-                        f".{name}.eegt-tmp-{os.getpid()}{os.path.splitext(name)[1]}")
-
-
-def discard(path: str | None) -> None:
-    """Remove a temporary file if it is there."""
-    if path and os.path.lexists(path):
-        os.remove(path)
 
 
 def stage(path: str) -> str:
