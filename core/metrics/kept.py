@@ -31,7 +31,43 @@ import numpy as np
 
 from ..mesh.faces import FaceSet, as_faceset
 
-__all__ = ["Kept", "kept_corners", "kept_note"]
+__all__ = ["FixedCorners", "Kept", "fixed_corners", "kept_corners", "kept_note"]
+
+
+@dataclass(frozen=True)
+class FixedCorners:
+    """One arity group's faces with a fixed node (`cols`, columns of the group) and their
+    corners: `det` ((n, len(cols)) > 0 where the face turns counterclockwise), `nxt` / `prv`
+    the next and previous corner's nodes, `fix` / `fix_n` / `fix_p` whether the corner's,
+    the next and the previous node are fixed. A corner made of fixed nodes only
+    (`fix & fix_n & fix_p`) with `det <= 0` is one that no move can change: frozen
+    (core.run.pipeline.frozen_faces) or kept as given (`kept_corners`)."""
+
+    cols: np.ndarray
+    nodes: np.ndarray
+    nxt: np.ndarray
+    prv: np.ndarray
+    det: np.ndarray
+    fix: np.ndarray
+    fix_n: np.ndarray
+    fix_p: np.ndarray
+
+    @property
+    def unchangeable(self) -> np.ndarray:
+        """(n, len(cols)) bool: corners of fixed nodes only that are straight or folded."""
+        return self.fix & self.fix_n & self.fix_p & (self.det <= 0.0)
+
+
+def fixed_corners(x: np.ndarray, y: np.ndarray, g, free: np.ndarray) -> FixedCorners:
+    """The `FixedCorners` of arity group `g` at the points (x, y) with movable nodes `free`
+    (only faces with a fixed node can have a corner no move changes)."""
+    fixed = ~free[g.nodes]
+    cols = np.flatnonzero(fixed.any(axis=0))
+    nodes = g.nodes[:, cols]
+    nxt, prv = np.roll(nodes, -1, axis=0), np.roll(nodes, 1, axis=0)
+    det = (x[nxt] - x[nodes]) * (y[prv] - y[nodes]) - (y[nxt] - y[nodes]) * (
+        x[prv] - x[nodes])
+    return FixedCorners(cols, nodes, nxt, prv, det, fixed[:, cols], ~free[nxt], ~free[prv])
 
 
 @dataclass(frozen=True)
@@ -86,12 +122,8 @@ def kept_corners(points: np.ndarray, faces, free: np.ndarray) -> Kept | None:
     x, y = p[:, 0], p[:, 1]
     candidates = []
     for g in fs.groups:
-        fixed = ~free[g.nodes]
-        nxt, prv = np.roll(g.nodes, -1, axis=0), np.roll(g.nodes, 1, axis=0)
-        det = (x[nxt] - x[g.nodes]) * (y[prv] - y[g.nodes]) - (y[nxt] - y[g.nodes]) * (
-            x[prv] - x[g.nodes])
-        hit = (fixed & np.roll(fixed, -1, axis=0) & np.roll(fixed, 1, axis=0) & (det <= 0.0))
-        candidates.append(g.ids[hit.any(axis=0)])
+        fc = fixed_corners(x, y, g, free)
+        candidates.append(g.ids[fc.cols[fc.unchangeable.any(axis=0)]])
     ids = np.sort(np.concatenate(candidates)) if candidates else np.zeros(0, np.int64)
     if ids.size == 0:
         return None

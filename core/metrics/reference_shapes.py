@@ -47,7 +47,10 @@ def _unit_centred(r: np.ndarray, used: np.ndarray) -> np.ndarray:
     return _unit_scaled(np.where(used[:, None], s, 0.0))
 
 
-def _checked(reference_points, n_nodes: int, width: int) -> np.ndarray:
+def _checked(reference_points, fs: FaceSet, n_nodes: int, width: int
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """(the reference as a float64 (N, width) copy, the (N,) mask of nodes used by `fs`);
+    ValueError (one line) unless it is that shape with finite used nodes."""
     if reference_points is None:
         raise ValueError("target 'reference' needs a reference mesh (reference_points: the "
                          "same mesh's vertices in their reference positions)")
@@ -60,18 +63,18 @@ def _checked(reference_points, n_nodes: int, width: int) -> np.ndarray:
     if r.shape[0] != n_nodes:
         raise ValueError(f"reference mesh has {r.shape[0]} vertices, the mesh has {n_nodes} "
                          "(it must have the same topology)")
-    return r
+    used = fs.used_nodes(n_nodes)
+    if not np.isfinite(r[used]).all():
+        bad = int(np.count_nonzero(~np.isfinite(r[used]).all(axis=1)))
+        raise ValueError(f"reference mesh has {bad} vertices with NaN or infinite coordinates")
+    return r, used
 
 
 def reference_targets(reference_points, faces, n_nodes: int) -> np.ndarray:
     """(n_corners, 2) targets: the reference's position of every face corner (the faces'
     corner order), from an (N, 2) reference with the faces counterclockwise."""
     fs = as_faceset(faces, n_nodes)
-    r = _checked(reference_points, n_nodes, 2)
-    used = fs.used_nodes(n_nodes)
-    if not np.isfinite(r[used]).all():
-        bad = int(np.count_nonzero(~np.isfinite(r[used]).all(axis=1)))
-        raise ValueError(f"reference mesh has {bad} vertices with NaN or infinite coordinates")
+    r, used = _checked(reference_points, fs, n_nodes, 2)
     area = _signed_area(_unit_centred(r, used), fs)
     if area < 0.0:
         raise ValueError("reference mesh is clockwise (its total signed area is negative): "
@@ -86,11 +89,7 @@ def reference_to_2d(reference3d, faces, n_nodes: int, tol: float = 1e-5) -> np.n
     its faces are counterclockwise (the plane's normal is its vector area); ValueError (one
     line) when it is not planar within `tol` of its size."""
     fs = as_faceset(faces, n_nodes)
-    r = _checked(reference3d, n_nodes, 3)
-    used = fs.used_nodes(n_nodes)
-    if not np.isfinite(r[used]).all():
-        bad = int(np.count_nonzero(~np.isfinite(r[used]).all(axis=1)))
-        raise ValueError(f"reference mesh has {bad} vertices with NaN or infinite coordinates")
+    r, used = _checked(reference3d, fs, n_nodes, 3)
     # fitted at a largest |coordinate| in [0.5, 1) (a power of two: the same plane and bits,
     # but its sums and squares can neither overflow nor underflow), then scaled back
     _, e = np.frexp(np.max(np.abs(r[used])))

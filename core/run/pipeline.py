@@ -21,7 +21,7 @@ from ..mesh.points import check_points
 from ..mesh.reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from ..mesh.topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
 from ..metrics.face_quality import Stats, folded_area, mesh_stats
-from ..metrics.kept import Kept, kept_corners, kept_note
+from ..metrics.kept import Kept, fixed_corners, kept_corners, kept_note
 from ..metrics.mean_ratio import group_quality
 from ..metrics.reference_shapes import reference_targets
 from ..metrics.targets import Targets, corner_factors, prepare_targets, target_fallback_note
@@ -436,21 +436,15 @@ def frozen_faces(p: np.ndarray, faces, free: np.ndarray) -> np.ndarray:
     out = np.zeros(fs.n_faces, dtype=bool)
     x, y = p[:, 0], p[:, 1]
     for g in fs.groups:
-        fixed = ~free[g.nodes]  # (n, F); only faces with a fixed node can have such a corner
-        cols = np.flatnonzero(fixed.any(axis=0))
-        nodes = g.nodes[:, cols]
-        nxt, prv = np.roll(nodes, -1, axis=0), np.roll(nodes, 1, axis=0)
-        det = (x[nxt] - x[nodes]) * (y[prv] - y[nodes]) - (y[nxt] - y[nodes]) * (
-            x[prv] - x[nodes]
-        )
-        fix, fix_n, fix_p = fixed[:, cols], ~free[nxt], ~free[prv]
-        stuck = fix & fix_n & fix_p & (det <= 0.0)
+        fc = fixed_corners(x, y, g, free)
+        nodes, nxt, prv, fix, fix_n, fix_p = fc.nodes, fc.nxt, fc.prv, fc.fix, fc.fix_n, fc.fix_p
+        stuck = fc.unchangeable
         # two fixed nodes of a corner at one point (a node dragged onto its neighbour)
         same_n = (x[nxt] == x[nodes]) & (y[nxt] == y[nodes])
         same_p = (x[prv] == x[nodes]) & (y[prv] == y[nodes])
         same_np = (x[nxt] == x[prv]) & (y[nxt] == y[prv])
         stuck |= (fix & fix_n & same_n) | (fix & fix_p & same_p) | (fix_n & fix_p & same_np)
-        out[g.ids[cols]] = stuck.any(axis=0)
+        out[g.ids[fc.cols]] = stuck.any(axis=0)
     return out
 
 
