@@ -12,8 +12,14 @@ last iterate (where the next frame's untangling goes on) instead of the best one
 cold run renumbers for memory locality (``core.mesh.reorder``, 50 000 faces and more in a
 scattered numbering) run in their own order here.
 
+A session whose every node is grabbed (a selection dragged as a whole) has nothing to
+optimize: its frames translate the grabbed nodes and measure them.
+
 ``uv_region`` cuts what a UV drag moves out of a welded UV map: the grabbed UV vertices'
-islands (or their selected faces), mirrored islands reflected as ``core.uv.uv_untangle`` does.
+islands (or their selected faces), mirrored islands reflected as ``core.uv.uv_untangle`` does;
+``uv_vertex_corners`` lists every face corner (Blender loop) of its UV vertices, those of faces
+outside the region included, so that a moved UV vertex moves whole. A drag's cursor is kept
+within ``cursor_bounds`` (``CURSOR_REACH``) and what it writes passes ``storable_float32``.
 docs/live.md describes the tools built on it.
 """
 
@@ -38,12 +44,48 @@ from .algorithm1 import Deadline, smooth_loop, untangle_loop
 from .live_reuse import AnchorSearch, GivenQuality, StillDistances
 from .pipeline import as_given, frozen_faces, normalisation
 
-__all__ = ["FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession", "UVRegion",
-           "live_params", "uv_region"]
+__all__ = ["CURSOR_REACH", "FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession",
+           "UVRegion", "clamp_cursor", "cursor_bounds", "live_params", "storable_float32",
+           "uv_region", "uv_vertex_corners"]
 
 FRAME_ITERATIONS = 50  # at most this many untangling and this many smoothing steps a frame
 FRAME_BUDGET = 0.04  # seconds a frame aims at, its writes into Blender included (at least
 # one iteration runs: a mesh whose single iteration takes longer passes it)
+CURSOR_REACH = 1000.0  # a drag's cursor is kept within the dragged mesh's bounding box grown
+# on every side by this many times the box's longer side: farther than any pull on screen,
+# near enough that every place is finite in float32 and the frame's scaling stays sane
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+def cursor_bounds(points: np.ndarray, reach: float = CURSOR_REACH) -> np.ndarray:
+    """(2, 2) [low, high] corners of the places a drag's cursor may take: the bounding box
+    of ``points`` ((N, 2), the dragged mesh in the cursor's coordinates) grown on every side
+    by ``reach`` times its longer side (1 for a box of no size), within float32's range."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    side = float(np.max(hi - lo))
+    grow = reach * (side if side > 0.0 else 1.0)
+    return np.clip(np.stack([lo - grow, hi + grow]), -_FLOAT32_MAX, _FLOAT32_MAX)
+
+
+def clamp_cursor(at, bounds: np.ndarray) -> np.ndarray | None:
+    """The cursor ``at`` (2,) clamped into ``bounds`` (``cursor_bounds``; infinities go to
+    the bound), or None when it is not a place (NaN, None)."""
+    if at is None:
+        return None
+    a = np.asarray(at, dtype=np.float64).reshape(2)
+    if np.isnan(a).any():
+        return None
+    return np.minimum(np.maximum(a, bounds[0]), bounds[1])
+
+
+def storable_float32(values: np.ndarray) -> np.ndarray:
+    """``values`` as float32, what Blender stores; ValueError (one line) when one is NaN or
+    beyond float32's range (it would be stored as inf or NaN)."""
+    v = np.asarray(values, dtype=np.float64)
+    if not (np.abs(v) <= _FLOAT32_MAX).all():
+        raise ValueError("a place beyond float32's range: nothing written")
+    return v.astype(np.float32)
 
 
 def live_params(params: EEGTParams | None, iterations: int) -> EEGTParams:
@@ -71,8 +113,9 @@ class LiveSession:
 
     ``points`` (N, 2) and ``faces`` a counterclockwise planar mesh; ``fixed`` (N,) bool pins
     that stay; ``grab`` the node ids that follow the cursor (pins too); ``targets`` per-corner
-    target shapes as in ``untangle_and_smooth``. ValueError (one line) for bad input or when
-    nothing can move."""
+    target shapes as in ``untangle_and_smooth``. When every node of the faces is grabbed,
+    frames translate them (nothing to optimize: ``rigid``). ValueError (one line) for bad
+    input or when nothing but some grabbed nodes can move."""
 
     def __init__(self, points, faces, grab, fixed=None, params: EEGTParams | None = None,
                  targets=None):
@@ -93,13 +136,16 @@ class LiveSession:
         self.pins = pins
         edges = checked_edges(None, self.fs, n)
         self.free = free_nodes(n, self.fs, pins, edges=edges)
-        if not self.free.any():
+        used = self.fs.used_nodes(n)
+        grabbed = np.zeros(n, dtype=bool)
+        grabbed[self.grab] = True
+        self.rigid = not self.free.any() and not (used & ~grabbed).any()
+        if not self.free.any() and not self.rigid:
             raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
         self.params = params if params is not None else EEGTParams()
         self._engine_params = live_params(self.params, 1)  # steps read no iteration cap
         self.targets = prepare_targets(targets, self.fs)
         self.points = p.copy()
-        used = self.fs.used_nodes(n)
         still = ~self.free & used
         still[self.grab] = False
         self._still_ids = np.flatnonzero(still)
@@ -109,7 +155,8 @@ class LiveSession:
         self._given = GivenQuality(self.fs, self.targets)
         self.step_seconds = 0.0  # the last frame's time per iteration
         self._tail = 0.0  # the last frame's seconds after its iterations
-        self._prepare()
+        if not self.rigid:
+            self._prepare()
 
     def _engine_at(self, work: np.ndarray, key: tuple[float, float, float]) -> NumpyEngine:
         """The engine restarted at ``work`` (normalised) with the fixed nodes' search: the
@@ -153,6 +200,8 @@ class LiveSession:
             p[self.grab] = np.asarray(grab_to, dtype=np.float64).reshape(-1, 2)
         if not np.isfinite(p).all():
             raise ValueError("grabbed positions must be finite")
+        if self.rigid:
+            return self._translated(p, t0)
         prm = live_params(self.params, iterations)
         fs, free = self.fs, self.free
         center, scale = normalisation(p, fs)
@@ -209,6 +258,15 @@ class LiveSession:
         self._tail = t1 - t_tail
         return LiveFrame(out, after, status, n_untangle, n_smooth, t1 - t0)
 
+    def _translated(self, p: np.ndarray, t0: float) -> LiveFrame:
+        """A rigid session's frame: the grabbed nodes where ``p`` has them, measured; no
+        iteration (nothing else can move)."""
+        center, scale = normalisation(p, self.fs)
+        after = self._given.stats(as_given(p, self.fs, center, scale))
+        self.points = p
+        status = "tangled" if after.n_inverted else "valid"
+        return LiveFrame(p, after, status, 0, 0, time.perf_counter() - t0)
+
 
 @dataclass(frozen=True)
 class UVRegion:
@@ -264,3 +322,24 @@ def uv_region(layout: UVLayout, grab: np.ndarray, selected: np.ndarray | None = 
     pos = layout.oriented_points(side, layout.points if points is None else points)[nodes]
     return UVRegion(sub, nodes, face_ids, rows, pos, side[layout.node_island[nodes]] < 0,
                     keep[nodes], g)
+
+
+def uv_vertex_corners(layout: UVLayout, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                    np.ndarray]:
+    """Every face corner (Blender loop) of the UV vertices ``nodes``: the loops of one mesh
+    vertex that Blender's UV editor shows as one UV vertex (``layout.loop_node``), whichever
+    face holds them (selected or not, in the region or not). Returns ``faces`` (m,), the
+    faces holding one, ascending; ``pick`` (k,), where each such corner is among the corners
+    of ``faces`` taken face by face in order; ``local`` (k,), the index in ``nodes`` of its
+    UV vertex."""
+    nodes = np.asarray(nodes, dtype=np.int64).ravel()
+    lut = np.full(layout.n_nodes, -1, dtype=np.int64)
+    lut[nodes] = np.arange(nodes.size)
+    local = lut[layout.faces.indices]
+    rows = np.flatnonzero(local >= 0)
+    offsets = layout.faces.offsets
+    faces = np.unique(np.searchsorted(offsets, rows, side="right") - 1)
+    counts = offsets[faces + 1] - offsets[faces]
+    every = np.repeat(offsets[faces] - (np.cumsum(counts) - counts), counts) \
+        + np.arange(int(counts.sum()))  # the corner rows of ``faces``, face by face
+    return faces, np.searchsorted(every, rows), local[rows]

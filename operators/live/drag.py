@@ -3,9 +3,12 @@
 
 ``UVDrag`` moves UV vertices of the active UV map (the UV editor), ``MeshDrag`` vertices of
 a planar mesh (the 3D View). Both read the mesh once (bulk reads in Object Mode, then back
-in Edit Mode), run ``core.run.live.LiveSession`` frames and write only the values that changed
-into the edit mesh (BMesh: there is no bulk write in Edit Mode). ``restore`` writes every value read
-at the start back, bit for bit. No operator logic here: the modal operators drive these.
+in Edit Mode), keep the cursor within ``core.run.live.cursor_bounds``, run
+``core.run.live.LiveSession`` frames and write only the values that changed into the edit
+mesh (BMesh: there is no bulk write in Edit Mode), never a non-finite one. A moved UV vertex
+is written to every loop of it (``core.run.live.uv_vertex_corners``). ``restore`` writes every
+value read at the start back, bit for bit. No operator logic here: the modal operators drive
+these.
 """
 
 from __future__ import annotations
@@ -20,7 +23,17 @@ import numpy as np
 
 from ...core import EEGTParams, faces_from_csr
 from ...core.metrics import face_shapes_2d
-from ...core.run import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, uv_region
+from ...core.run.live import (
+    FRAME_BUDGET,
+    FRAME_ITERATIONS,
+    LiveFrame,
+    LiveSession,
+    clamp_cursor,
+    cursor_bounds,
+    storable_float32,
+    uv_region,
+    uv_vertex_corners,
+)
 from ...core.uv import weld_uv
 from ..mesh import mesh_io, runner
 from ..shared import modes
@@ -57,7 +70,9 @@ class UVDrag:
 
     ``grab``: UV vertex ids (of the welded map, ``self.layout``) or None to pick: the UV
     vertex nearest to ``cursor`` within ``radius`` (UV units), else the UV vertices of the
-    selected faces. The grabbed vertices keep their offset to the cursor."""
+    selected faces. The grabbed vertices keep their offset to the cursor (both clamped into
+    ``self.bounds``). A moved UV vertex moves with all its loops, also those of faces outside
+    the region (scope "selection": unselected faces that share it), so nothing tears."""
 
     def __init__(self, obj: bpy.types.Object, cursor: tuple[float, float], params: EEGTParams,
                  *, radius: float = 0.0, grab: np.ndarray | None = None, use_pins: bool = True,
@@ -105,16 +120,16 @@ class UVDrag:
                                    fixed=region.fixed, params=params, targets=targets)
         self.start = region.points[region.grab].copy()
         self.mirrored_grab = region.mirrored[region.grab]
-        self.cursor0 = np.asarray(cursor, dtype=np.float64)
-        # the edit mesh's loops of the region, in the order of their values
+        self.bounds = cursor_bounds(lay.points[region.nodes])
+        cursor0 = clamp_cursor(cursor, self.bounds)
+        if cursor0 is None:
+            raise ValueError("the cursor is at no place (NaN)")
+        self.cursor0 = cursor0
+        # every loop of the region's UV vertices (faces outside the region too), face by face
+        faces, pick, self.loop_local = uv_vertex_corners(lay, region.nodes)
+        self._corners = (faces, pick)
         self.me, self.layer_name = me, layer_name
         self._attach()
-        offsets = lay.faces.offsets
-        corners = np.concatenate([np.arange(offsets[f], offsets[f + 1])
-                                  for f in region.face_ids.tolist()])
-        lut = np.full(lay.n_nodes, -1, dtype=np.int64)
-        lut[region.nodes] = np.arange(region.nodes.size)
-        self.loop_local = lut[lay.loop_node[lay.corner_loop[corners]]]
         self.original = np.array([lp[self.uvl].uv[:] for lp in self.loops], dtype=np.float32)
         self.written = self.original.copy()
         self.frame: LiveFrame | None = None
@@ -127,13 +142,17 @@ class UVDrag:
         self.bm.faces.ensure_lookup_table()
         self.uvl = self.bm.loops.layers.uv[self.layer_name]
         faces = self.bm.faces
-        self.loops = [lp for f in self.region.face_ids.tolist() for lp in faces[f].loops]
+        face, pick = self._corners  # faces with a loop to write; those loops among theirs
+        every = [lp for f in face.tolist() for lp in faces[f].loops]
+        self.loops = [every[i] for i in pick.tolist()]
 
     def targets_for(self, cursor: tuple[float, float] | None) -> np.ndarray | None:
-        """The grabbed vertices' places (region coordinates) for a cursor in UV space."""
-        if cursor is None:
+        """The grabbed vertices' places (region coordinates) for a cursor in UV space
+        (clamped into ``self.bounds``; None or NaN: None, where they are)."""
+        at = clamp_cursor(cursor, self.bounds)
+        if at is None:
             return None
-        d = np.asarray(cursor, dtype=np.float64) - self.cursor0
+        d = at - self.cursor0
         out = self.start.copy()
         out[:, 0] += np.where(self.mirrored_grab, -d[0], d[0])
         out[:, 1] += d[1]
@@ -151,7 +170,8 @@ class UVDrag:
         # vertex's value (welded) keeps its own bits, as Untangle & Smooth UVs keeps them
         moved = np.any(frame.points != self.region.points, axis=1)[self.loop_local]
         values = self.original.copy()
-        values[moved] = self.region.to_uv(frame.points)[self.loop_local[moved]]
+        values[moved] = storable_float32(
+            self.region.to_uv(frame.points)[self.loop_local[moved]])
         self._write(values)
         self.frame = frame
         self.times = StepTimes(t1 - t0, time.perf_counter() - t1)
@@ -178,7 +198,8 @@ class MeshDrag:
 
     ``grab``: vertex indices, or None to pick with ``pick`` (a function from (N, 3) vertex
     positions to (N, 2) screen positions, the cursor and a radius in pixels): the vertex
-    under the cursor, else the selected vertices."""
+    under the cursor, else the selected vertices. Cursor places are clamped into
+    ``self.bounds`` (plane coordinates)."""
 
     def __init__(self, obj: bpy.types.Object, params: EEGTParams, *,
                  grab: np.ndarray | None = None,
@@ -210,6 +231,7 @@ class MeshDrag:
         self.session = LiveSession(job.points2d, job.faces, local, fixed=job.fixed,
                                    params=params)
         self.start = job.points2d[local].copy()
+        self.bounds = cursor_bounds(job.points2d)
         self.me = me
         self._attach()
         self.original = np.array([v.co[:] for v in self.verts], dtype=np.float32)
@@ -233,9 +255,10 @@ class MeshDrag:
     def step(self, at: np.ndarray | None, budget: float | None = FRAME_BUDGET,
              iterations: int = FRAME_ITERATIONS) -> LiveFrame:
         """One frame with the grabbed vertices moved by ``at`` minus the first ``at`` (plane
-        coordinates; None: where they are)."""
+        coordinates, clamped into ``self.bounds``; None or NaN: where they are)."""
         t0 = time.perf_counter()
         targets = None
+        at = clamp_cursor(at, self.bounds)
         if at is not None:
             if self.anchor is None:
                 self.anchor = np.asarray(at, dtype=np.float64)
@@ -246,7 +269,7 @@ class MeshDrag:
         moved = frame.points != self.job.points2d
         co = self.original.copy()
         rows = np.flatnonzero(moved.any(axis=1))
-        co[rows] = self.job.frame.to_3d(frame.points[rows]).astype(np.float32)
+        co[rows] = storable_float32(self.job.frame.to_3d(frame.points[rows]))
         self._write(co)
         self.frame = frame
         self.times = StepTimes(t1 - t0, time.perf_counter() - t1)

@@ -5,8 +5,9 @@ Edit Mode (``mesh.eegt_live_untangle``).
 Press the left mouse button on a vertex (none under the cursor: the selection is grabbed)
 and drag: a timer runs one frame at a time with the latest cursor position (mouse moves that
 arrive meanwhile only update that position, so a slow frame skips to where the cursor is,
-never queues), each frame (core and writes) kept under ``core.run.live.FRAME_BUDGET``. Release or
-Enter keeps the result (one undo step); Esc or the right button puts every value back.
+never queues), each frame (core and writes) kept under ``core.run.live.FRAME_BUDGET``; the
+drags keep the cursor within ``core.run.live.cursor_bounds``. Release or Enter keeps the
+result (one undo step); Esc or the right button puts every value back.
 """
 
 from __future__ import annotations
@@ -99,11 +100,21 @@ class _LiveModal:
         self._area.header_text_set(status_text(frame))
         self._area.tag_redraw()
 
+    def _frame_or_restore(self) -> bool:
+        """Run a frame; False when the mesh cannot take it (every value put back, warned)."""
+        try:
+            self._frame()
+        except ValueError as exc:
+            self._drag.restore()
+            self.report({"WARNING"}, str(exc).splitlines()[0])
+            return False
+        return True
+
     def _busy(self) -> bool:
         """Whether the mesh may still change with the cursor still."""
         f = self._drag.frame
-        if f is None:
-            return False
+        if f is None or f.untangle_iterations + f.smooth_iterations == 0:
+            return False  # no frame yet, or one that ran nothing (a selection moved whole)
         if f.status == "tangled":
             return self._settle < UNTANGLE_FRAMES
         return self._settle < SETTLE_FRAMES and f.smooth_iterations > 1
@@ -118,8 +129,8 @@ class _LiveModal:
                 (kind == "LEFTMOUSE" and value == "RELEASE" and self._drag is not None):
             if self._drag is None:
                 return self._end(context, {"CANCELLED"})
-            if self._pending:
-                self._frame()
+            if self._pending and not self._frame_or_restore():
+                return self._end(context, {"CANCELLED"})
             return self._end(context, {"FINISHED"})
         if kind == "LEFTMOUSE" and value == "PRESS" and self._drag is None:
             return self._press(context, event)
@@ -127,13 +138,9 @@ class _LiveModal:
             self._at, self._pending = self._cursor(event), True
             return {"RUNNING_MODAL"}
         if kind == "TIMER":  # ours or another: either way a chance to run a frame
-            if self._drag is not None and (self._pending or self._busy()):
-                try:
-                    self._frame()
-                except ValueError as exc:  # the mesh cannot take this place: all back
-                    self._drag.restore()
-                    self.report({"WARNING"}, str(exc).splitlines()[0])
-                    return self._end(context, {"CANCELLED"})
+            if self._drag is not None and (self._pending or self._busy()) and \
+                    not self._frame_or_restore():
+                return self._end(context, {"CANCELLED"})
             return {"RUNNING_MODAL"}
         if kind in {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN",
                     "TRACKPADZOOM"}:
