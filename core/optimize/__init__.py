@@ -20,7 +20,8 @@ Where things live (NumPy and OpenCL twins side by side; the kernels are in `core
   `state.skipped_trials`; OpenCL: `lbfgs_parallel.cl` `limit_corner`, `finish_limit`.
 - active sub-mesh (rings around seed elements): `submesh.Neighbourhood` (node -> element
   incidence built once, each sub-mesh costs its own size), `submesh.active_submesh`.
-- stage drivers (eps continuation and polish, the lift): `stages.untangle_global`,
+- stage drivers (eps continuation and polish, the lift; giving up on a fold that makes no
+  progress, `stages.STALL_ROUNDS`): `stages.untangle_global`,
   `stages.lift_min_quality`; what they are handed: `options.GlobalOptions`.
 - boundary sliding (a sliding node's parameter on its curve as its variable, order kept in
   the line search): `slide.SlideState`, `slide.SlideProblem` (host solver only).
@@ -35,9 +36,9 @@ the rest of the core are mapped in `core/__init__.py`.
 """
 
 from .options import GlobalOptions
-from .stages import lift_min_quality, untangle_budget, untangle_global
+from .stages import STALL_ROUNDS, lift_min_quality, untangle_budget, untangle_global
 from .state import stops
 from .submesh import active_submesh
 
-__all__ = ["GlobalOptions", "active_submesh", "lift_min_quality", "stops", "untangle_budget",
-           "untangle_global"]
+__all__ = ["STALL_ROUNDS", "GlobalOptions", "active_submesh", "lift_min_quality", "stops",
+           "untangle_budget", "untangle_global"]

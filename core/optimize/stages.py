@@ -24,7 +24,7 @@ from .slide import make_state
 from .state import State, Tick, stops
 from .submesh import Neighbourhood
 
-__all__ = ["BUDGET_NODES", "lift_min_quality", "untangle_budget", "untangle_global"]
+__all__ = ["BUDGET_NODES", "STALL_ROUNDS", "lift_min_quality", "untangle_budget", "untangle_global"]
 
 INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on spun holes: docs)
 INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses a larger mesh
@@ -34,6 +34,10 @@ BUDGET_NODES = 10_000  # an untangling budget holds up to this many free nodes; 
 EXTEND_SHRINK = 0.5  # a spent untangling budget gets one more round while the worst corner
 # det closes in on 0: |min det| at most this x its value two rounds before (`_extend`)
 EXTEND_SHARE = 0.5  # ... up to this share of max_iter in all
+STALL_ROUNDS = 12  # untangling rounds in a row that neither lower the inverted count nor
+# raise the worst corner det end the run: a fold no move opens (`_stalled`; solvable meshes
+# of the corpus take at most 4 untangling rounds in all: docs/global_untangle.md, "Giving up")
+STALL_RISE = 1e-6  # a rise of the worst det by less than this x |det| is no progress
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -150,7 +154,7 @@ def untangle_global(
     was reached, the iterate with the fewest inverted elements is returned.
     info: iterations, rounds, n_inverted_in, n_inverted_out, min_det (smallest normalised corner
     det), eps_history, seconds, seconds_per_iter, status ("untangled" / "failed" / "cancelled" /
-    "nothing to do").
+    "nothing to do"), gave_up (the run ended early: STALL_ROUNDS rounds without progress).
     """
     t_start = time.perf_counter()
     P, free = _checked_input(points, free)
@@ -171,6 +175,7 @@ def untangle_global(
         "seconds": 0.0,
         "seconds_per_iter": 0.0,
         "status": "nothing to do",
+        "gave_up": False,
     }
     if en.i0.size == 0 or st.size == 0:
         info["seconds"] = time.perf_counter() - t_start
@@ -193,6 +198,7 @@ def untangle_global(
         seconds=secs,
         seconds_per_iter=secs / max(run.total, 1),
         status=run.status or ("untangled" if n_out == 0 else "failed"),
+        gave_up=run.gave_up,
     )
     return out, info
 
@@ -220,9 +226,12 @@ class _Continuation:
         self.status = ""
         self.eps_hist: list[float] = []
         self.dmins = [dmin]  # the min det at the start and after each untangling round
+        self.top_det, self.top_inv = dmin, n_inv  # the best worst det and inverted count
+        self.stall = 0  # untangling rounds in a row without progress (`_stalled`)
         self.granted = 0  # iterations `_extend` added to max_iter
         self.rounds = 0
         self.cancel = False
+        self.gave_up = False  # `_stalled` ended the run
 
     def solve(self, t_start: float) -> None:
         """Rounds until the budget, a stop rule or a cancel ends them."""
@@ -246,6 +255,8 @@ class _Continuation:
             if self._done(guard, decrease, its, t_start):
                 break
             if not guard:
+                if self._stalled(dmin, n_inv):
+                    break
                 self._extend(dmin)
             self.eps = self._next_eps(decrease, dmin)
 
@@ -266,6 +277,23 @@ class _Continuation:
             return
         more = min(self.inner, int(EXTEND_SHARE * self.opt.max_iter) - self.granted)
         self.granted += max(more, 0)
+
+    def _stalled(self, dmin: float, n_inv: int) -> bool:
+        """Whether STALL_ROUNDS untangling rounds in a row have neither lowered the inverted
+        count below its best nor raised the worst corner det by STALL_RISE (relative) above
+        its best: the iterate sits where the energy has no way down that opens the fold (a
+        tangle no position of the free nodes can fix has no certificate in general:
+        core/run/hopeless.py finds the common ones). Such a run ends as 'failed' after a few
+        dozen iterations instead of the whole budget (tens of thousands of rounds of one
+        iteration each at the eps floor)."""
+        progress = False
+        if dmin > self.top_det + STALL_RISE * abs(self.top_det):
+            self.top_det, progress = dmin, True
+        if n_inv < self.top_inv:
+            self.top_inv, progress = n_inv, True
+        self.stall = 0 if progress else self.stall + 1
+        self.gave_up = self.stall >= STALL_ROUNDS
+        return self.gave_up
 
     def _cap(self, guard: bool) -> int:
         """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one

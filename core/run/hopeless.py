@@ -1,12 +1,13 @@
 """Free nodes that no position can make valid, found before the run (with a certificate).
 
-A free node whose every neighbour is fixed (boundary, pinned, or a corner that does not
-slide) moves alone: every corner of its faces that touches it is twice a signed triangle
-area, an affine function ``c . x + d`` of its position x, and a face is valid when all of
-those are > 0 (the corners that do not touch it are constants). The node can make its star
-valid exactly when these open half-planes meet. When they do not, the optimizer can only
-fail, and it takes minutes to find out (tens of thousands of iterations on a nine-node
-U-shaped star).
+In a face where a free node is the only free node, every corner that touches it is twice a
+signed triangle area, an affine function ``c . x + d`` of its position x (the corners that
+do not touch it are constants), and the face is valid when all of those are > 0. Whatever
+the other free nodes do, those faces can all be valid only where these open half-planes
+meet. When they do not, the optimizer can only fail, and it takes minutes to find out (tens
+of thousands of iterations on a nine-node U-shaped star). A node whose neighbours are all
+fixed is the whole story of its star; a node with free neighbours is examined on its faces
+without them (a relaxation: an empty region still proves the fold hopeless).
 
 Emptiness is decided without an LP solver (Blender ships NumPy only): by Helly's theorem
 in the plane, open half-planes that do not meet contain three (or two) that already do not,
@@ -20,12 +21,12 @@ only with a margin (the combination's constant, as a distance, below ``-1e-9`` t
 size of its star), so a star that is only just solvable is never held (nor one whose
 region shrinks to a point, such as three lines through one fixed node: the optimizer's).
 
-Only candidate nodes are examined: free nodes all of whose faces hold no other free node,
-found with two passes over the face corners (about 45 ms for a million quads), and of
-those only the ones with a corner below the margin where they are now. A star with more
-than `MAX_ROWS` rows (dozens of faces), or beyond `MAX_TRIPLES` triples in one run, is left
-to the optimizer. Groups of adjacent free nodes (two free nodes folding one region
-together) are not examined: the single-node test only.
+Only candidate nodes are examined: free nodes that are the only free node of some face,
+found with two passes over the face corners (tens of ms for a million quads), and of those
+only the ones with a corner below the margin where they are now. A star with more than
+`MAX_ROWS` rows (dozens of faces), or beyond `MAX_TRIPLES` triples in one run, is left to
+the optimizer. Groups of free nodes whose faces fold together are examined by
+core/run/hopeless_groups.py (the area their fixed rim encloses).
 
 The run holds a certified node (it leaves the free set): its inverted faces become frozen
 faces, reported with the certificate, and the rest of the mesh is untangled as usual.
@@ -59,11 +60,10 @@ def _length(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class Hopeless:
     """The certified nodes and, per node, the faces (one to three) whose corners cannot all
-    be positive together, and the number of faces around it."""
+    be positive together."""
 
     nodes: np.ndarray  # (K,) int64 node ids, ascending
     witness: tuple[tuple[int, ...], ...]  # per node: the certificate's face ids
-    n_faces: np.ndarray  # (K,) faces around each node
 
 
 def _free_count(g, free: np.ndarray) -> np.ndarray:
@@ -74,12 +74,10 @@ def _free_count(g, free: np.ndarray) -> np.ndarray:
     return out
 
 
-def _candidates(fs: FaceSet, free: np.ndarray, can_hold: np.ndarray, n_nodes: int
-                ) -> np.ndarray:
-    """Nodes in `can_hold` (free) all of whose faces have no other free node: two passes
-    over the corners (a few tens of ms for a million quads), the second only when a face
-    with one free node exists."""
-    counts = [_free_count(g, free) for g in fs.groups]
+def _candidates(fs: FaceSet, free: np.ndarray, can_hold: np.ndarray, n_nodes: int,
+                counts: list[np.ndarray]) -> np.ndarray:
+    """Nodes in `can_hold` (free) that are the only free node of at least one face: one
+    pass over the corners of the faces with one free node."""
     lone = np.zeros(n_nodes, dtype=bool)  # free node of a face with one free node
     for g, cnt in zip(fs.groups, counts, strict=True):
         one = cnt == 1
@@ -87,25 +85,18 @@ def _candidates(fs: FaceSet, free: np.ndarray, can_hold: np.ndarray, n_nodes: in
             nodes = g.nodes[:, one]
             lone[nodes[free[nodes]]] = True
     lone &= can_hold
-    if not lone.any():
-        return np.zeros(0, dtype=np.int64)
-    for g, cnt in zip(fs.groups, counts, strict=True):  # drop those with a crowded face
-        many = cnt > 1
-        for row in g.nodes:
-            hit = lone[row] & many
-            if hit.any():
-                lone[row[hit]] = False
     return np.flatnonzero(lone)
 
 
-def _rows(p: np.ndarray, fs: FaceSet, cand: np.ndarray, n_nodes: int):
-    """Per constraint row (a corner touching a candidate): its node, face, A - x0, B - x0
-    (the corner's area is cross(A - x, B - x) > 0) and the faces around each candidate."""
+def _rows(p: np.ndarray, fs: FaceSet, cand: np.ndarray, n_nodes: int,
+          counts: list[np.ndarray]):
+    """Per constraint row (a corner touching a candidate in a face where it is the only
+    free node): its node, face, A - x0, B - x0 (the corner's area is cross(A - x, B - x) > 0)."""
     is_cand = np.zeros(n_nodes, dtype=bool)
     is_cand[cand] = True
     node_l, face_l, a_l, b_l = [], [], [], []
-    for g in fs.groups:
-        hit = is_cand[g.nodes]  # (n, F): the candidate's corner (at most one per face)
+    for g, cnt in zip(fs.groups, counts, strict=True):
+        hit = is_cand[g.nodes] & (cnt == 1)  # (n, F): the candidate's corner (one per face)
         k, j = np.nonzero(hit)
         if k.size == 0:
             continue
@@ -182,12 +173,14 @@ def hopeless_nodes(p: np.ndarray, fs: FaceSet, free: np.ndarray,
 
     `p`: (N, 2+) float64 points (the run's coordinates), `free`: (N,) bool movable nodes."""
     n_nodes = free.size
-    none = Hopeless(np.zeros(0, dtype=np.int64), (), np.zeros(0, dtype=np.int64))
+    none = Hopeless(np.zeros(0, dtype=np.int64), ())
     hold = free if can_hold is None else free & can_hold
-    cand = _candidates(fs, free, hold, n_nodes)
+    counts = [_free_count(g, free) for g in fs.groups]
+    cand = _candidates(fs, free, hold, n_nodes, counts)
     if cand.size == 0:
         return none
-    node, face, a, b = _rows(np.asarray(p, dtype=np.float64)[:, :2], fs, cand, n_nodes)
+    node, face, a, b = _rows(np.asarray(p, dtype=np.float64)[:, :2], fs, cand, n_nodes,
+                             counts)
     # row i: cross(A - x, B - x) = c . y + d with y = x - x0
     c = np.stack([a[:, 1] - b[:, 1], b[:, 0] - a[:, 0]], axis=1)
     d = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
@@ -201,7 +194,7 @@ def hopeless_nodes(p: np.ndarray, fs: FaceSet, free: np.ndarray,
         dist = d / _length(c[:, 0], c[:, 1])
     worst = np.minimum.reduceat(np.where(np.isnan(dist), np.inf, dist), starts)
     tangled = worst < -MARGIN * size
-    held, witness, n_faces = [], [], []
+    held, witness = [], []
     budget = MAX_TRIPLES
     for m in np.unique(counts[tangled]):
         pick = tangled & (counts == m)
@@ -215,13 +208,11 @@ def hopeless_nodes(p: np.ndarray, fs: FaceSet, free: np.ndarray,
         for r in np.flatnonzero(found):
             held.append(int(node[s[r]]))
             witness.append(tuple(sorted({int(face[idx[r, w]]) for w in which[r]})))
-            n_faces.append(int(np.unique(face[idx[r]]).size))
     if not held:
         return none
     order = np.argsort(held)
     return Hopeless(np.asarray(held, dtype=np.int64)[order],
-                    tuple(witness[i] for i in order),
-                    np.asarray(n_faces, dtype=np.int64)[order])
+                    tuple(witness[i] for i in order))
 
 
 def hopeless_note(h: Hopeless) -> str:
@@ -233,10 +224,10 @@ def hopeless_note(h: Hopeless) -> str:
         return f"faces {', '.join(str(f) for f in w)} cannot all be valid at once"
 
     if h.nodes.size == 1:
-        return (f"node {int(h.nodes[0])} is held: with its neighbours fixed, no position of "
-                f"it makes its {int(h.n_faces[0])} faces valid ({faces(h.witness[0])})")
+        return (f"node {int(h.nodes[0])} is held: with the other vertices of its faces that "
+                f"touch it fixed, no position of it makes them valid ({faces(h.witness[0])})")
     why = [f"node {int(v)}: {faces(w)}" for v, w in zip(h.nodes[:3], h.witness[:3],
                                                          strict=False)]
     more = f"; {h.nodes.size - 3} more" if h.nodes.size > 3 else ""
-    return (f"{h.nodes.size} nodes are held: with their neighbours fixed, no position of one "
-            f"makes its faces valid ({'; '.join(why)}{more})")
+    return (f"{h.nodes.size} nodes are held: with the other vertices of their faces fixed, no "
+            f"position of one makes them valid ({'; '.join(why)}{more})")

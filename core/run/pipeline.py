@@ -25,7 +25,14 @@ from ..metrics.kept import Kept, fixed_corners, kept_corners, kept_note
 from ..metrics.mean_ratio import group_quality
 from ..metrics.reference_shapes import reference_targets
 from ..metrics.targets import Targets, corner_factors, prepare_targets, target_fallback_note
-from ..optimize import GlobalOptions, lift_min_quality, stops, untangle_budget, untangle_global
+from ..optimize import (
+    STALL_ROUNDS,
+    GlobalOptions,
+    lift_min_quality,
+    stops,
+    untangle_budget,
+    untangle_global,
+)
 from ..optimize.device import solver_for
 from ..optimize.mesh_tables import Factors
 from ..optimize.sampled import Sampled
@@ -35,6 +42,7 @@ from .acceptance import accept
 from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
+from .hopeless_groups import hopeless_groups, hopeless_groups_note
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -262,13 +270,20 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
             tg = prepare_targets(np.asarray(targets, dtype=np.float64)[~kept.corner], fs)
     # free nodes that no position can fix (neighbours all fixed) are held: their inverted
     # faces are frozen from the start instead of costing the optimizer minutes
-    held = hopeless_nodes(given, fs, free, None if motion is None else ~motion.sliding)
+    can_hold = None if motion is None else ~motion.sliding
+    held = hopeless_nodes(given, fs, free, can_hold)
     if held.nodes.size:
         free = free.copy()
         free[held.nodes] = False
+    # ... and groups of free nodes whose faces' areas add up to a constant that is not > 0
+    rims = hopeless_groups(given, fs, free, can_hold)
+    if rims.nodes.size:
+        free = free.copy()
+        free[rims.nodes] = False
     frozen = frozen_faces(given, fs, free)
-    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered,
-                 hopeless_note(held), kept)
+    why = "; ".join(w for w in (hopeless_note(held), hopeless_groups_note(rims, scale * scale))
+                    if w)
+    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered, why, kept)
 
 
 def _renumbers(fs: FaceSet, n_nodes: int) -> bool:
@@ -479,6 +494,7 @@ class _Run:
         self.n_untangle = self.n_smooth = self.n_global = 0
         self.polished = False  # the global stage's polish (or the lift stage) has run
         self.lifted = 0  # lift rounds the last lift kept
+        self.gave_up = False  # a global stage ended for want of progress (stages.STALL_ROUNDS)
         self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
         self._near: Neighbourhood | None = None  # made by the local untangle, if it runs
         self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
@@ -526,6 +542,8 @@ class _Run:
                     f"after {self.n_untangle} untangling iterations"
                     + (f" and {self.n_global} global iterations" if self.n_global else "")
                     + f" (best iterate kept; input had {before.n_inverted - self.n_frozen})"
+                    + (f"; the optimizer gave up after {STALL_ROUNDS} rounds in a row without "
+                       "progress: no move it finds opens the fold" if self.gave_up else "")
                     + (f"; besides, {self.stuck_why()}" if self.n_frozen else "")
                 )
         if not self.polished:  # the whole-mesh global stage polishes and lifts as it goes
@@ -657,6 +675,7 @@ class _Run:
                 slide=None if self.slide is None else self.slide.sub(nodes, start),
             )
             self.n_global += int(info["iterations"])
+            self.gave_up |= bool(info.get("gave_up"))
             if info.get("status") == "cancelled":
                 raise _CancelRun
             pts = start.copy()
@@ -753,6 +772,7 @@ class _Run:
                 slide=self.slide,
             )
             self.n_global += int(info["iterations"])
+            self.gave_up |= bool(info.get("gave_up"))
             if info.get("status") == "cancelled":
                 raise _CancelRun
             if info.get("status") == "untangled" and self.params.lift_rounds > 0:

@@ -10,6 +10,7 @@ from core import mesh_stats, untangle_and_smooth
 from core.mesh import read_obj
 from core.mesh.faces import as_faceset
 from core.run.hopeless import hopeless_nodes
+from core.run.hopeless_groups import hopeless_groups
 
 U_STAR = Path(__file__).resolve().parents[1] / "e2e" / "data" / "u_star_impossible.obj"
 
@@ -47,8 +48,9 @@ def test_u_star_fails_at_once_naming_the_faces_and_the_certificate():
     assert res.global_iterations == 0 and res.untangle_iterations == 0
     assert res.n_frozen == 2 and res.after.n_inverted == 2
     assert "2 faces stay inverted (faces 3, 5)" in res.message, res.message
-    assert ("node 8 is held: with its neighbours fixed, no position of it makes its 8 faces "
-            "valid (faces 3, 5 cannot all be valid at once)") in res.message, res.message
+    assert ("node 8 is held: with the other vertices of its faces that touch it fixed, no "
+            "position of it makes them valid (faces 3, 5 cannot all be valid at once)"
+            ) in res.message, res.message
     assert np.array_equal(res.points, p)
     assert not res.moved.any()
 
@@ -137,10 +139,97 @@ def test_certificate_never_holds_a_node_that_some_position_fixes(arity):
     assert held > 0 and kept > 0, (held, kept)
 
 
-def test_a_free_neighbour_is_not_a_candidate():
-    """Two adjacent free nodes are not examined (the single-node test only)."""
+def test_a_free_neighbour_is_not_examined_but_the_faces_without_it_are():
+    """The U-star's boundary node 4 made free: node 8's faces without node 4 (0-2, 5-7) have
+    a common region, so nothing is held; the faces with node 4 are not rows of node 8."""
     p, f = _u_star()
     fs = as_faceset(f, len(p))
     free = np.zeros(len(p), dtype=bool)
     free[[4, 8]] = True
     assert hopeless_nodes(p, fs, free).nodes.size == 0
+
+
+def _u_star_split() -> tuple[np.ndarray, list[list[int]]]:
+    """The U-star with its face 0 (8, 0, 1) split at a new free node 9 (its centroid)."""
+    p, f = _u_star()
+    p = np.vstack([p, p[[8, 0, 1]].mean(axis=0)])
+    return p, [[9, 0, 1], [9, 1, 8], [9, 8, 0], *f[1:]]
+
+
+def test_u_star_with_a_second_free_node_is_held_at_once():
+    """Node 8 has a free neighbour (node 9), yet its faces 5 and 7 (the old 3 and 5: no free
+    node but 8) cannot both be valid: node 8 is held before the run, no optimizer iteration
+    is spent on the fold (node 9 is smoothed, its faces stay valid)."""
+    p, f = _u_star_split()
+    fs = as_faceset(f, len(p))
+    free = np.zeros(len(p), dtype=bool)
+    free[[8, 9]] = True
+    h = hopeless_nodes(p, fs, free)
+    assert h.nodes.tolist() == [8] and h.witness == ((5, 7),)
+    res = untangle_and_smooth(p, f)
+    assert res.status == "failed"
+    assert res.untangle_iterations == 0
+    assert mesh_stats(res.points, f[:3]).n_inverted == 0
+    assert "2 faces stay inverted (faces 5, 7)" in res.message, res.message
+    assert "node 8 is held" in res.message and "faces 5, 7 cannot all be valid" in res.message
+    assert res.after.n_inverted == 2
+    assert np.array_equal(res.points[8], p[8])
+
+
+def _rim_pair(clockwise: bool) -> tuple[np.ndarray, list[list[int]]]:
+    """Two free nodes (4, 5) inside a rim of four fixed nodes, six triangles. Clockwise: the
+    rim's nodes mirrored (a rim turned inside out, signed area -1); else the unit square
+    with the two free nodes swapped (tangled, solvable)."""
+    rim = [(0, 0), (0, 1), (1, 1), (1, 0)] if clockwise else [(0, 0), (1, 0), (1, 1), (0, 1)]
+    inner = [(0.3, 0.5), (0.7, 0.5)] if clockwise else [(0.7, 0.5), (0.3, 0.5)]
+    p = np.array(rim + inner, dtype=float)
+    return p, [[4, 0, 1], [4, 1, 5], [5, 1, 2], [5, 2, 3], [5, 3, 4], [4, 3, 0]]
+
+
+def test_group_whose_rim_encloses_negative_area_is_held_beside_an_untangled_grid():
+    """Nodes 4 and 5 of the inside-out rim: each alone has a region (two half-planes), but
+    the six faces' areas add up to -1 wherever they go. Held before the run with the reason;
+    the tangled grid beside it is untangled."""
+    grid, gf = _tangled_grid()
+    pair, pf = _rim_pair(clockwise=True)
+    shift = len(grid)
+    p = np.vstack([grid, pair + np.array([10.0, 0.0])])
+    f = gf + [[v + shift for v in face] for face in pf]
+    fs = as_faceset(f, len(p))
+    free = np.ones(len(p), dtype=bool)
+    free[np.flatnonzero(np.isin(np.arange(len(p)), [0, 1, 2, 3, 4, 5, 9, 10, 14, 15, 19, 20,
+                                                   21, 22, 23, 24]))] = False
+    free[shift:shift + 4] = False
+    assert hopeless_nodes(p, fs, free).nodes.size == 0  # no single node is hopeless
+    g = hopeless_groups(p, fs, free)
+    assert g.nodes.tolist() == [shift + 4, shift + 5]
+    (nodes, faces, total), = g.groups
+    assert nodes == (shift + 4, shift + 5)
+    assert faces == tuple(range(len(gf), len(gf) + 6)) and total == -1.0
+    res = untangle_and_smooth(p, f)
+    assert res.status == "failed"
+    assert mesh_stats(res.points[:shift], gf).n_inverted == 0
+    assert (f"nodes {shift + 4}, {shift + 5} are held: their 6 faces cannot all be valid at "
+            "once (their signed areas add up to -1 wherever these nodes go") in res.message
+    assert np.array_equal(res.points[shift:], p[shift:])
+
+
+def test_group_whose_rim_encloses_positive_area_is_not_held_and_is_untangled():
+    p, f = _rim_pair(clockwise=False)
+    fs = as_faceset(f, len(p))
+    free = np.array([False] * 4 + [True] * 2)
+    assert mesh_stats(p, f).n_inverted > 0
+    assert hopeless_groups(p, fs, free).nodes.size == 0
+    res = untangle_and_smooth(p, f)
+    assert res.status == "untangled" and res.after.n_inverted == 0, res.message
+
+
+def test_group_with_a_free_node_outside_the_grown_rings_is_not_examined():
+    """The inside-out rim joined to a long strip of free nodes (a chain wider than the rings
+    grown from the tangled faces): the group is not closed, nothing is held."""
+    pair, pf = _rim_pair(clockwise=True)
+    fs = as_faceset(pf, len(pair))
+    free = np.array([False] * 4 + [True] * 2)
+    assert hopeless_groups(pair, fs, free).nodes.size == 2
+    free[0] = True  # a rim node that moves: the sum is no longer a constant
+    assert hopeless_groups(pair, fs, free).nodes.size == 0

@@ -1,0 +1,64 @@
+"""A fold no move opens and no certificate names ends the optimizer's run after
+STALL_ROUNDS rounds without progress (core/optimize/stages.py), not after its whole budget."""
+
+from pathlib import Path
+
+import numpy as np
+
+import core.run.pipeline as pipeline
+from core import untangle_and_smooth
+from core.mesh import read_obj
+from core.optimize import STALL_ROUNDS, untangle_global
+from core.run.hopeless import Hopeless
+from core.run.hopeless_groups import HopelessGroups
+
+U_STAR = Path(__file__).resolve().parents[1] / "e2e" / "data" / "u_star_impossible.obj"
+
+
+def _u_star() -> tuple[np.ndarray, dict[int, np.ndarray], list[list[int]]]:
+    p, fs = read_obj(U_STAR)
+    tris = np.ascontiguousarray(fs.groups[0].nodes.T)
+    return p[:, :2].copy(), {3: tris}, tris.tolist()
+
+
+def test_u_star_without_its_certificate_gives_up_after_the_stall_rounds():
+    """The optimizer alone on the U-star: each round leaves the worst det and the inverted
+    count where they were; it stops after STALL_ROUNDS of them (was 20 300 iterations over
+    19 368 rounds at the eps floor), 'failed', gave_up set, the best iterate returned."""
+    p, groups, _ = _u_star()
+    free = np.zeros(len(p), dtype=bool)
+    free[8] = True
+    out, info = untangle_global(p, groups, free)
+    assert info["status"] == "failed" and info["gave_up"] is True
+    assert STALL_ROUNDS <= info["rounds"] <= STALL_ROUNDS + 1
+    assert info["n_inverted_out"] == 2
+    assert info["iterations"] < 50 * STALL_ROUNDS
+    assert np.array_equal(out[~free], p[~free])
+
+
+def test_a_solvable_fold_does_not_give_up():
+    """An octagon fan whose centre is dragged outside it: untangled, gave_up False."""
+    t = 2 * np.pi * np.arange(8) / 8
+    p = np.vstack([np.column_stack([np.cos(t), np.sin(t)]), [1.3, 0.2]])
+    tris = np.array([[8, i, (i + 1) % 8] for i in range(8)])
+    free = np.zeros(9, dtype=bool)
+    free[8] = True
+    _, info = untangle_global(p, {3: tris}, free)
+    assert info["status"] == "untangled" and info["gave_up"] is False
+
+
+def test_run_without_certificates_says_it_gave_up_in_well_under_a_second_of_iterations(
+        monkeypatch):
+    """The whole run on the U-star with both certificates switched off: 'failed' with the
+    reason, a few hundred optimizer iterations (was 40 600, 78-97 s)."""
+    p, _, faces = _u_star()
+    monkeypatch.setattr(pipeline, "hopeless_nodes", lambda *a, **k: Hopeless(
+        np.zeros(0, dtype=np.int64), ()))
+    monkeypatch.setattr(pipeline, "hopeless_groups", lambda *a, **k: HopelessGroups(
+        np.zeros(0, dtype=np.int64), ()))
+    res = untangle_and_smooth(p, faces)
+    assert res.status == "failed"
+    assert res.after.n_inverted == 2
+    assert res.global_iterations < 4 * 50 * STALL_ROUNDS
+    assert (f"the optimizer gave up after {STALL_ROUNDS} rounds in a row without progress"
+            in res.message), res.message
