@@ -1,7 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Solver mesh writes that never destroy (docs/engineers.md): the mesh goes to a hidden
 temporary file beside the target (``.NAME.eegt-tmp-PID.EXT``), is read back whole and
-checked (as many points, as many cells of every type), and only then replaces the target
+checked (as many points, as many cells of every type; in the same format, every group with
+the same nodes), and only then replaces the target
 with ``os.replace``. A failed write removes the temporary file and leaves an existing
 target byte-identical; its `SolverMeshError` is one line naming the target, never the
 temporary file.
@@ -89,6 +90,9 @@ def stage(sm: SolverMesh, path: str, positions: np.ndarray | None = None,
             raise SolverMeshError("the written file does not hold every cell (it changes "
                                   + ", ".join(f"{k}: {want.get(k, 0)} -> {have.get(k, 0)}"
                                               for k in lost) + ")")
+        why = solver_mesh.groups_changed(sm, back)
+        if why:
+            raise SolverMeshError(why)
     except BaseException as exc:  # meshio calls sys.exit on some files it cannot parse
         discard(tmp)
         if isinstance(exc, KeyboardInterrupt):

@@ -284,7 +284,9 @@ class SolverMesh:
 
 
 def _gmsh_sections(path: str) -> None:
-    """Refuse a Gmsh file with a section meshio does not model (it would be dropped)."""
+    """Refuse a Gmsh file with a section meshio does not model (it would be dropped), or a
+    Gmsh 2 file whose elements carry more tags than physical and elementary (meshio keeps
+    those two: partition tags would be dropped)."""
     with open(path, "rb") as fh:
         text = fh.read()
     for m in re.finditer(rb"(?m)^\$(\w+)\r?$", text):
@@ -292,6 +294,41 @@ def _gmsh_sections(path: str) -> None:
         if not name.startswith("End") and name not in GMSH_SECTIONS:
             raise SolverMeshError(f"cannot read '{path}' as msh: its ${name} section would "
                                   f"be lost (kept: {', '.join(GMSH_SECTIONS)})")
+    most = _gmsh2_most_tags(text)
+    if most > 2:
+        raise SolverMeshError(
+            f"cannot read '{path}' as msh: its elements carry {most} tags (physical, "
+            f"elementary and {most - 2} more, e.g. mesh partitions), which would be lost "
+            "(meshio keeps physical and elementary: re-export it from Gmsh without "
+            "partitions, or as version 4.1)")
+
+
+def _gmsh2_most_tags(text: bytes) -> int:
+    """The largest number of tags an element of a Gmsh 2.x file carries (ASCII or binary);
+    0 for other versions or when the file has no $Elements section."""
+    fmt = re.search(rb"\$MeshFormat\r?\n\s*(\S+)\s+(\d)\s+(\d+)", text)
+    start = text.find(b"$Elements")
+    if not fmt or not fmt.group(1).startswith(b"2") or start < 0:
+        return 0
+    body_at = text.index(b"\n", start) + 1
+    count_end = text.index(b"\n", body_at)
+    n = int(text[body_at:count_end].split()[0])
+    at = count_end + 1
+    if fmt.group(2) == b"0":  # ASCII: elm-number elm-type number-of-tags ...
+        end = text.find(b"$EndElements", at)
+        rows = text[at:end].split(b"\n")
+        return max((int(r.split()[2]) for r in rows if len(r.split()) > 2), default=0)
+    most, done = 0, 0  # binary: blocks of (type, count, tags) then count * (1 + tags +
+    nodes = {1: 2, 2: 3, 3: 4, 4: 4, 5: 8, 6: 6, 7: 5, 8: 3, 9: 6, 10: 9, 11: 10, 12: 27,
+             13: 18, 14: 14, 15: 1, 16: 8, 17: 20, 18: 15, 19: 13}  # nodes) int32
+    while done < n and at + 12 <= len(text):
+        kind, count, tags = np.frombuffer(text, dtype="<i4", count=3, offset=at).tolist()
+        if kind not in nodes or count <= 0:
+            break  # a type whose node count is not listed here: stop counting
+        most = max(most, tags)
+        at += 12 + 4 * count * (1 + tags + nodes[kind])
+        done += count
+    return most
 
 
 def _read_mesh(path: str, fmt: str) -> tuple[Any, dict[str, Any]]:
@@ -396,7 +433,8 @@ def convert(mesh: Any, fmt: str) -> Any:
     bounding entities) dropped, cell sets as integer arrays (a Gmsh set's missing blocks
     empty: NumPy 1 made them float Abaqus numbers), the cell tags (the first of
     `TAG_ARRAYS`) under the target's name (``gmsh:physical`` and ``gmsh:geometrical``,
-    ``medit:ref``), SU2 left to `su2.write` (it takes any of them)."""
+    ``medit:ref``), SU2 left to `su2.write` (it takes any of them). To .msh, a mesh without
+    cell tags (Abaqus) has its element sets as named physical groups (`_sets_as_tags`)."""
     out = copy.copy(mesh)
     out.point_data = {k: v for k, v in mesh.point_data.items() if not k.startswith("gmsh:")}
     out.cell_sets = {k: [np.zeros(0, dtype=np.int64) if x is None else
@@ -412,8 +450,53 @@ def convert(mesh: Any, fmt: str) -> Any:
         if fmt in target:
             data.pop(tag)
             data.update({k: [t.copy() for t in tags] for k in target[fmt]})
+    if tag is None and fmt == "msh" and out.cell_sets:
+        tags, names = _sets_as_tags(out)
+        data.update({"gmsh:physical": tags, "gmsh:geometrical": [t.copy() for t in tags]})
+        out.field_data = {**names, **mesh.field_data}
     out.cell_data = data
     return out
+
+
+def _sets_as_tags(mesh: Any) -> tuple[list[np.ndarray], dict[str, np.ndarray]]:
+    """Element sets (Abaqus ``*ELSET``) as Gmsh physical tags: set k (in order) is tag k,
+    named by ``field_data``; cells in no set get 0. `_sets_refusal` has checked first that
+    no cell is in two sets and each set has cells of one dimension."""
+    tags = [np.zeros(len(b.data), dtype=np.int32) for b in mesh.cells]
+    names = {}
+    for k, (name, parts) in enumerate(mesh.cell_sets.items(), 1):
+        dims = set()
+        for b, (block, idx) in enumerate(zip(mesh.cells, parts)):
+            if idx is not None and len(idx):
+                tags[b][np.asarray(idx, dtype=np.int64)] = k
+                dims.add(cell_dim(block.type))
+        names[name] = np.array([k, dims.pop() if dims else 2], dtype=np.int64)
+    return tags, names
+
+
+def _sets_refusal(mesh: Any) -> str | None:
+    """Why a mesh's sets cannot become Gmsh physical groups (node sets have no place in
+    .msh; a Gmsh element has one physical tag; a physical group has one dimension)."""
+    if mesh.point_sets:
+        some = ", ".join(f"'{n}'" for n in list(mesh.point_sets)[:3])
+        return (f"its node sets ({some}{', ...' if len(mesh.point_sets) > 3 else ''}) have "
+                "no place in .msh (write .inp, or remove them)")
+    owner: list[dict[int, str]] = [{} for _ in mesh.cells]
+    for name, parts in mesh.cell_sets.items():
+        if name.startswith("gmsh:"):
+            continue
+        dims = set()
+        for b, idx in enumerate(parts):
+            for i in ([] if idx is None else np.asarray(idx, dtype=np.int64).tolist()):
+                if i in owner[b] and owner[b][i] != name:
+                    return (f"its element sets '{owner[b][i]}' and '{name}' share cells: a "
+                            "Gmsh element has one physical group")
+                owner[b][i] = name
+                dims.add(cell_dim(mesh.cells[b].type))
+        if len(dims) > 1:
+            return (f"its element set '{name}' holds cells of dimensions "
+                    f"{', '.join(map(str, sorted(dims)))}: a Gmsh physical group has one")
+    return None
 
 
 def _convert_refusal(sm: SolverMesh, fmt: str) -> str | None:
@@ -422,6 +505,8 @@ def _convert_refusal(sm: SolverMesh, fmt: str) -> str | None:
         return f"its Gmsh $Periodic pairs have no place in .{fmt}"
     if fmt == "su2":
         return su2.plan(sm.mesh)[1]
+    if fmt == "msh" and not any(k in sm.mesh.cell_data for k in TAG_ARRAYS):
+        return _sets_refusal(sm.mesh)
     return None
 
 
@@ -493,6 +578,30 @@ def check_written(sm: SolverMesh, path: str, shown: str | None = None) -> str | 
     have = sorted((b.type, len(b.data)) for b in back.cells)
     if _totals(want) != _totals(have):
         return "the written file does not hold every cell"
+    if fmt == sm.fmt:
+        try:
+            return groups_changed(sm, _checked(path, fmt, back, sm.options))
+        except SolverMeshError as exc:
+            return f"the written file does not read back: {_shown(str(exc), path, shown)}"
+    return None
+
+
+def groups_changed(sm: SolverMesh, back: SolverMesh) -> str | None:
+    """Why `back` (the same format written back) does not hold `sm`'s groups, each by its
+    name or tag, with the same nodes (a writer that keeps one Gmsh physical group per
+    entity drops the others), or None. Another format's groups are `convert`'s rules."""
+    if back.fmt != sm.fmt:
+        return None
+    have = set(back.group_names())
+    for name in sm.group_names():
+        want = sm.group_nodes(name)
+        got = back.group_nodes(name) if name in have else np.zeros_like(want)
+        if not np.array_equal(want, got):
+            return (f"its group '{name}' would change ({int(np.count_nonzero(want))} -> "
+                    f"{int(np.count_nonzero(got))} nodes; meshio's writer keeps one "
+                    "physical group per Gmsh entity)" if sm.fmt == "msh" else
+                    f"its group '{name}' would change ({int(np.count_nonzero(want))} -> "
+                    f"{int(np.count_nonzero(got))} nodes)")
     return None
 
 

@@ -8,7 +8,9 @@ elements in file order with the marker's tag (its name when it is a number, else
 previous tag + 1: meshio's own numbering) and ``field_data[name] = [tag, NDIME - 1]``.
 A write takes the interior from the cells of dimension NDIME and the markers from the
 cells of dimension NDIME - 1, grouped by tag in the order they come, named from
-``field_data`` (else the tag). Points are written with Python's shortest exact repr.
+``field_data`` (else the tag). Points are written with Python's shortest exact repr. The
+index columns of the point and interior element records are the file's own (kept in the
+layout when they are not the row numbers 0, 1, 2, ...), else the row numbers.
 Anything the format has no place for is a `Su2Error` of one line.
 """
 
@@ -61,6 +63,8 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
     blocks: list[tuple[str, list[list[int]], int]] = []  # (type, rows, tag)
     field_data: dict[str, np.ndarray] = {}
     tag, n_mark, marker = 0, None, None
+    ids: list[str] = []  # the interior elements' own index column, as written
+    n_interior = 0
 
     def elements(count: int, at: int, tag_: int, interior: bool) -> int:
         for k in range(count):
@@ -80,6 +84,7 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                 raise Su2Error(f"line {no}: element type {code} takes {n} nodes")
             if interior and extra:
                 layout["elem_index"] = True
+                ids.append(words[-1])
             if k and blocks[-1][0] == kind:
                 blocks[-1][1].append(nodes)
             else:
@@ -99,6 +104,7 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                 if ndime not in (2, 3):
                     raise Su2Error(f"line {no}: NDIME= {value} (2 or 3)")
             elif key == "NELEM":
+                n_interior += int(value)
                 i = elements(int(value), i, 0, True)
             elif key == "NPOIN":
                 if ndime == 0:
@@ -119,6 +125,9 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                     raise Su2Error(f"the {n} points after line {no} are not {width} numbers "
                                    "each") from None
                 layout["point_index"] = width > ndime
+                if width > ndime:
+                    layout["point_ids"] = _own_numbers(
+                        [t.split()[ndime] for _, t in rows])
                 i += n
             elif key == "NMARK":
                 n_mark = int(value)
@@ -149,9 +158,21 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
              blocks]
     tags = [np.full(len(rows), t, dtype=np.int32) for _, rows, t in blocks]
     layout["ndime"] = ndime
+    if layout["elem_index"]:
+        if len(ids) != n_interior:
+            raise Su2Error("some interior elements have an index column and some do not")
+        layout["elem_ids"] = _own_numbers(ids)
     mesh = meshio.Mesh(points, cells, cell_data={"su2:tag": tags} if cells else {},
                        field_data=field_data)
     return mesh, layout
+
+
+def _own_numbers(words: list[str]) -> tuple[str, ...] | None:
+    """A record index column as the file writes it, or None when it is the row numbers
+    0, 1, 2, ... (what `write` writes without it)."""
+    if all(w == str(k) for k, w in enumerate(words)):
+        return None
+    return tuple(words)
 
 
 def _tags(mesh: Any) -> tuple[str | None, list[np.ndarray]]:
@@ -204,18 +225,22 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
             if hi > lo:
                 markers.setdefault(int(t[lo]), []).append((block.type, data[lo:hi]))
     pts = np.asarray(mesh.points, dtype=np.float64)[:, :ndime]
-    out = [f"NDIME= {ndime}\n", f"NELEM= {sum(len(d) for _, d in interior)}\n"]
+    n_elem = sum(len(d) for _, d in interior)
+    elem_ids = _ids(layout.get("elem_ids"), n_elem, "element")
+    point_ids = _ids(layout.get("point_ids"), len(pts), "point")
+    out = [f"NDIME= {ndime}\n", f"NELEM= {n_elem}\n"]
     k = 0
     for kind, data in interior:
         code = MESHIO_TO_SU2[kind]
         for row in data.tolist():
-            out.append(" ".join(map(str, [code, *row, k] if layout.get("elem_index", True)
-                                    else [code, *row])) + "\n")
+            out.append(" ".join(map(str, [code, *row, elem_ids[k]]
+                                    if layout.get("elem_index", True) else [code, *row]))
+                       + "\n")
             k += 1
     out.append(f"NPOIN= {len(pts)}\n")
     index = layout.get("point_index", True)
     for j, row in enumerate(pts.tolist()):
-        out.append(" ".join(map(repr, row)) + (f" {j}\n" if index else "\n"))
+        out.append(" ".join(map(repr, row)) + (f" {point_ids[j]}\n" if index else "\n"))
     out.append(f"NMARK= {len(markers)}\n")
     for t, parts in markers.items():
         out.append(f"MARKER_TAG= {names.get(t, str(t))}\n")
@@ -225,3 +250,12 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
             out.extend(" ".join(map(str, [code, *row])) + "\n" for row in data.tolist())
     with open(path, "w", encoding="utf-8") as fh:
         fh.writelines(out)
+
+
+def _ids(own: tuple[str, ...] | None, n: int, what: str) -> Any:
+    """The index column to write: the file's own (`own`), else the row numbers."""
+    if own is None:
+        return range(n)
+    if len(own) != n:
+        raise Su2Error(f"the file numbers {len(own)} {what}s, the mesh has {n}")
+    return own

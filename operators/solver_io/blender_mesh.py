@@ -4,9 +4,12 @@
 The object has one vertex per point of the file (same numbers) and one face per 2D cell
 (block by block); point data become point attributes, the 2D cells' one-component cell data
 face attributes, every group a vertex group, a pin mask the ``eegt_pinned`` attribute.
-The mesh remembers its file (path, format, SHA-256): writing it back reads that file again
-and changes only the coordinates of the vertices whose position differs from the file's
-(at Blender's single precision), so every other block, array and group is the file's own.
+The mesh remembers its file (path, format, SHA-256) and the float64 origin its vertex
+positions are relative to (the centre of the file's bounding box; the object is placed
+there): writing it back reads that file again and changes only the coordinates of the
+vertices whose position differs from the file's, to the origin plus their single-precision
+position (so a mesh far from 0, e.g. at UTM coordinates, keeps steps of its own size), and
+every other node, block, array and group is the file's own, bit for bit.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from ...fileio.solver_mesh import SolverMesh, SolverMeshError
 from ..mesh.mesh_io import PIN_NAME, read_positions
 
 SOURCE, DIGEST, FORMAT = "eegt_solver_source", "eegt_solver_sha256", "eegt_solver_format"
+ORIGIN = "eegt_solver_origin"  # float64 (x, y, z) the vertex positions are relative to
 _FLOAT_TYPES = {1: "FLOAT", 2: "FLOAT2", 3: "FLOAT_VECTOR"}
 
 
@@ -29,7 +33,8 @@ def build_object(sm: SolverMesh, name: str, pinned: np.ndarray | None = None,
     """A new mesh object of `sm` linked to the scene's collection."""
     me = bpy.data.meshes.new(name)
     me.vertices.add(sm.n_points)
-    me.vertices.foreach_set("co", sm.points3d().astype(np.float32).ravel())
+    origin = mesh_origin(sm)
+    me.vertices.foreach_set("co", local_positions(sm, origin).ravel())
     me.loops.add(int(sm.corners.size))
     me.loops.foreach_set("vertex_index", sm.corners.astype(np.int32))
     me.polygons.add(sm.n_faces)
@@ -42,11 +47,28 @@ def build_object(sm: SolverMesh, name: str, pinned: np.ndarray | None = None,
     me[SOURCE] = os.path.abspath(sm.path)
     me[DIGEST] = solver_mesh.file_digest(sm.path)
     me[FORMAT] = sm.fmt
+    me[ORIGIN] = [float(v) for v in origin]
     obj = bpy.data.objects.new(name, me)
+    obj.location = origin.tolist()  # where the file puts it (display only)
     bpy.context.scene.collection.objects.link(obj)
     if groups:
         _vertex_groups(obj, sm)
     return obj
+
+
+def mesh_origin(sm: SolverMesh) -> np.ndarray:
+    """(3,) float64: the centre of the file's bounding box, which the Blender mesh's
+    float32 vertex positions are taken relative to (a mesh at UTM-like coordinates keeps
+    float32 steps of its own size, not of its offset)."""
+    p = sm.points3d()
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    return 0.5 * lo + 0.5 * hi
+
+
+def local_positions(sm: SolverMesh, origin: np.ndarray) -> np.ndarray:
+    """(N, 3) float32: the file's points relative to `origin`, as the Blender mesh holds
+    them."""
+    return (sm.points3d() - origin).astype(np.float32)
 
 
 def set_pins(me: bpy.types.Mesh, pinned: np.ndarray) -> None:
@@ -120,10 +142,13 @@ def source_of(me: bpy.types.Mesh) -> SolverMesh:
 
 def moved_positions(me: bpy.types.Mesh, sm: SolverMesh) -> tuple[np.ndarray, np.ndarray]:
     """(positions (N, 3) float64, moved (N,) bool): the vertices whose float32 position
-    differs from the file's (rounded to float32)."""
+    differs from the file's as imported (relative to the mesh's stored origin, rounded to
+    float32), at the origin plus their float32 position (computed in float64). Every
+    other vertex keeps the file's own float64 coordinates."""
+    origin = np.asarray(me.get(ORIGIN, (0.0, 0.0, 0.0)), dtype=np.float64).reshape(3)
     co = read_positions(me)
-    moved = (co != sm.points3d().astype(np.float32)).any(axis=1)
-    return co.astype(np.float64), moved
+    moved = (co != local_positions(sm, origin)).any(axis=1)
+    return origin + co.astype(np.float64), moved
 
 
 def write_object(obj: bpy.types.Object, path: str) -> int:

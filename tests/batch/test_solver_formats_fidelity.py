@@ -2,8 +2,9 @@
 names, version, encoding and $Periodic pairs, sections that would be lost refused,
 conversions that work or are refused before any writing, meshio's own reasons as one line,
 volume cells and periodic pairs held, Abaqus node sets as groups. Written files are checked
-with the small SU2 and Gmsh 2.2 ASCII parsers below, not with meshio; meshio's own test
-meshes are read in place from build/meshio_sdist when that folder holds them."""
+with the small SU2 and Gmsh 2.2 ASCII parsers of tests/solver_parsers.py, not with meshio;
+meshio's own test meshes are read in place from build/meshio_sdist when that folder holds
+them."""
 
 from __future__ import annotations
 
@@ -17,97 +18,13 @@ import pytest
 from eegt_blender.fileio import solver_mesh
 from eegt_blender.fileio.solver_mesh import SolverMeshError
 from solver_meshes import CHANNEL_TRIANGLES, channel_msh, every_format
+from solver_parsers import parse_msh22, parse_su2
 
 pytest.importorskip("meshio", reason="meshio is not installed")
 
 ROOT = Path(__file__).resolve().parents[2]
 MESHIO_MESHES = ROOT / "build" / "meshio_sdist" / "meshio-5.3.5" / "tests" / "meshes"
 NUMPY2_PYTHON = "EEGT_NUMPY2_PYTHON"
-
-
-# independent parsers ------------------------------------------------------------------
-
-def parse_su2(path: Path) -> dict:
-    """NDIME, element records (without their index), point records (floats, without
-    index) and markers [(name, element records)] of an SU2 file, plainly."""
-    lines = [ln.split("%")[0].strip() for ln in path.read_text().splitlines()]
-    lines = [ln for ln in lines if ln]
-    out: dict = {"elems": [], "points": [], "markers": []}
-    i = 0
-    while i < len(lines):
-        key, _, val = lines[i].partition("=")
-        key, val = key.strip(), val.strip()
-        i += 1
-        if key == "NDIME":
-            out["ndime"] = int(val)
-        elif key == "NELEM":
-            n = int(val)
-            for ln in lines[i:i + n]:
-                w = [int(x) for x in ln.split()]
-                nn = {3: 2, 5: 3, 9: 4, 10: 4, 12: 8, 13: 6, 14: 5}[w[0]]
-                out["elems"].append(tuple(w[:1 + nn]))
-            i += n
-        elif key == "NPOIN":
-            n = int(val.split()[0])
-            d = out["ndime"]
-            out["points"] = [tuple(float(x) for x in ln.split()[:d]) for ln in lines[i:i + n]]
-            i += n
-        elif key == "MARKER_TAG":
-            out["markers"].append((val, []))
-        elif key == "MARKER_ELEMS":
-            n = int(val)
-            out["markers"][-1][1].extend(tuple(int(x) for x in ln.split())
-                                         for ln in lines[i:i + n])
-            i += n
-    return out
-
-
-def parse_msh22(path: Path) -> dict:
-    """Sections, physical names {(dim, tag): name}, nodes {id: xyz}, elements
-    [(type, tags, nodes)], periodic pairs and NodeData {name: values} of a Gmsh 2.2 ASCII
-    file, plainly."""
-    lines = path.read_text().splitlines()
-    out: dict = {"sections": [], "names": {}, "nodes": {}, "elements": [], "periodic": [],
-                 "nodedata": {}}
-    i = 0
-    while i < len(lines):
-        head = lines[i].strip()
-        i += 1
-        if not head.startswith("$") or head.startswith("$End"):
-            continue
-        sec = head[1:]
-        out["sections"].append(sec)
-        end = lines.index(f"$End{sec}", i)
-        body = lines[i:end]
-        if sec == "MeshFormat":
-            out["format"] = body[0].split()[:2]
-        elif sec == "PhysicalNames":
-            for ln in body[1:]:
-                d, t, name = ln.split(maxsplit=2)
-                out["names"][(int(d), int(t))] = name.strip('"')
-        elif sec == "Nodes":
-            for ln in body[1:]:
-                w = ln.split()
-                out["nodes"][int(w[0])] = tuple(float(x) for x in w[1:4])
-        elif sec == "Elements":
-            for ln in body[1:]:
-                w = [int(x) for x in ln.split()]
-                nt = w[2]
-                out["elements"].append((w[1], tuple(w[3:3 + nt]), tuple(w[3 + nt:])))
-        elif sec == "Periodic":
-            for ln in body[1:]:
-                w = ln.split()
-                if len(w) == 2 and not w[0].startswith("Affine"):
-                    out["periodic"].append((int(w[0]), int(w[1])))
-        elif sec == "NodeData":
-            ns = int(body[0])
-            j = 1 + ns
-            j += 1 + int(body[j])
-            rows = body[j + 1 + int(body[j]):]
-            out["nodedata"][body[1].strip('"')] = {int(r.split()[0]): float(r.split()[1])
-                                                   for r in rows}
-        i = end + 1
-    return out
 
 
 # files ---------------------------------------------------------------------------------
@@ -279,9 +196,9 @@ def test_meshio_gmsh_files_round_trip(tmp_path, rel):
 
 # conversions and reasons ---------------------------------------------------------------
 
+# .inp with node sets -> .msh is refused (tests/fileio/test_solver_write_keeps.py)
 CONVERSIONS = [("msh41", "su2"), ("vtu", "su2"), ("msh41", "mesh"), ("msh41", "inp"),
-               ("vtu", "msh"), ("su2", "msh"), ("inp", "msh"), ("mesh", "msh"),
-               ("inp", "su2")]
+               ("vtu", "msh"), ("su2", "msh"), ("mesh", "msh"), ("inp", "su2")]
 
 
 @pytest.mark.parametrize(("src", "dst"), CONVERSIONS)

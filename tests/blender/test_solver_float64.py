@@ -168,3 +168,26 @@ def test_report_is_json_with_group_metrics(bpy, cli, channel, tmp_path):
     assert code == 0 and rep["written"]
     assert rep["objects"][0]["metrics"]["min_angle"]["after"]["min"] > 0
     assert "fluid" in rep["solver_mesh"]["metrics"]
+
+
+def test_export_of_a_mesh_far_from_the_origin_keeps_its_own_steps(bpy, ext, channel,
+                                                                   tmp_path):
+    """Import keeps the vertices relative to the file's centre (float64, on the mesh), so a
+    vertex moved 1.3 cm at UTM-like coordinates is written 1.3 cm away (plain float32 there
+    has 0.5 m steps); every node not moved keeps the file's float64 bits."""
+    src = _transformed(channel, tmp_path / "utm.vtu", 50.0, (3e5 + 0.123456789, 4.2e6))
+    assert bpy.ops.eegt.import_solver_mesh(filepath=str(src)) == {"FINISHED"}
+    obj = bpy.context.active_object
+    file_pts = meshio.read(src).points
+    k = int(np.argmin(np.abs(file_pts[:, 0] - np.median(file_pts[:, 0]))))
+    co = np.empty(len(obj.data.vertices) * 3, dtype=np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    co[k, :2] += np.float32(0.013)
+    obj.data.vertices.foreach_set("co", co.ravel())
+    out = tmp_path / "o.vtu"
+    assert bpy.ops.eegt.export_solver_mesh(filepath=str(out)) == {"FINISHED"}
+    got = meshio.read(out).points
+    assert np.abs(got[k, :2] - (file_pts[k, :2] + 0.013)).max() < 1e-4
+    others = np.arange(len(got)) != k
+    assert np.array_equal(got[others], file_pts[others])

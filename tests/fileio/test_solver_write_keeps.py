@@ -1,0 +1,177 @@
+"""What a solver mesh write keeps or refuses before any run (docs/engineers.md): Gmsh 2
+elements with more tags than physical and elementary refused at read (meshio would drop
+them), SU2 index columns written as the file numbers them, a Gmsh entity in two physical
+groups refused on write (meshio's writer keeps one), Abaqus element sets carried to .msh
+as named physical groups (or the conversion refused with one line). Written files are read
+with the independent parsers of tests/solver_parsers.py."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from eegt_blender.fileio import checked_write, solver_mesh
+from eegt_blender.fileio.solver_mesh import SolverMeshError
+from solver_parsers import parse_msh22, parse_su2
+
+pytest.importorskip("meshio", reason="meshio is not installed")
+
+
+def _gmsh_rectangle(path, version: str, binary: bool, partitions: int = 0,
+                    curve_in_two_groups: bool = False):
+    """A 2 x 1 rectangle meshed by Gmsh (physical 'domain'), optionally partitioned or with
+    its bottom curve in two physical groups ('bottom', 'wall')."""
+    gmsh = pytest.importorskip("gmsh", reason="the gmsh package is not installed")
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("r")
+        occ = gmsh.model.occ
+        rect = occ.addRectangle(0, 0, 0, 2, 1)
+        occ.synchronize()
+        gmsh.model.addPhysicalGroup(2, [rect], name="domain")
+        if curve_in_two_groups:
+            curves = [abs(t) for _, t in gmsh.model.getBoundary([(2, rect)], oriented=False)]
+            bottom = min(curves, key=lambda c: occ.getCenterOfMass(1, c)[1])
+            gmsh.model.addPhysicalGroup(1, [bottom], name="bottom")
+            gmsh.model.addPhysicalGroup(1, [bottom], name="wall")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", 0.5)
+        gmsh.model.mesh.generate(2)
+        if partitions:
+            gmsh.model.mesh.partition(partitions)
+        gmsh.option.setNumber("Mesh.MshFileVersion", float(version))
+        gmsh.option.setNumber("Mesh.Binary", int(binary))
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    return path
+
+
+# (a) Gmsh 2 extra element tags ----------------------------------------------------------
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_gmsh2_partition_tags_are_refused_at_read_with_one_line(tmp_path, binary):
+    src = _gmsh_rectangle(tmp_path / "part.msh", "2.2", binary, partitions=2)
+    with pytest.raises(SolverMeshError) as exc:
+        solver_mesh.read(str(src))
+    msg = str(exc.value)
+    assert "\n" not in msg and f"'{src}'" in msg
+    assert "its elements carry 4 tags (physical, elementary and 2 more" in msg
+
+
+def test_gmsh2_with_physical_and_elementary_tags_only_still_reads(tmp_path):
+    src = _gmsh_rectangle(tmp_path / "plain.msh", "2.2", True)
+    assert solver_mesh.read(str(src)).n_faces > 0
+
+
+# (b) SU2 index columns --------------------------------------------------------------------
+
+SU2_NUMBERED_FROM_ONE = """NDIME= 2
+NELEM= 2
+5 0 1 2 1
+5 1 3 2 2
+NPOIN= 4
+0.0 0.0 1
+1.0 0.0 2
+0.0 1.0 3
+1.0 1.0 4
+NMARK= 1
+MARKER_TAG= wall
+MARKER_ELEMS= 2
+3 0 1
+3 1 3
+"""
+
+
+def test_su2_index_columns_are_written_as_the_file_numbers_them(tmp_path):
+    src = tmp_path / "one.su2"
+    src.write_text(SU2_NUMBERED_FROM_ONE)
+    sm = solver_mesh.read(str(src))
+    out = tmp_path / "out.su2"
+    moved = np.array([False, False, False, True])
+    checked_write.write(sm, str(out), sm.points3d() + 0.25, moved)
+    text = out.read_text().splitlines()
+    assert text[2:4] == ["5 0 1 2 1", "5 1 3 2 2"]
+    assert text[5:9] == ["0.0 0.0 1", "1.0 0.0 2", "0.0 1.0 3", "1.25 1.25 4"]
+    a, b = parse_su2(src, index=True), parse_su2(out, index=True)
+    assert b["elems"] == a["elems"] and b["markers"] == a["markers"]
+
+
+def test_su2_row_numbered_index_columns_stay_row_numbers(tmp_path):
+    src = tmp_path / "zero.su2"
+    src.write_text(SU2_NUMBERED_FROM_ONE.replace(" 1\n5 1 3 2 2", " 0\n5 1 3 2 1")
+                   .replace("0.0 0.0 1\n1.0 0.0 2\n0.0 1.0 3\n1.0 1.0 4",
+                            "0.0 0.0 0\n1.0 0.0 1\n0.0 1.0 2\n1.0 1.0 3"))
+    sm = solver_mesh.read(str(src))
+    assert sm.options["elem_ids"] is None and sm.options["point_ids"] is None
+    out = tmp_path / "out.su2"
+    solver_mesh.write(sm, str(out))
+    assert out.read_text() == src.read_text()
+
+
+# groups a same-format write would lose ----------------------------------------------------
+
+def test_gmsh41_entity_in_two_physical_groups_is_refused_before_writing(tmp_path):
+    src = _gmsh_rectangle(tmp_path / "two.msh", "4.1", False, curve_in_two_groups=True)
+    sm = solver_mesh.read(str(src))
+    assert sm.group_nodes("wall").sum() == sm.group_nodes("bottom").sum() >= 2
+    out = tmp_path / "out.msh"
+    out.write_bytes(b"earlier")
+    with pytest.raises(checked_write.WriteError) as exc:
+        checked_write.write(sm, str(out))
+    assert "its group 'wall' would change" in exc.value.reason
+    assert "one physical group per Gmsh entity" in exc.value.reason
+    assert out.read_bytes() == b"earlier" and sorted(os.listdir(tmp_path)) == [
+        "out.msh", "two.msh"]
+
+
+# (c) Abaqus element sets to .msh ----------------------------------------------------------
+
+INP = """*NODE
+1, 0.0, 0.0
+2, 1.0, 0.0
+3, 2.0, 0.0
+4, 0.0, 1.0
+5, 1.0, 1.0
+6, 2.0, 1.0
+*ELEMENT, TYPE=CPS3, ELSET=left
+1, 1, 2, 5
+2, 1, 5, 4
+*ELEMENT, TYPE=CPS3, ELSET=right
+3, 2, 3, 6
+4, 2, 6, 5
+"""
+
+
+def test_abaqus_element_sets_become_named_physical_groups_in_msh(tmp_path):
+    src = tmp_path / "plate.inp"
+    src.write_text(INP)
+    sm = solver_mesh.read(str(src))
+    assert solver_mesh.can_write(sm, "msh") is None
+    out = tmp_path / "plate.msh"
+    checked_write.write(sm, str(out))
+    p = parse_msh22(out)
+    assert p["names"] == {(2, 1): "left", (2, 2): "right"}
+    assert [e[1][0] for e in p["elements"]] == [1, 1, 2, 2]  # physical tag of each triangle
+    back = solver_mesh.read(str(out))
+    for name in ("left", "right"):
+        assert np.array_equal(back.group_nodes(name), sm.group_nodes(name))
+
+
+@pytest.mark.parametrize(("extra", "why"), [
+    ("*NSET, NSET=clamped\n1, 4\n",
+     "its node sets ('clamped') have no place in .msh (write .inp, or remove them)"),
+    ("*ELSET, ELSET=all\n1, 2, 3, 4\n",
+     "its element sets 'all' and 'left' share cells: a Gmsh element has one physical group"),
+])
+def test_abaqus_sets_msh_cannot_hold_are_refused_before_writing(tmp_path, extra, why):
+    src = tmp_path / "plate.inp"
+    src.write_text(INP + extra)
+    sm = solver_mesh.read(str(src))
+    got = solver_mesh.can_write(sm, "msh", str(tmp_path / "o.msh"))
+    assert got == f"cannot write '{tmp_path / 'o.msh'}' as msh: {why}"
+    with pytest.raises(checked_write.WriteError) as exc:
+        checked_write.write(sm, str(tmp_path / "o.msh"))
+    assert exc.value.reason == why
+    assert sorted(os.listdir(tmp_path)) == ["plate.inp"]
