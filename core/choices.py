@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 __all__ = ["BACKEND", "BOUNDARY", "DEVICE_GLOBAL_STAGE", "HYBRID", "NUMPY_ENGINE",
-           "OPENCL_ENGINE", "PARAMETERS", "SCALING", "SMALL_ON_GPU", "TARGET", "UNTANGLE",
+           "OPENCL_ENGINE", "PARAMETERS", "REGION", "SCALING", "SMALL_ON_GPU", "TARGET", "UNTANGLE",
            "UV_SCOPE", "UV_TARGET", "Bound", "Choice", "Enumeration", "global_stage_on_device",
            "ids", "violation"]
 
@@ -85,6 +85,15 @@ TARGET: Enumeration = (
     Choice("regular", "Regular", "Pull every face towards the regular polygon (paper)"),
     Choice("reference", "Reference", "Pull every face towards its own shape in a reference of "
            "the same topology (a shape key or an object): keeps grading and anisotropy"),
+    Choice("keep", "Keep Shapes", "Pull every face towards its own shape as given: grading, "
+           "anisotropy and sizes stay; a folded face takes its shape from the reference when "
+           "one is given, else from its valid neighbours"),
+)
+
+REGION: Enumeration = (
+    Choice("mesh", "Whole Mesh", "Every free vertex may move (paper)"),
+    Choice("folds", "Folds Only", "Only the folded faces and a margin around them, grown while "
+           "the fold cannot be opened inside it: every other vertex keeps its bits (a repair)"),
 )
 
 # Compute backends. A run reports the engine it used (``backends.make_engine``), which is
@@ -146,6 +155,7 @@ PARAMETERS: dict[str, Bound | Enumeration] = {
     "boundary": BOUNDARY,
     "feature_angle": Bound(0.0, high=180.0, unit=" degrees", soft_max=180.0),
     "target": TARGET,
+    "region": REGION,
 }
 
 

@@ -114,8 +114,18 @@ class EEGTParams:
     target: str = field(
         default="regular",
         metadata={
-            "help": "Shape each face is pulled towards: 'regular' polygon (paper), or its "
-            "shape in a 'reference' mesh of the same topology (keeps grading and anisotropy)"
+            "help": "Shape each face is pulled towards: 'regular' polygon (paper), its "
+            "shape in a 'reference' mesh of the same topology (keeps grading and anisotropy), "
+            "or its own shape as given, 'keep' (folded faces: the reference's shape when one "
+            "is given, else their valid neighbours')"
+        },
+    )
+    region: str = field(
+        default="mesh",
+        metadata={
+            "help": "What may move: the whole 'mesh' (paper), or only the 'folds': the folded "
+            "faces and a margin grown while the fold cannot be opened inside it (a repair: "
+            "every other vertex keeps its bits)"
         },
     )
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from .csr import ragged_arange
 
-__all__ = ["ArityGroup", "FaceSet", "as_faceset", "faces_from_csr"]
+__all__ = ["ArityGroup", "FaceSet", "as_faceset", "face_subset", "faces_from_csr"]
 
 
 @dataclass(frozen=True)
@@ -176,3 +176,15 @@ def as_faceset(faces, n_nodes: int) -> FaceSet:
         flat = _integer_indices(flat)
     offsets = np.concatenate([[0], np.cumsum(counts)])
     return FaceSet(offsets, flat, n_nodes)
+
+
+def face_subset(fs: FaceSet, face_ids: np.ndarray) -> tuple[FaceSet, np.ndarray, np.ndarray]:
+    """The faces ``face_ids`` (in that order) as a FaceSet over their own nodes: (faces,
+    global node of each local node, row of each local corner in ``fs``'s corner order)."""
+    face_ids = np.asarray(face_ids, dtype=np.int64)
+    counts = fs.counts[face_ids]
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    rows = np.repeat(fs.offsets[face_ids] - offsets[:-1], counts) + np.arange(int(offsets[-1]))
+    nodes, local = np.unique(fs.indices[rows], return_inverse=True)
+    return FaceSet(offsets, local.reshape(-1)), nodes, rows
+

@@ -8,6 +8,9 @@ stage, on a plane in 2D or 3D, in one go or frame by frame under a cursor.
 - the acceptance rule ("no worse than the input", every path's one decision, with the
   storage type's ties): `acceptance.accept`, `tie_tolerance`.
 - the harmonic start for large folds: `harmonic.harmonic_positions`.
+- a repair (region "folds", target "keep"): the folded faces and a growing margin only,
+  each face pulled towards its own shape: `repair.repair_folds`, `folded_faces`,
+  `keep_targets`; hopeless folds held before the run: `hopeless`, `hopeless_groups`.
 - live drags, a frame at a time: `live.LiveSession`, `LiveFrame`; what a frame reuses from
   the last: `live_reuse`.
 """
@@ -17,8 +20,10 @@ from .harmonic import harmonic_positions
 from .live import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, live_params, uv_region
 from .pipeline import Cancelled, EEGTResult, frozen_note, untangle_and_smooth
 from .pipeline_3d import untangle_and_smooth_3d
+from .repair import folded_faces, keep_targets
 
 __all__ = ["FLOAT32_TIE", "FRAME_BUDGET", "FRAME_ITERATIONS", "Cancelled", "EEGTResult",
-           "LiveFrame", "LiveSession", "accept", "frozen_note", "harmonic_positions",
+           "LiveFrame", "LiveSession", "accept", "folded_faces", "frozen_note",
+           "harmonic_positions", "keep_targets",
            "live_params", "tie_tolerance", "untangle_and_smooth", "untangle_and_smooth_3d",
            "uv_region"]

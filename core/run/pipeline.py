@@ -43,6 +43,7 @@ from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
 from .hopeless_groups import hopeless_groups, hopeless_groups_note
+from .repair import folded_faces, keep_targets, repair_folds
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -82,6 +83,8 @@ class EEGTResult:
     n_target_fallback: int = 0  # faces whose target shape was unusable: regular polygon used
     n_kept: int = 0  # valid faces with a straight or concave corner of fixed vertices only
     kept: Kept | None = None  # those corners (core.metrics.kept): how the stats measure them
+    targets: np.ndarray | None = None  # (n_corners, 2) what before/after are measured
+    # against (the caller's, the reference's or target "keep"'s; None: regular polygons)
 
     def as_dict(self) -> dict:
         return {
@@ -152,6 +155,9 @@ def untangle_and_smooth(
     params = params if params is not None else EEGTParams()
     if not isinstance(params, EEGTParams):
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
+    if params.region == "folds":
+        return _untangle_folds(points, faces, fixed, params, backend, progress, targets,
+                               reference_points, edges, keep_as_given, t0)
     n_faces = _face_count(faces)
     start_warm_up(backend, n_faces)  # the device gets ready while the input is checked
     with pages_for_run(n_faces), keep_freed_memory(n_faces):
@@ -186,6 +192,7 @@ def untangle_and_smooth(
         0 if tg is None else tg.n_fallback,
         0 if mesh.kept is None else mesh.kept.n_faces,
         mesh.kept,
+        mesh.corners,
     )
 
 
@@ -209,6 +216,7 @@ class _Mesh:
     renumbered: tuple[Renumbering, FaceSet] | None
     hopeless: str = ""  # why certified-hopeless nodes are held (core/run/hopeless.py)
     kept: Kept | None = None
+    corners: np.ndarray | None = None  # the targets as per-corner points (caller's order)
 
 
 def _face_count(faces) -> int:
@@ -229,14 +237,13 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
     the normalised points."""
     p = check_points(points)
     fs = as_faceset(faces, p.shape[0])
-    if params.target == "reference":
-        if targets is not None:
-            raise ValueError("give targets or a reference mesh (target 'reference'), not both")
-        targets = reference_targets(reference_points, fs, p.shape[0])
-    elif reference_points is not None:
-        raise ValueError("reference_points given but target is 'regular': set "
-                         "target='reference' to use them")
-    tg = prepare_targets(targets, fs)
+    targets, keep_from = _target_corners(p, fs, params, targets, reference_points)
+    if keep_from is not None or params.target == "keep":
+        targets = keep_targets(p, fs, free_nodes(p.shape[0], fs, fixed, edges=edges),
+                               _folded(p, fs), keep_from)
+    tg = prepare_targets(targets, fs)  # its one-line checks first
+    corners = None if targets is None or isinstance(targets, Targets) else \
+        np.asarray(targets, dtype=np.float64)
     center, scale = normalisation(p, fs)
     work = (p - center) / scale
     # the edge analysis and the renumbering (two sorts) side by side
@@ -283,7 +290,94 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
     frozen = frozen_faces(given, fs, free)
     why = "; ".join(w for w in (hopeless_note(held), hopeless_groups_note(rims, scale * scale))
                     if w)
-    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered, why, kept)
+    return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered, why, kept,
+                 corners)
+
+
+def _target_corners(p: np.ndarray, fs: FaceSet, params: EEGTParams, targets, reference_points
+                    ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(the caller's or the reference's per-corner targets, or None; the reference mesh
+    for target "keep", or None), after the one-line checks of the combination."""
+    if params.target in ("reference", "keep") and targets is not None:
+        raise ValueError(f"give targets or target '{params.target}', not both")
+    if params.target == "reference":
+        return reference_targets(reference_points, fs, p.shape[0]), None
+    if params.target == "keep":
+        if reference_points is None:
+            return None, None
+        reference_targets(reference_points, fs, p.shape[0])  # its checks (one line each)
+        return None, np.asarray(reference_points, dtype=np.float64)[:, :2]
+    if reference_points is not None:
+        raise ValueError("reference_points given but target is 'regular': set "
+                         "target='reference' (or 'keep') to use them")
+    return targets, None
+
+
+def _folded(p: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """(F,) bool: faces with a corner that does not turn left."""
+    return folded_faces(p, fs, np.ones(p.shape[0], dtype=bool))
+
+
+def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
+                    progress: Progress | None, targets, reference_points,
+                    edges: EdgeInfo | None, keep_as_given: bool, t0: float) -> EEGTResult:
+    """Region "folds" (core/run/repair.py): the run on the folded faces and a margin grown
+    while needed; every other node keeps its bits. Stats are the whole mesh's against the
+    run's targets (target "keep": each face's own shape, the region's folded faces theirs
+    from `keep_targets`)."""
+    p = check_points(points)
+    fs = as_faceset(faces, p.shape[0])
+    whole, keep_from = _target_corners(p, fs, params, targets, reference_points)
+    if isinstance(whole, Targets):
+        raise ValueError("region 'folds' takes targets as an (n_corners, 2) array")
+    if whole is not None:
+        prepare_targets(whole, fs)  # its one-line checks
+        whole = np.asarray(whole, dtype=np.float64)
+    edges = checked_edges(edges, fs, p.shape[0])
+    pins = free_nodes(p.shape[0], fs, fixed, edges=edges)
+    if params.boundary != "fixed":  # boundary nodes of the region move as the mode says
+        pins = pins | (fs.used_nodes(p.shape[0]) & edges.boundary_mask() & ~_pinned(fixed, p))
+    if not pins.any():
+        raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
+    center, scale = normalisation(p, fs)
+    _check_orientation((p - center) / scale, fs)
+    own = p[fs.indices, :2].copy() if params.target == "keep" else whole
+    paper = params.untangle == "eegt" or not keep_as_given
+    kept = None if paper else kept_corners(as_given(p, fs, center, scale), fs, pins)
+    before = mesh_stats(p, fs, own, kept)
+    if before.n_inverted == 0 or not folded_faces(p, fs, pins).any():
+        text = "no folded face a move can change: nothing moved (region 'folds')"
+        return EEGTResult(p.copy(), "valid" if before.n_inverted == 0 else "failed", before,
+                          before, 0, 0, time.perf_counter() - t0, backend, text,
+                          np.zeros(p.shape[0], dtype=bool), targets=own)
+    done = repair_folds(p, fs, pins, params, whole, untangle_and_smooth, keep_from,
+                        backend=backend, progress=progress, keep_as_given=keep_as_given)
+    res = done.result
+    after_targets = own
+    if done.targets is not None:
+        after_targets = (p[fs.indices, :2].copy() if own is None else own.copy())
+        rows = np.repeat(done.region, fs.counts)
+        after_targets[rows] = done.targets
+    after = mesh_stats(done.points, fs, after_targets, kept)
+    moved = np.zeros(p.shape[0], dtype=bool)
+    moved[done.nodes[np.asarray(res.moved, dtype=bool)]] = True
+    n_region = int(done.region.sum())
+    status = res.status
+    if status in ("valid", "untangled") and after.n_inverted > 0:
+        status = "failed"
+    message = (f"folds only: {n_region} of {fs.n_faces} faces ({done.rings} rings around "
+               f"the folded ones) may move, every other vertex kept; {res.message}")
+    return EEGTResult(done.points, status, before, after, res.untangle_iterations,
+                      res.smooth_iterations, time.perf_counter() - t0, res.backend, message,
+                      moved, res.global_iterations, res.n_frozen, res.n_target_fallback,
+                      res.n_kept, kept, after_targets)
+
+
+def _pinned(fixed, p: np.ndarray) -> np.ndarray:
+    """(N,) bool of the caller's pins (None: none)."""
+    if fixed is None:
+        return np.zeros(p.shape[0], dtype=bool)
+    return np.asarray(fixed, dtype=bool).reshape(-1)
 
 
 def _renumbers(fs: FaceSet, n_nodes: int) -> bool:

@@ -9,7 +9,7 @@ from ..mesh.plane import PlaneFrame
 from ..mesh.points import check_points
 from ..mesh.topology import EdgeInfo, free_nodes
 from ..metrics.face_quality import Stats, mesh_stats
-from ..metrics.reference_shapes import reference_targets, reference_to_2d
+from ..metrics.reference_shapes import reference_to_2d
 from ..params import EEGTParams
 from .acceptance import accept, tie_tolerance
 from .pipeline import EEGTResult, Progress, normalisation, untangle_and_smooth
@@ -79,9 +79,7 @@ def untangle_and_smooth_3d(
         place = _Placing(original, work, res, frame, center, scale, project)
         out = place(moved)
         if np.dtype(stored) != np.float64:
-            if params is not None and params.target == "reference":
-                targets = reference_targets(reference_points, fs, original.shape[0])
-            out = _stored_float32(res, out, place, moved, fs, targets)
+            out = _stored_float32(res, out, place, moved, fs, res.targets)
     if np.dtype(stored) != np.float64 and out.dtype != np.float32:
         out = out.astype(np.float32)
     res.points = out

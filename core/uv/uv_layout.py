@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..mesh.faces import FaceSet, faces_from_csr
+from ..mesh.faces import FaceSet, face_subset, faces_from_csr
 
 # Blender's STD_UV_CONNECT_LIMIT: two corners of one vertex whose UVs differ by less than
 # this in u and in v are one UV vertex for its island tools (Select Linked, UV islands).
@@ -204,12 +204,4 @@ def weld_uv(loop_start, loop_total, corner_verts, uv,
                     node_island, area)
 
 
-def island_faces(fs: FaceSet, face_ids: np.ndarray) -> tuple[FaceSet, np.ndarray, np.ndarray]:
-    """The faces ``face_ids`` (in that order) as a FaceSet over their own nodes: (faces,
-    global node of each local node, row of each local corner in ``fs``'s corner order)."""
-    face_ids = np.asarray(face_ids, dtype=np.int64)
-    counts = fs.counts[face_ids]
-    offsets = np.concatenate([[0], np.cumsum(counts)])
-    rows = np.repeat(fs.offsets[face_ids] - offsets[:-1], counts) + np.arange(int(offsets[-1]))
-    nodes, local = np.unique(fs.indices[rows], return_inverse=True)
-    return FaceSet(offsets, local.reshape(-1)), nodes, rows
+island_faces = face_subset  # an island's (or any set of faces') own FaceSet: core.mesh.faces

@@ -105,6 +105,8 @@ def _params(ns: argparse.Namespace) -> EEGTParams:
     base = EEGTParams.paper() if ns.paper else EEGTParams()
     changes = {f.name: getattr(ns, f.name) for f in dataclasses.fields(EEGTParams)
                if getattr(ns, f.name) is not None}
+    if ns.uv is None and not ns.paper and solver_run.is_solver(ns.input):
+        changes = {**solver_run.REPAIR, **changes}  # a solver mesh is repaired unless asked
     try:
         return dataclasses.replace(base, **changes)
     except ValueError as exc:

@@ -39,7 +39,7 @@ from ...core import (
     summaries,
 )
 from ...core.metrics import reference_targets, reference_to_2d
-from ...core.run import accept, frozen_note, untangle_and_smooth_3d
+from ...core.run import accept, folded_faces, frozen_note, untangle_and_smooth_3d
 from ...fileio import checked_write, solver_mesh
 from ...fileio.solver_formats import SOLVER_EXTENSIONS, solver_format
 from ..mesh import reference_mesh, runner
@@ -119,6 +119,21 @@ def fit_plane(points3d: np.ndarray, fs: FaceSet, fixed: np.ndarray | None = None
     return Plane(center, scale, frame)
 
 
+REPAIR = {"target": "keep", "region": "folds"}  # a solver mesh's defaults: a repair that
+# keeps every cell as built outside the folds (--target regular --region mesh: the paper's)
+
+
+def judge_targets(points2d: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """Target "keep"'s per-corner targets for judging the file: each face's own corners,
+    the folded ones NaN (their shape is the run's to choose; judged against the regular
+    polygon, as an unusable target is)."""
+    corners = points2d[fs.indices, :2].copy()
+    folded = np.repeat(folded_faces(points2d, fs, np.ones(points2d.shape[0], dtype=bool)),
+                       fs.counts)
+    corners[folded] = np.nan
+    return corners
+
+
 @dataclasses.dataclass
 class SolverPlan:
     """Everything the run needs, decided before it starts."""
@@ -175,6 +190,8 @@ def plan(ns: argparse.Namespace, params: EEGTParams
     p = SolverPlan(sm, name, fs, fixed, plane, plane.to_2d(points3d), Stats(0, 0.0, 0.0))
     if ns.reference:
         _plan_reference(p, ns.reference)
+    elif params.target == "keep":
+        p.targets = judge_targets(p.points2d, fs)
     p.before = mesh_stats(p.points2d, fs, p.targets)
     if ns.output:
         try:  # the output format can hold this mesh: the same check as the real write

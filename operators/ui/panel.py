@@ -18,15 +18,17 @@ class _EEGTTab:
 
 
 def draw_boundary_target(layout: bpy.types.UILayout, owner, obj) -> None:
-    """Boundary mode, feature angle (slide), target shape and, for target 'reference', its
-    shape key (searched among ``obj``'s keys) or object: the scene settings or an
-    operator's own properties (its reference object is a name there)."""
+    """Boundary mode, feature angle (slide), target shape, region (whole mesh or folds
+    only) and, for target 'reference', its shape key (searched among ``obj``'s keys) or
+    object: the scene settings or an operator's own properties (its reference object is a
+    name there)."""
     col = layout.column(align=True)
     col.prop(owner, "boundary")
     if owner.boundary == "slide":
         col.prop(owner, "feature_angle")
     col = layout.column(align=True)
     col.prop(owner, "target", text="Target")
+    layout.prop(owner, "region")
     if owner.target != "reference":
         return
     keys = obj.data.shape_keys if obj is not None and obj.type == "MESH" else None

@@ -45,10 +45,11 @@ LABELS: dict[str, str] = {
     "boundary": "Boundary",
     "feature_angle": "Feature Angle",
     "target": "Target Shape",
+    "region": "Region",
 }
 
 # Fields the main panel draws itself (with the reference choice), not the Parameters list.
-MAIN_PANEL_FIELDS = ("boundary", "feature_angle", "target")
+MAIN_PANEL_FIELDS = ("boundary", "feature_angle", "target", "region")
 
 
 

@@ -108,7 +108,7 @@ def test_boundary_and_target_everywhere_with_tooltips(bpy, ext):
     op = bpy.ops.mesh.eegt_untangle_smooth.get_rna_type().properties
     for rna in (settings.bl_rna.properties, op):
         assert [i.identifier for i in rna["boundary"].enum_items] == ["fixed", "slide", "free"]
-        assert [i.identifier for i in rna["target"].enum_items] == ["regular", "reference"]
+        assert [i.identifier for i in rna["target"].enum_items] == ["regular", "reference", "keep"]
         for name in ("boundary", "target"):
             assert all(len(i.description) > 30 for i in rna[name].enum_items)
         for name in ("boundary", "feature_angle", "target", "reference_key",
@@ -119,7 +119,7 @@ def test_boundary_and_target_everywhere_with_tooltips(bpy, ext):
     parser = ext.operators.command.parser.build_parser()
     flags = {a.dest: a for a in parser._actions}
     assert flags["boundary"].choices == ["fixed", "slide", "free"]
-    assert flags["target"].choices == ["regular", "reference"]
+    assert flags["target"].choices == ["regular", "reference", "keep"]
     assert "--reference" in flags["reference"].option_strings
     assert "--reference-key" in flags["reference_key"].option_strings
     assert hasattr(bpy.types.MESH_OT_eegt_untangle_smooth, "draw")

@@ -1,0 +1,159 @@
+"""A repair: untangle the folded faces and a margin around them, nothing else.
+
+Region "folds" (`EEGTParams.region`) runs the whole pipeline on a region: the faces with a
+corner that is not positive (and a free node), grown by `FIRST_RINGS` rings of faces. The
+region's rim (its nodes on faces outside it) is held, so every node outside keeps its bits
+and the cost follows the region, not the mesh. When the fold cannot be opened inside the
+region, the margin doubles (`rings` 2, 4, 8, ...) and the run starts again from the input,
+until the region is the whole mesh; an attempt on a region smaller than the mesh gets a
+budget proportional to its size (`attempt_budget`), so a margin too tight for the fold costs
+little.
+
+Target "keep" (`keep_targets`): every face is pulled towards its own shape as given, so that
+the grading, the anisotropy and the sizes the user built survive; a folded face has no shape
+of its own to keep and takes its reference shape when a reference mesh is given, else the
+shape its corners have once the folded faces' free nodes are moved to the harmonic map of
+the rest of the region (a smooth fill from the valid neighbours; a face still unusable there
+falls back to the regular polygon and is counted). Details: docs/repair.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from ..mesh.faces import FaceSet, face_subset
+from ..params import EEGTParams
+from .harmonic import harmonic_positions
+
+__all__ = ["FIRST_RINGS", "Repaired", "attempt_budget", "folded_faces", "grow_region",
+           "keep_targets", "repair_folds"]
+
+FIRST_RINGS = 3  # the first margin around the folded faces, in rings of faces
+BUDGET_PER_FACE = 2  # an attempt on a region below the whole mesh: this many optimizer and
+BUDGET_MIN = 400  # EEGT iterations per face of the region, at least BUDGET_MIN, at most the
+# run's max_untangle_iterations (a margin that is too tight fails in a fraction of a second)
+
+
+def folded_faces(p: np.ndarray, fs: FaceSet, free: np.ndarray) -> np.ndarray:
+    """(F,) bool: faces with a corner that does not turn left and at least one free node
+    (the faces a move can change)."""
+    out = np.zeros(fs.n_faces, dtype=bool)
+    for g in fs.groups:
+        xr, yr = p[g.nodes, 0], p[g.nodes, 1]
+        bad = np.zeros(g.size, dtype=bool)
+        for k in range(g.n):
+            a, b = (k + 1) % g.n, k - 1
+            det = (xr[a] - xr[k]) * (yr[b] - yr[k]) - (yr[a] - yr[k]) * (xr[b] - xr[k])
+            bad |= ~(det > 0.0)
+        out[g.ids] = bad & free[g.nodes].any(axis=0)
+    return out
+
+
+def grow_region(fs: FaceSet, n_nodes: int, seed: np.ndarray, rings: int) -> np.ndarray:
+    """(F,) bool: the faces `seed` and every face within `rings` rings of them (a ring: the
+    faces sharing a node with the region)."""
+    region = seed.copy()
+    for _ in range(rings):
+        nodes = np.zeros(n_nodes, dtype=bool)
+        for g in fs.groups:
+            nodes[g.nodes[:, region[g.ids]]] = True
+        grown = region.copy()
+        for g in fs.groups:
+            grown[g.ids] |= nodes[g.nodes].any(axis=0)
+        if np.array_equal(grown, region):
+            break
+        region = grown
+    return region
+
+
+def attempt_budget(params: EEGTParams, n_region: int, whole: bool) -> int:
+    """The iteration budget of one attempt: the run's own on the whole mesh, else
+    BUDGET_PER_FACE per face of the region within [BUDGET_MIN, the run's]."""
+    top = params.max_untangle_iterations
+    if whole:
+        return top
+    return min(top, max(BUDGET_MIN, BUDGET_PER_FACE * n_region))
+
+
+def keep_targets(p: np.ndarray, fs: FaceSet, free: np.ndarray, folded: np.ndarray,
+                 reference: np.ndarray | None = None) -> np.ndarray:
+    """(n_corners, 2) targets of target "keep": every face's own corners as given; the
+    folded faces' corners from `reference` ((N, 2), same topology) when given, else from the
+    harmonic fill of their free nodes (the other nodes held)."""
+    corners = np.asarray(p, dtype=np.float64)[fs.indices, :2].copy()
+    rows = np.repeat(folded, fs.counts)
+    if not folded.any():
+        return corners
+    if reference is not None:
+        corners[rows] = np.asarray(reference, dtype=np.float64)[fs.indices[rows], :2]
+        return corners
+    movable = np.zeros(p.shape[0], dtype=bool)
+    movable[fs.indices[rows]] = True
+    movable &= free
+    filled = harmonic_positions(np.asarray(p, dtype=np.float64)[:, :2], fs, movable)
+    corners[rows] = filled[fs.indices[rows]]
+    return corners
+
+
+Run = Callable[..., Any]
+
+
+@dataclass(frozen=True)
+class Repaired:
+    """What `repair_folds` did: the whole mesh's points, the last attempt's result (core
+    result of the region), the region's faces (F,) bool, its margin in rings, its FaceSet,
+    nodes (its local node -> the mesh's) and targets (None: regular polygons)."""
+
+    points: np.ndarray
+    result: Any
+    region: np.ndarray
+    rings: int
+    faces: FaceSet
+    nodes: np.ndarray
+    targets: np.ndarray | None
+
+
+def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParams,
+                 targets: np.ndarray | None, run: Run, keep_from: np.ndarray | None = None,
+                 **run_args: Any) -> Repaired:
+    """The loop of region "folds": `run(points, faces, fixed=..., params=...,
+    targets=..., **run_args)` (core.run.pipeline.untangle_and_smooth with region "mesh") on
+    the folded faces grown by FIRST_RINGS, 2 x, 4 x ... rings until an attempt leaves no face
+    of the region inverted or the region is the whole mesh.
+
+    `p` (N, 2) float64, `fs` and `free` (N,) bool: the nodes a move may change; `targets`:
+    the whole mesh's (n_corners, 2) targets or None (regular polygons), used unless
+    `params.target` is "keep"; `keep_from`: with target "keep", the reference mesh or None
+    (the folded faces' targets: `keep_targets`, computed on each region)."""
+    n = p.shape[0]
+    seed = folded_faces(p, fs, free)
+    sub_params = replace(params, region="mesh", target="regular")
+    rings = FIRST_RINGS
+    while True:
+        region = grow_region(fs, n, seed, rings)
+        whole = bool(region.all())
+        ids = np.flatnonzero(region)
+        sub, nodes, rows = face_subset(fs, ids)
+        rim = np.zeros(n, dtype=bool)
+        for g in fs.groups:
+            rim[g.nodes[:, ~region[g.ids]]] = True
+        held = ~free[nodes] | rim[nodes]
+        if params.target == "keep":
+            ref = None if keep_from is None else keep_from[nodes]
+            tg = keep_targets(p[nodes], sub, ~held, seed[ids], ref)
+        else:
+            tg = None if targets is None else targets[rows]
+        prm = replace(sub_params, max_untangle_iterations=attempt_budget(params, ids.size,
+                                                                          whole))
+        res = run(p[nodes], sub, fixed=held, params=prm, targets=tg, **run_args)
+        if whole or res.status in ("valid", "untangled", "cancelled"):
+            out = p.copy()
+            if res.status != "cancelled":
+                moved = ~held
+                out[nodes[moved]] = np.asarray(res.points, dtype=np.float64)[moved, :2]
+            return Repaired(out, res, region, rings, sub, nodes, tg)
+        rings *= 2

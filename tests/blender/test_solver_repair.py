@@ -1,0 +1,50 @@
+"""Solver meshes are repaired by default (target "keep", region "folds"): only the folded
+faces and a margin move, every other node keeps its bits; `--target regular --region mesh`
+gives the whole-mesh smoothing."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from solver_meshes import channel_msh
+
+meshio = pytest.importorskip("meshio", reason="meshio is not installed")
+
+
+def _moved(src, out) -> np.ndarray:
+    return (meshio.read(src).points != meshio.read(out).points).any(axis=1)
+
+
+def test_solver_mesh_default_is_a_repair_that_keeps_every_node_outside_the_margin(
+        bpy, ext, tmp_path):
+    src = channel_msh(tmp_path / "c.msh", shift=0.15)
+    out, rep = tmp_path / "r.msh", tmp_path / "r.json"
+    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
+                                          "--quiet"])[0]
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert code == 0, o
+    assert o["status"] == "untangled" and o["after"]["n_inverted"] == 0
+    assert o["message"].startswith("folds only: ")
+    moved = _moved(src, out)
+    n_points = moved.size
+    assert 0 < moved.sum() < 0.25 * n_points  # the margin around the cylinder only
+    whole_out, whole_rep = tmp_path / "w.msh", tmp_path / "w.json"
+    code = ext.operators.command.cli.run([str(src), "-o", str(whole_out), "--report",
+                                          str(whole_rep), "--quiet", "--target", "regular",
+                                          "--region", "mesh"])[0]
+    (w,) = json.loads(whole_rep.read_text())["objects"]
+    assert code == 0 and w["after"]["n_inverted"] == 0
+    assert not w["message"].startswith("folds only")
+    assert _moved(src, whole_out).sum() > 0.5 * n_points  # every free node moved
+
+
+def test_repair_of_a_valid_solver_mesh_writes_it_unchanged(bpy, ext, tmp_path):
+    src = channel_msh(tmp_path / "v.msh", shift=0.0)
+    out, rep = tmp_path / "o.msh", tmp_path / "o.json"
+    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
+                                          "--quiet"])[0]
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert code == 0 and o["status"] == "valid"
+    assert not _moved(src, out).any()

@@ -1,0 +1,171 @@
+"""Region "folds" (core/run/repair.py): only the folded faces and a margin grown while needed
+move, every other node keeps its bits; target "keep" pulls faces towards their own shapes."""
+
+import numpy as np
+import pytest
+
+from core import EEGTParams, mesh_stats, untangle_and_smooth
+from core.mesh.faces import as_faceset
+from core.run.repair import FIRST_RINGS, folded_faces, grow_region, keep_targets
+
+
+def _grid(n: int) -> tuple[np.ndarray, list[list[int]]]:
+    m = n + 1
+    xs, ys = np.meshgrid(np.arange(m, dtype=float), np.arange(m, dtype=float))
+    p = np.column_stack([xs.ravel(), ys.ravel()])
+    return p, [[m * j + i, m * j + i + 1, m * j + i + m + 1, m * j + i + m]
+               for j in range(n) for i in range(n)]
+
+
+def _o_grid(n_around: int = 48, first: float = 1e-3, growth: float = 1.25
+            ) -> tuple[np.ndarray, list[list[int]]]:
+    """Quads around a unit circle, rows growing geometrically from `first` to radius 8 (a
+    boundary layer: aspect about 2 pi / n_around / first at the wall)."""
+    radii, h = [1.0], first
+    while radii[-1] + h < 8.0:
+        radii.append(radii[-1] + h)
+        h *= growth
+    radii[-1] = 8.0
+    r = np.asarray(radii)
+    t = 2.0 * np.pi * np.arange(n_around) / n_around
+    p = np.column_stack([np.outer(r, np.cos(t)).ravel(), np.outer(r, np.sin(t)).ravel()])
+    faces = [[i * n_around + j, (i + 1) * n_around + j, (i + 1) * n_around + (j + 1) % n_around,
+              i * n_around + (j + 1) % n_around]
+             for i in range(r.size - 1) for j in range(n_around)]
+    return p, faces
+
+
+def _turned_wall(p: np.ndarray, degrees: float, shift: tuple[float, float] = (0.3, 0.1),
+                 reach: float = 1.6) -> np.ndarray:
+    """The wall (unit circle) turned about the centre and shifted; nodes follow by a weight
+    falling from 1 at the wall to 0 at radius `reach` (the thin cells fold where it falls
+    and the wall comes closer)."""
+    r = np.hypot(p[:, 0], p[:, 1])
+    s = np.clip((r - 1.0) / (reach - 1.0), 0.0, 1.0)
+    w = ((1.0 - s) ** 3 * (1.0 + 3.0 * s))[:, None]
+    a = np.radians(degrees)
+    c, si = np.cos(a), np.sin(a)
+    moved = np.column_stack([c * p[:, 0] - si * p[:, 1] + shift[0],
+                             si * p[:, 0] + c * p[:, 1] + shift[1]])
+    return p + w * (moved - p)
+
+
+def _first_heights(p: np.ndarray, n_around: int) -> np.ndarray:
+    """Height of each wall cell's first layer: the distance from the wall node to the node
+    above it."""
+    return np.hypot(*(p[n_around:2 * n_around] - p[:n_around]).T)
+
+
+@pytest.mark.parametrize("target", ["keep", "regular", "reference"])
+def test_folds_only_moves_a_margin_around_the_folds_and_keeps_every_other_bit(target):
+    p, faces = _o_grid()
+    bent = _turned_wall(p, 25.0)
+    before = mesh_stats(bent, faces)
+    assert before.n_inverted > 0
+    wall = np.hypot(p[:, 0], p[:, 1]) < 1.0 + 1e-12
+    res = untangle_and_smooth(bent, faces, fixed=wall, reference_points=None if target != \
+                              "reference" else p, params=EEGTParams(region="folds", target=target))
+    assert res.status == "untangled", res.message
+    assert mesh_stats(res.points, faces).n_inverted == 0
+    assert res.message.startswith("folds only: ")
+    stay = ~res.moved
+    assert np.array_equal(res.points[stay], bent[stay])  # bit for bit
+    assert 0 < res.moved.sum() < 0.5 * len(p)
+    assert np.array_equal(res.points[wall], bent[wall])
+
+
+def test_whole_mesh_run_pulls_the_boundary_layer_to_squares_folds_only_keeps_it():
+    """The first layer at the wall: region 'mesh' with regular targets makes it tens of times
+    taller (towards squares); region 'folds' with target 'keep' leaves every wall cell's first
+    layer that is outside the region as it was, bit for bit, and the rest within 2 x."""
+    n_around = 48
+    p, faces = _o_grid(n_around)
+    bent = _turned_wall(p, 25.0)
+    wall = np.hypot(p[:, 0], p[:, 1]) < 1.0 + 1e-12
+    h0 = _first_heights(bent, n_around)
+    whole = untangle_and_smooth(bent, faces, fixed=wall)
+    folds = untangle_and_smooth(bent, faces, fixed=wall,
+                                params=EEGTParams(region="folds", target="keep"))
+    assert whole.after.n_inverted == 0 and folds.after.n_inverted == 0
+    assert np.median(_first_heights(whole.points, n_around) / h0) > 10.0
+    ratio = _first_heights(folds.points, n_around) / h0
+    assert np.max(np.abs(np.log(ratio))) < np.log(2.0)
+
+
+def test_a_pinned_handle_dragged_far_grows_the_margin_until_the_fold_opens():
+    """A pinned node dragged 6.3 cells across a 30 x 30 grid: the first margin (FIRST_RINGS
+    rings) cannot hold the neighbours it pushes; the region doubles until it can."""
+    p, faces = _grid(30)
+    c = 15 * 31 + 15
+    q = p.copy()
+    q[c] += [6.3, 0.4]
+    pin = np.zeros(len(p), dtype=bool)
+    pin[c] = True
+    res = untangle_and_smooth(q, faces, fixed=pin, params=EEGTParams(region="folds",
+                                                                     target="keep"))
+    assert res.status == "untangled" and res.after.n_inverted == 0, res.message
+    assert f"({4 * FIRST_RINGS} rings around the folded ones)" in res.message, res.message
+    assert np.array_equal(res.points[~res.moved], q[~res.moved])
+
+
+def test_folds_only_on_a_valid_mesh_moves_nothing():
+    p, faces = _grid(6)
+    p[8] += [0.1, 0.05]
+    res = untangle_and_smooth(p, faces, params=EEGTParams(region="folds"))
+    assert res.status == "valid" and not res.moved.any()
+    assert np.array_equal(res.points, p)
+    assert res.message == "no folded face a move can change: nothing moved (region 'folds')"
+
+
+def test_keep_targets_on_a_valid_jittered_mesh_keep_every_bit():
+    """Every face is already its own target: quality 1 against it, nothing to gain."""
+    p, faces = _grid(10)
+    rng = np.random.default_rng(1)
+    inner = (p[:, 0] > 0) & (p[:, 0] < 10) & (p[:, 1] > 0) & (p[:, 1] < 10)
+    p[inner] += rng.normal(0.0, 0.15, (int(inner.sum()), 2))
+    res = untangle_and_smooth(p, faces, params=EEGTParams(target="keep"))
+    assert res.status == "valid"
+    assert np.array_equal(res.points, p)
+    assert res.before.q_min > 0.999999 and res.after.q_avg == res.before.q_avg
+
+
+def test_keep_targets_take_folded_faces_from_the_reference_else_from_the_harmonic_fill():
+    p, faces = _grid(4)
+    fs = as_faceset(faces, len(p))
+    q = p.copy()
+    q[12] = [3.4, 2.6]  # the centre node pushed across its neighbours
+    free = np.zeros(len(p), dtype=bool)
+    free[[6, 7, 8, 11, 12, 13, 16, 17, 18]] = True
+    folded = folded_faces(q, fs, free)
+    assert folded.any()
+    rows = np.repeat(folded, fs.counts)
+    own = keep_targets(q, fs, free, folded)
+    assert np.array_equal(own[~rows], q[fs.indices[~rows]])  # valid faces: their own corners
+    assert np.allclose(own[rows], p[fs.indices[rows]], rtol=0, atol=1e-9)  # a grid's fill
+    ref = keep_targets(q, fs, free, folded, reference=p * 2.0)
+    assert np.array_equal(ref[rows], 2.0 * p[fs.indices[rows]])
+
+
+def test_grow_region_adds_the_faces_sharing_a_node_per_ring():
+    p, faces = _grid(5)
+    fs = as_faceset(faces, len(p))
+    seed = np.zeros(fs.n_faces, dtype=bool)
+    seed[12] = True  # the centre face
+    assert grow_region(fs, len(p), seed, 1).sum() == 9
+    assert grow_region(fs, len(p), seed, 2).sum() == 25
+    assert grow_region(fs, len(p), seed, 9).sum() == 25
+
+
+@pytest.mark.parametrize("bad, why", [
+    (dict(target="keep", targets=np.zeros((16, 2))), "give targets or target 'keep', not both"),
+    (dict(target="keep", reference_points=np.zeros((3, 2))),
+     "reference mesh has 3 vertices, the mesh has 9"),
+    (dict(target="regular", reference_points=np.zeros((9, 2))),
+     "reference_points given but target is 'regular'"),
+])
+def test_keep_target_refusals_are_one_line(bad, why):
+    p, faces = _grid(2)
+    kw = dict(bad)
+    params = EEGTParams(target=kw.pop("target"), region="folds")
+    with pytest.raises(ValueError, match=why):
+        untangle_and_smooth(p, faces, params=params, **kw)
