@@ -7,6 +7,8 @@ imports only `core.fpmath`.
   (`csr.ragged_arange`, `csr.bincount_csr`, Morton orders).
 - edges, boundary and free nodes (`topology.EdgeInfo`, `edge_info`, `boundary_nodes`,
   `free_nodes`); cache-friendly renumbering of large meshes (`reorder`).
+- consistent face orientation of clockwise or mixed faces (`orient.orient_faces`,
+  `reverse_faces`).
 - input points (`points.check_points`); the plane of a 3D mesh (`plane.PlaneFrame`).
 - OBJ and legacy VTK files (`obj_io`).
 """
@@ -14,11 +16,12 @@ imports only `core.fpmath`.
 from .csr import bincount_csr, ragged_arange
 from .faces import ArityGroup, FaceSet, as_faceset, face_subset, faces_from_csr
 from .obj_io import read_legacy_vtk, read_obj, write_obj
+from .orient import FaceOrientation, orient_faces, reverse_faces
 from .plane import PlaneFrame, open_edges
 from .points import check_points
 from .topology import EdgeInfo, boundary_nodes, edge_info, free_nodes
 
-__all__ = ["ArityGroup", "EdgeInfo", "FaceSet", "PlaneFrame", "as_faceset", "bincount_csr",
-           "boundary_nodes", "check_points", "edge_info", "face_subset", "faces_from_csr",
-           "free_nodes",
-           "open_edges", "ragged_arange", "read_legacy_vtk", "read_obj", "write_obj"]
+__all__ = ["ArityGroup", "EdgeInfo", "FaceOrientation", "FaceSet", "PlaneFrame", "as_faceset",
+           "bincount_csr", "boundary_nodes", "check_points", "edge_info", "face_subset",
+           "faces_from_csr", "free_nodes", "open_edges", "orient_faces", "ragged_arange",
+           "read_legacy_vtk", "read_obj", "reverse_faces", "write_obj"]

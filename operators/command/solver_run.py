@@ -8,6 +8,14 @@ area, as everywhere) -> write through ``fileio.checked_write`` to a temporary fi
 output -> read back -> judged by ``core.run.accept`` on the numbers read back (a result no
 better than the input is written unchanged) -> the caller renames it into place.
 
+The run sees the faces consistently oriented: FEM files often store element nodes
+clockwise, or some clockwise and some not, and the core needs every interior edge walked
+once each way. `plan` reverses, in memory only, the faces that go against their
+component's orientation, each component counterclockwise (``core.mesh.orient_faces``: by
+topology, so folded faces stay folded), and says in the report how many faces were read
+clockwise; the written file keeps its own cells and node order. A surface that cannot be
+oriented (a Moebius-like strip) is refused.
+
 Everything is decided before the work (`plan`): the input read, the groups and the pin
 field, the reference, that some node can move, that the mesh is planar, and that the output
 format can hold the input (a dry write of the input mesh to a temporary file beside the
@@ -38,6 +46,7 @@ from ...core import (
     mesh_stats,
     summaries,
 )
+from ...core.mesh import orient_faces
 from ...core.metrics import reference_targets, reference_to_2d
 from ...core.run import accept, folded_faces, frozen_note, untangle_and_smooth_3d
 from ...fileio import checked_write, solver_mesh
@@ -140,13 +149,14 @@ class SolverPlan:
 
     sm: solver_mesh.SolverMesh
     name: str
-    faces: FaceSet
+    faces: FaceSet  # the file's 2D cells, consistently oriented (counterclockwise)
     fixed: np.ndarray | None  # (N,) pinned nodes (None: --no-pinned)
     plane: Plane
     points2d: np.ndarray  # (N, 2) the input in its plane
     before: Stats  # the input file's own counts
     reference: np.ndarray | None = None  # (N, 3) normalised reference positions
     targets: np.ndarray | None = None  # their face-corner targets (the stats' targets)
+    clockwise: int = 0  # faces read clockwise (reversed in `faces`, not in the file)
 
 
 def _refuse(message: str) -> UsageError:
@@ -162,7 +172,7 @@ def plan(ns: argparse.Namespace, params: EEGTParams
     try:
         sm = solver_mesh.read(path)
         fs = faces_from_csr(sm.offsets[:-1], sm.counts(), sm.corners, sm.n_points)
-        on_boundary = boundary_nodes(sm.n_points, fs)
+        on_boundary = boundary_nodes(sm.n_points, fs)  # whatever way round the faces run
         choice = solver_mesh.node_choice(
             sm, params.boundary, on_boundary, ns.pin_field,
             solver_mesh.parse_groups(ns.fixed_groups),
@@ -178,6 +188,7 @@ def plan(ns: argparse.Namespace, params: EEGTParams
     fixed = None if ns.no_pinned else choice.pinned
     points3d = sm.points3d()
     try:
+        fs, clockwise = oriented_faces(sm, fs)
         movable = free_nodes(sm.n_points, fs, fixed)
         if params.boundary != "fixed":
             movable |= on_boundary if fixed is None else on_boundary & ~fixed
@@ -187,7 +198,8 @@ def plan(ns: argparse.Namespace, params: EEGTParams
     if not movable.any():
         raise _refuse(f"'{path}': every node is pinned or on the fixed boundary: nothing can "
                       "move")
-    p = SolverPlan(sm, name, fs, fixed, plane, plane.to_2d(points3d), Stats(0, 0.0, 0.0))
+    p = SolverPlan(sm, name, fs, fixed, plane, plane.to_2d(points3d), Stats(0, 0.0, 0.0),
+                   clockwise=clockwise)
     if ns.reference:
         _plan_reference(p, ns.reference)
     elif params.target == "keep":
@@ -200,10 +212,36 @@ def plan(ns: argparse.Namespace, params: EEGTParams
         except checked_write.WriteError as exc:
             raise UsageError(f"eegt: cannot write output '{ns.output}': {exc.reason}",
                              unwritable=ns.output) from None
+    notes = list(choice.notes)
+    if clockwise:
+        notes.insert(0, clockwise_note(clockwise, sm.n_faces))
     info = {"format": sm.fmt, "points": sm.n_points, "faces": sm.n_faces,
             "pinned": int(np.count_nonzero(choice.pinned)), "boundary": choice.boundary,
-            "notes": list(choice.notes)}
+            "clockwise_faces": clockwise, "notes": notes}
     return params, info, p
+
+
+def oriented_faces(sm: solver_mesh.SolverMesh, fs: FaceSet | None = None
+                   ) -> tuple[FaceSet, int]:
+    """(the file's 2D cells as faces (`fs`: as read, when the caller has them),
+    consistently oriented, each connected component counterclockwise; how many were read
+    clockwise and are reversed). The orientation is decided on the points centred and
+    scaled (`_normalised`), seen from the side of the mesh's normal whose largest coordinate
+    is positive (+z for a 2D file). ValueError (one line) for faces no orientation fits."""
+    if fs is None:
+        fs = faces_from_csr(sm.offsets[:-1], sm.counts(), sm.corners, sm.n_points)
+    points3d = sm.points3d()
+    center, scale = _normalised(points3d, fs)
+    orientation = orient_faces(fs, sm.n_points, (points3d - center) / scale)
+    return orientation.apply(fs), orientation.n_flipped
+
+
+def clockwise_note(clockwise: int, n_faces: int) -> str:
+    """The report's note on faces read clockwise."""
+    which = f"all {n_faces} faces were" if clockwise == n_faces else \
+        f"{clockwise} of {n_faces} faces were"
+    return (f"{which} read clockwise: the run takes them counterclockwise; the file keeps "
+            "its own node order")
 
 
 def _plan_reference(p: SolverPlan, path: str) -> None:
@@ -222,7 +260,7 @@ def _plan_reference(p: SolverPlan, path: str) -> None:
             points = np.asarray(src.file_points, dtype=np.float64)
             same = points.shape[0] == sm.n_points and \
                 np.array_equal(src.file_faces.offsets, fs.offsets) and \
-                np.array_equal(src.file_faces.indices, fs.indices)
+                np.array_equal(src.file_faces.indices, sm.corners[:fs.n_corners])
             n_ref, f_ref = points.shape[0], src.file_faces.n_faces
     except ValueError as exc:
         raise _refuse(str(exc).splitlines()[0]) from None
@@ -332,14 +370,15 @@ def object_metrics(p: SolverPlan, after2d: np.ndarray,
 def group_metrics(p: SolverPlan, after2d: np.ndarray,
                   names: tuple[str, ...]) -> dict[str, Any]:
     """group -> measure -> {"before", "after"} over the faces of every group of 2D cells in
-    the input file (the summaries as ``core.MeasureSummary.as_dict``)."""
+    the input file (the summaries as ``core.MeasureSummary.as_dict``; its faces as the run
+    oriented them)."""
     sm = p.sm
     counts = sm.counts()
     out = {}
     for group, mask in sm.face_groups().items():
         corner_mask = np.repeat(mask, counts)
         sub = faces_from_csr(np.cumsum(counts[mask]) - counts[mask], counts[mask],
-                             sm.corners[corner_mask], sm.n_points)
+                             p.faces.indices[corner_mask], sm.n_points)
         b, a = summaries(p.points2d, sub, names), summaries(after2d, sub, names)
         out[group] = {"faces": int(np.count_nonzero(mask)),
                       **{n: {"before": b[n].as_dict(), "after": a[n].as_dict()}

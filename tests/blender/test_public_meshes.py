@@ -8,7 +8,9 @@ read back, the same points and cells, only free interior nodes changed (every ot
 keeps its bits), the same groups with the same nodes, the same point and cell data, SU2
 markers (names, order, records) and Gmsh 2.2 ASCII names and element tags by the independent
 parsers of tests/solver_parsers.py, the exit code as documented (0: valid at the end; 3: not;
-2: refused before the run with one line, nothing written). docs/engineers.md's table
+2: refused before the run with one line, nothing written). Files whose element nodes run
+clockwise, all or some (FEM meshes), run too: the report's note says how many faces were read
+clockwise, and the written cells keep the file's own node order. docs/engineers.md's table
 *Checked on public files* lists the files and what they gave."""
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ finally:
 
 # file (OWNER+NAME/PATH) -> the exit-2 line's words, for the files the command refuses
 ZERO_AREA = "mesh has zero total area"  # closed surfaces and volume meshes' skins
-NOT_ORIENTED = "faces are not consistently oriented"
 NOTHING_MOVES = "every node is pinned or on the fixed boundary"
 REFUSED = {
     "su2code+Tutorials/design/Multi_Objective_Shape_Design/mesh_wedge_inv_FFD.su2":
@@ -41,31 +42,37 @@ REFUSED = {
     "nschloe+meshio/tests/meshes/su2/mixgrid.su2": ZERO_AREA,
     "live-clones+gmsh/benchmarks/misc/partitions.msh":
         "its elements carry 3 tags (physical, elementary and 1 more",
-    "live-clones+gmsh/benchmarks/misc/multimodel23.msh": NOT_ORIENTED,
+    "live-clones+gmsh/benchmarks/misc/multimodel23.msh": NOTHING_MOVES,  # 2 faces, 1 clockwise
     "live-clones+gmsh/benchmarks/misc/interpolation_scheme2.msh":
         "its $InterpolationScheme section would be lost",
     "live-clones+gmsh/benchmarks/misc/adaptive_tri6.msh": "its elements carry 3 tags",
-    "live-clones+gmsh/benchmarks/3d/CubeAniso2D.msh": NOT_ORIENTED,
+    "live-clones+gmsh/benchmarks/3d/CubeAniso2D.msh": ZERO_AREA,  # a cube's skin, mixed
     "kinnala+scikit-fem/docs/examples/meshes/mixedtriquad.msh":
         "Encountered non-unique CellBlock dim_tag",  # meshio's Gmsh 4.1 writer
     "kinnala+scikit-fem/docs/examples/meshes/tagged_gmsh4.msh":
         "its group 'test' would change (9 -> 0 nodes; meshio's writer keeps one physical "
         "group per Gmsh entity)",
-    "kinnala+scikit-fem/docs/examples/meshes/oriented_squares.msh": NOT_ORIENTED,
     "MmgTools+mmg/libexamples/mmg3d/io_generic_and_get_adja/cube.msh": ZERO_AREA,
-    "kinnala+scikit-fem/docs/examples/meshes/backward-facing_step.vtu": NOT_ORIENTED,
     "MmgTools+mmg/libexamples/mmg3d/io_generic_and_get_adja/cube.vtu": ZERO_AREA,
     "nschloe+meshio/tests/meshes/vtu/00_raw_binary.vtu": "volume cells only",
     "nschloe+meshio/tests/meshes/vtu/02_raw_compressed.vtu": "volume cells only",
-    "sfepy+sfepy/meshes/2d/helmholtz_apartment.vtk": NOT_ORIENTED,
     "sfepy+sfepy/meshes/various_formats/small2d.vtk": NOTHING_MOVES,
     "nschloe+meshio/tests/meshes/vtk/gh-935.vtk": NOTHING_MOVES,
     "nschloe+meshio/tests/meshes/vtk/rbc_001.vtk": ZERO_AREA,
     "sfepy+sfepy/meshes/various_formats/abaqus_hex.inp": "volume cells only",
-    "nschloe+meshio/tests/meshes/abaqus/element_elset.inp": NOT_ORIENTED,
+    "nschloe+meshio/tests/meshes/abaqus/element_elset.inp": NOTHING_MOVES,  # 2 faces, 1 clockwise
     "MmgTools+mmg/libexamples/mmg2d/adaptation_example0/example0_a/init.mesh":
         "Unknown keyword 'RequiredEdges'",
     "nschloe+meshio/tests/meshes/medit/cube86.mesh": ZERO_AREA,
+}
+# file -> faces read clockwise, for the files that run and have any (the report's note)
+CLOCKWISE = {
+    "su2code+Tutorials/multiphysics/steady_fsi/mesh_cantilever.su2": 1000,  # all of them
+    "su2code+Tutorials/multiphysics/contact_resistance_cht/solid_mesh_1.su2": 1521,  # all
+    "kinnala+scikit-fem/docs/examples/meshes/oriented_squares.msh": 250,  # of 266
+    "kinnala+scikit-fem/docs/examples/meshes/backward-facing_step.vtu": 1925,  # of 4218
+    "sfepy+sfepy/meshes/2d/helmholtz_apartment.vtk": 524,  # of 752
+    "kinnala+scikit-fem/docs/examples/meshes/troublesome_mesh.vtk": 724,  # all
 }
 FILES = [local_name(repo, path) for (repo, _), path, _ in MESHES]
 
@@ -85,12 +92,12 @@ def cli(ext):
 
 def _movable(ext, sm) -> np.ndarray:
     """(N,) bool: the nodes a run with the default flags may move (free interior nodes of
-    the faces, none the file holds)."""
+    the faces, none the file holds; whatever way round the file's faces run)."""
     core = ext.core
     fs = core.faces_from_csr(sm.offsets[:-1], sm.counts(), sm.corners, sm.n_points)
     on_boundary = core.boundary_nodes(sm.n_points, fs)
     choice = ext.fileio.solver_mesh.node_choice(sm, "fixed", on_boundary)
-    return core.free_nodes(sm.n_points, fs, choice.pinned)
+    return fs.used_nodes(sm.n_points) & ~on_boundary & ~choice.pinned
 
 
 def _same_arrays(a: dict, b: dict) -> bool:
@@ -132,6 +139,10 @@ def test_public_mesh_through_the_command(bpy, ext, cli, public, tmp_path, capfd,
             "report.json"]
         return
     assert code in (0, 3), (code, err)
+    assert rep["solver_mesh"]["clockwise_faces"] == CLOCKWISE.get(name, 0)
+    noted = [n for n in rep["solver_mesh"]["notes"] if "read clockwise" in n]
+    assert len(noted) == (1 if name in CLOCKWISE else 0), rep["solver_mesh"]["notes"]
+    assert not noted or (f"{CLOCKWISE[name]} " in noted[0] and "own node order" in noted[0])
     entry = rep["objects"][0]
     assert code == (0 if entry["after"]["n_inverted"] == 0 else 3), entry
     assert entry["after"]["n_inverted"] <= entry["before"]["n_inverted"], entry
