@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any
 
@@ -51,6 +51,13 @@ LIFT_POOR = 0.5  # while q_min < this x q_avg, q_avg may fall below the input's 
 LIFT_RETRY = 0.5  # share of the floor step after a round that cost too much q_avg (`_retries`;
 #                   1.0: no retry)
 LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of the lift
+SETTLE_FLOOR = 1.01  # the lift's last whole-mesh run: its floor is this x the climb's
+# q_min (0: no such run); kept only when q_min and q_avg both rise (`_Lift._settle`)
+SETTLE_ITER = 1000  # ... at most this many L-BFGS iterations, until 5 lower its energy by
+SETTLE_TOL = 1e-7  # less than this (relative): the climb's runs stop far from the optimum of
+# q_avg (300 iterations at 1e-5), and a converged run raises it by 0.003-0.02 at no q_min
+SETTLE_MAX_FREE = 10_000  # meshes with more free nodes skip it (its cost grows with the
+# mesh: the 'eegt+local' runs of large meshes keep their time)
 
 
 def _checked_input(points, free) -> tuple[np.ndarray, np.ndarray]:
@@ -560,6 +567,32 @@ class _Lift:
                 self.info["rounds"] = r
             if (self.cur_a >= self.a0 or self.info["rounds"]) and self.cur_m > self.best_m:
                 self.best_v, self.best_m, self.best_a = self.v, self.cur_m, self.cur_a
+        return self._settle()
+
+    def _settle(self) -> bool:
+        """After local rounds, on meshes up to SETTLE_MAX_FREE free nodes: one whole-mesh run
+        that maximises q_avg at a floor just above the climb's q_min (SETTLE_FLOOR x q_min),
+        converged further than the climb's runs (SETTLE_ITER, SETTLE_TOL), kept only when
+        neither measure falls (docs/global_untangle.md, "Settle")."""
+        if (SETTLE_FLOOR <= 0.0 or not self.info["rounds"] or self.best_v is None
+                or int(np.count_nonzero(self.mesh.free)) > SETTLE_MAX_FREE):
+            return True
+        en, st = self.en, self.st
+        en.qc = SETTLE_FLOOR * self.best_m
+        r = self.opt.lift_rounds + 1
+        tick = self._tick(r, lambda v: _numbers(en.element_quality(*st.unpack(v))))
+        opt = replace(self.opt, lift_first_iter=SETTLE_ITER, lift_rel_tol=SETTLE_TOL,
+                      lift_chunk=0)
+        vt, its, qt = _runs(self.run_lbfgs, en, st, self.best_v, opt, tick, self._show)
+        self.total += its
+        qm, qa = _numbers(qt)
+        self.trail.append((qm, qa))
+        if self.cancel:
+            return False
+        if qm >= self.best_m and qa > self.best_a:
+            self.best_v, self.best_m, self.best_a = vt, qm, qa
+            self.v, self.q, self.cur_m, self.cur_a = vt, qt, qm, qa
+            self.info["settled"] = True
         return True
 
     def _retries(self, qm: float) -> bool:
