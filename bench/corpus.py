@@ -460,6 +460,16 @@ HELD_OUT: tuple[CaseSpec, ...] = tuple(
         ("naca", "gmshgraded", 10_000, {"angle": -25.0, "dy": 0.12}),
         ("naca", "gmshmixed", 10_000, {"angle": -15.0, "dy": 0.08}),
         ("naca", "gmshquad", 10_000, {"angle": -20.0, "dy": 0.1}),
+    )) + tuple(
+    # small meshes of other meshers (the lift's settle was set on the first two and a
+    # 3k Triangle gear; the other four were run only after)
+    CaseSpec("motion", dom, mesher, n, seed, params) for dom, mesher, n, seed, params in (
+        ("channel", "gmsh", 2_000, 7, {"dx": 1.0}),
+        ("channel", "gmsh", 5_000, 7, {"dx": 1.0, "dy": 0.1}),
+        ("channel", "gmsh", 3_000, 9, {"dx": 1.0}),
+        ("channel", "gmshgraded", 3_000, 9, {"dx": 1.0}),
+        ("gear", "gmsh", 3_000, 9, {"angle": 50.0}),
+        ("gear", "tri20", 2_000, 9, {"angle": 40.0}),
     ))
 
 

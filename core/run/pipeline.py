@@ -16,11 +16,11 @@ from ..fpmath import add_reduce
 from ..host.heap import keep_freed_memory
 from ..host.page_advice import pages_for_run
 from ..host.side_by_side import side_by_side
-from ..mesh.faces import FaceSet, as_faceset
+from ..mesh.faces import FaceSet, as_faceset, face_subset
 from ..mesh.points import check_points
 from ..mesh.reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from ..mesh.topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
-from ..metrics.face_quality import Stats, folded_area, mesh_stats
+from ..metrics.face_quality import Stats, folded_area, mesh_stats, quality, stats_of
 from ..metrics.kept import Kept, fixed_corners, kept_corners, kept_note
 from ..metrics.mean_ratio import group_quality
 from ..metrics.reference_shapes import reference_targets
@@ -43,7 +43,7 @@ from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
 from .hopeless_groups import hopeless_groups, hopeless_groups_note
-from .repair import folded_faces, keep_targets, repair_folds
+from .repair import folded_faces, inverted_corners, keep_targets, repair_folds, touching
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -323,54 +323,84 @@ def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
                     edges: EdgeInfo | None, keep_as_given: bool, t0: float) -> EEGTResult:
     """Region "folds" (core/run/repair.py): the run on the folded faces and a margin grown
     while needed; every other node keeps its bits. Stats are the whole mesh's against the
-    run's targets (target "keep": each face's own shape, the region's folded faces theirs
-    from `keep_targets`)."""
+    run's targets: the region's from its run, the faces outside measured once (unchanged);
+    with target "keep" a face outside counts 1 (it is its own target) unless it is inverted
+    with fixed vertices only. The cost follows the region: the mesh is passed over a few
+    times (corner signs, rings), never optimized or measured as a whole."""
     p = check_points(points)
-    fs = as_faceset(faces, p.shape[0])
+    n = p.shape[0]
+    fs = as_faceset(faces, n)
     whole, keep_from = _target_corners(p, fs, params, targets, reference_points)
     if isinstance(whole, Targets):
         raise ValueError("region 'folds' takes targets as an (n_corners, 2) array")
     if whole is not None:
         prepare_targets(whole, fs)  # its one-line checks
         whole = np.asarray(whole, dtype=np.float64)
-    edges = checked_edges(edges, fs, p.shape[0])
-    pins = free_nodes(p.shape[0], fs, fixed, edges=edges)
+    edges = checked_edges(edges, fs, n)
+    pins = free_nodes(n, fs, fixed, edges=edges)
     if params.boundary != "fixed":  # boundary nodes of the region move as the mode says
-        pins = pins | (fs.used_nodes(p.shape[0]) & edges.boundary_mask() & ~_pinned(fixed, p))
+        pins = pins | (fs.used_nodes(n) & edges.boundary_mask() & ~_pinned(fixed, p))
     if not pins.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
     center, scale = normalisation(p, fs)
     _check_orientation((p - center) / scale, fs)
-    own = p[fs.indices, :2].copy() if params.target == "keep" else whole
-    paper = params.untangle == "eegt" or not keep_as_given
-    kept = None if paper else kept_corners(as_given(p, fs, center, scale), fs, pins)
-    before = mesh_stats(p, fs, own, kept)
-    if before.n_inverted == 0 or not folded_faces(p, fs, pins).any():
+    bad = inverted_corners(p, fs)
+    seed = bad & touching(fs, pins)
+    keep = params.target == "keep"
+    if not seed.any():
+        region = np.zeros(fs.n_faces, dtype=bool)
+        before = stats_of(_outside_stats(p, fs, region, bad, pins, whole, keep,
+                                         keep_as_given, params))
         text = "no folded face a move can change: nothing moved (region 'folds')"
         return EEGTResult(p.copy(), "valid" if before.n_inverted == 0 else "failed", before,
                           before, 0, 0, time.perf_counter() - t0, backend, text,
-                          np.zeros(p.shape[0], dtype=bool), targets=own)
-    done = repair_folds(p, fs, pins, params, whole, untangle_and_smooth, keep_from,
+                          np.zeros(n, dtype=bool))
+    done = repair_folds(p, fs, pins, params, whole, untangle_and_smooth, keep_from, seed,
                         backend=backend, progress=progress, keep_as_given=keep_as_given)
     res = done.result
-    after_targets = own
-    if done.targets is not None:
-        after_targets = (p[fs.indices, :2].copy() if own is None else own.copy())
-        rows = np.repeat(done.region, fs.counts)
-        after_targets[rows] = done.targets
-    after = mesh_stats(done.points, fs, after_targets, kept)
-    moved = np.zeros(p.shape[0], dtype=bool)
+    out = _outside_stats(p, fs, done.region, bad, pins, whole, keep, keep_as_given, params)
+    paper = params.untangle == "eegt" or not keep_as_given
+    sub, nodes = done.faces, done.nodes
+    kept = None if paper else kept_corners(p[nodes], sub, ~done.held)
+    before = stats_of([quality(p[nodes], sub, done.targets, kept=kept), *out])
+    after = stats_of([quality(done.points[nodes], sub, done.targets, kept=kept), *out])
+    moved = np.zeros(n, dtype=bool)
     moved[done.nodes[np.asarray(res.moved, dtype=bool)]] = True
-    n_region = int(done.region.sum())
     status = res.status
     if status in ("valid", "untangled") and after.n_inverted > 0:
         status = "failed"
-    message = (f"folds only: {n_region} of {fs.n_faces} faces ({done.rings} rings around "
-               f"the folded ones) may move, every other vertex kept; {res.message}")
+    message = (f"folds only: {int(done.region.sum())} of {fs.n_faces} faces ({done.rings} "
+               f"rings around the folded ones) may move, every other vertex kept; "
+               f"{res.message}")
     return EEGTResult(done.points, status, before, after, res.untangle_iterations,
                       res.smooth_iterations, time.perf_counter() - t0, res.backend, message,
                       moved, res.global_iterations, res.n_frozen, res.n_target_fallback,
-                      res.n_kept, kept, after_targets)
+                      res.n_kept)
+
+
+def _outside_stats(p: np.ndarray, fs: FaceSet, region: np.ndarray, bad: np.ndarray,
+                   pins: np.ndarray, whole: np.ndarray | None, keep: bool,
+                   keep_as_given: bool, params: EEGTParams) -> list[np.ndarray]:
+    """The qualities of the faces outside `region` ([] when there are none). Target "keep":
+    1 for each (a face is its own target), 0 for an inverted one (its vertices are all
+    fixed: it is outside the folds) unless its corners are kept as given; else their mean
+    ratio against `whole` (None: regular polygons)."""
+    ids = np.flatnonzero(~region)
+    if ids.size == 0:
+        return []
+    paper = params.untangle == "eegt" or not keep_as_given
+    if keep:
+        q = np.ones(ids.size)
+        stuck = np.flatnonzero(bad[ids])
+        if stuck.size:
+            sub, nodes, _ = face_subset(fs, ids[stuck])
+            kept = None if paper else kept_corners(p[nodes], sub, pins[nodes])
+            q[stuck] = quality(p[nodes], sub, None, kept=kept)
+        return [q]
+    sub, nodes, rows = face_subset(fs, ids)
+    kept = None if paper else kept_corners(p[nodes], sub, pins[nodes])
+    tg = None if whole is None else whole[rows]
+    return [quality(p[nodes], sub, tg, kept=kept)]
 
 
 def _pinned(fixed, p: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ from ..params import EEGTParams
 from .harmonic import harmonic_positions
 
 __all__ = ["FIRST_RINGS", "Repaired", "attempt_budget", "folded_faces", "grow_region",
-           "keep_targets", "repair_folds"]
+           "inverted_corners", "keep_targets", "repair_folds", "touching"]
 
 FIRST_RINGS = 3  # the first margin around the folded faces, in rings of faces
 BUDGET_PER_FACE = 2  # an attempt on a region below the whole mesh: this many optimizer and
@@ -38,9 +38,8 @@ BUDGET_MIN = 400  # EEGT iterations per face of the region, at least BUDGET_MIN,
 # run's max_untangle_iterations (a margin that is too tight fails in a fraction of a second)
 
 
-def folded_faces(p: np.ndarray, fs: FaceSet, free: np.ndarray) -> np.ndarray:
-    """(F,) bool: faces with a corner that does not turn left and at least one free node
-    (the faces a move can change)."""
+def inverted_corners(p: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """(F,) bool: faces with a corner that does not turn left."""
     out = np.zeros(fs.n_faces, dtype=bool)
     for g in fs.groups:
         xr, yr = p[g.nodes, 0], p[g.nodes, 1]
@@ -49,8 +48,22 @@ def folded_faces(p: np.ndarray, fs: FaceSet, free: np.ndarray) -> np.ndarray:
             a, b = (k + 1) % g.n, k - 1
             det = (xr[a] - xr[k]) * (yr[b] - yr[k]) - (yr[a] - yr[k]) * (xr[b] - xr[k])
             bad |= ~(det > 0.0)
-        out[g.ids] = bad & free[g.nodes].any(axis=0)
+        out[g.ids] = bad
     return out
+
+
+def touching(fs: FaceSet, nodes: np.ndarray) -> np.ndarray:
+    """(F,) bool: faces with at least one node in the (N,) bool mask `nodes`."""
+    out = np.zeros(fs.n_faces, dtype=bool)
+    for g in fs.groups:
+        out[g.ids] = nodes[g.nodes].any(axis=0)
+    return out
+
+
+def folded_faces(p: np.ndarray, fs: FaceSet, free: np.ndarray) -> np.ndarray:
+    """(F,) bool: faces with a corner that does not turn left and at least one free node
+    (the faces a move can change)."""
+    return inverted_corners(p, fs) & touching(fs, free)
 
 
 def grow_region(fs: FaceSet, n_nodes: int, seed: np.ndarray, rings: int) -> np.ndarray:
@@ -106,7 +119,8 @@ Run = Callable[..., Any]
 class Repaired:
     """What `repair_folds` did: the whole mesh's points, the last attempt's result (core
     result of the region), the region's faces (F,) bool, its margin in rings, its FaceSet,
-    nodes (its local node -> the mesh's) and targets (None: regular polygons)."""
+    nodes (its local node -> the mesh's), targets (None: regular polygons) and held
+    nodes."""
 
     points: np.ndarray
     result: Any
@@ -115,11 +129,12 @@ class Repaired:
     faces: FaceSet
     nodes: np.ndarray
     targets: np.ndarray | None
+    held: np.ndarray  # (n,) bool over the region's nodes: those the run could not move
 
 
 def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParams,
                  targets: np.ndarray | None, run: Run, keep_from: np.ndarray | None = None,
-                 **run_args: Any) -> Repaired:
+                 seed: np.ndarray | None = None, **run_args: Any) -> Repaired:
     """The loop of region "folds": `run(points, faces, fixed=..., params=...,
     targets=..., **run_args)` (core.run.pipeline.untangle_and_smooth with region "mesh") on
     the folded faces grown by FIRST_RINGS, 2 x, 4 x ... rings until an attempt leaves no face
@@ -128,9 +143,10 @@ def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParam
     `p` (N, 2) float64, `fs` and `free` (N,) bool: the nodes a move may change; `targets`:
     the whole mesh's (n_corners, 2) targets or None (regular polygons), used unless
     `params.target` is "keep"; `keep_from`: with target "keep", the reference mesh or None
-    (the folded faces' targets: `keep_targets`, computed on each region)."""
+    (the folded faces' targets: `keep_targets`, computed on each region); `seed`: the
+    folded faces when the caller has them (`folded_faces`)."""
     n = p.shape[0]
-    seed = folded_faces(p, fs, free)
+    seed = folded_faces(p, fs, free) if seed is None else seed
     sub_params = replace(params, region="mesh", target="regular")
     rings = FIRST_RINGS
     while True:
@@ -155,5 +171,5 @@ def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParam
             if res.status != "cancelled":
                 moved = ~held
                 out[nodes[moved]] = np.asarray(res.points, dtype=np.float64)[moved, :2]
-            return Repaired(out, res, region, rings, sub, nodes, tg)
+            return Repaired(out, res, region, rings, sub, nodes, tg, held)
         rings *= 2
