@@ -36,9 +36,9 @@ the rest of the core are mapped in `core/__init__.py`.
 """
 
 from .options import GlobalOptions
-from .stages import STALL_ROUNDS, lift_min_quality, untangle_budget, untangle_global
+from .stages import STALL_ROUNDS, Resume, lift_min_quality, untangle_budget, untangle_global
 from .state import stops
 from .submesh import active_submesh
 
-__all__ = ["STALL_ROUNDS", "GlobalOptions", "active_submesh", "lift_min_quality", "stops",
-           "untangle_budget", "untangle_global"]
+__all__ = ["STALL_ROUNDS", "GlobalOptions", "Resume", "active_submesh", "lift_min_quality",
+           "stops", "untangle_budget", "untangle_global"]

@@ -24,7 +24,8 @@ from .slide import make_state
 from .state import State, Tick, stops
 from .submesh import Neighbourhood
 
-__all__ = ["BUDGET_NODES", "STALL_ROUNDS", "lift_min_quality", "untangle_budget", "untangle_global"]
+__all__ = ["BUDGET_NODES", "STALL_ROUNDS", "Resume", "lift_min_quality", "untangle_budget",
+           "untangle_global"]
 
 INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on spun holes: docs)
 INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses a larger mesh
@@ -122,6 +123,26 @@ def _held_stuck(P: np.ndarray, free: np.ndarray, rest: np.ndarray, en: FoldoverE
     return out & free & ~rest
 
 
+@dataclass
+class Resume:
+    """A resumable `untangle_global` (its ``resume`` argument): where the eps continuation
+    stood when a call ended, so that the next call on the same sub-mesh (the same nodes and
+    elements; fixed nodes may have moved) goes on from there instead of starting afresh.
+    Each call updates it in place. A call whose budget ends inside an eps round leaves the
+    round open (``used`` iterations at ``eps``, F_eps ``e_start`` at its start): the next
+    call finishes it with fresh L-BFGS memory, then lowers eps as one long call would.
+    ``eps`` None: the next call starts as a cold one (a fresh state, or a call that ended
+    valid)."""
+
+    eps: float | None = None
+    used: int = 0  # iterations of the open eps round
+    e_start: float = 0.0  # F_eps where the open round began
+    top_det: float | None = None  # the best worst det and inverted count (`_stalled`)
+    top_inv: int | None = None
+    stall: int = 0
+    calls: int = 0  # calls that used it
+
+
 def untangle_budget(iterations: int, n_free: int) -> int:
     """The optimizer's untangling iterations per attempt for a budget of `iterations`: that
     many up to BUDGET_NODES free nodes, beyond in proportion to the mesh's width (the square
@@ -141,6 +162,7 @@ def untangle_global(
     progress: Callable[[int, int, int, Callable[[], np.ndarray]], Any] | None = None,
     factors: Factors | None = None,
     slide: SlideView | None = None,
+    resume: Resume | None = None,
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """Untangle a planar polygon mesh by minimising the foldover-free energy (eps continuation).
 
@@ -162,6 +184,11 @@ def untangle_global(
     info: iterations, rounds, n_inverted_in, n_inverted_out, min_det (smallest normalised corner
     det), eps_history, seconds, seconds_per_iter, status ("untangled" / "failed" / "cancelled" /
     "nothing to do"), gave_up (the run ended early: STALL_ROUNDS rounds without progress).
+
+    resume: a `Resume` to go on from (and updated in place for the next call): the eps
+    continuation of the last call on this sub-mesh continues from its eps and open round
+    (a budget ends inside a round without lowering eps; no extra rounds are granted), for a
+    solve split across calls (Live Untangle's frames). None: a cold run, as always.
     """
     t_start = time.perf_counter()
     P, free = _checked_input(points, free)
@@ -188,8 +215,9 @@ def untangle_global(
         info["seconds"] = time.perf_counter() - t_start
         return P, info
     run = _Continuation(en, st, later, free, slide, opt, progress, run_lbfgs, n_inv,
-                        info["min_det"])
+                        info["min_det"], resume)
     run.solve(t_start)
+    run.keep_resume()
     x, y = run.st.unpack(run.best_v)
     out = P.copy()
     out[run.st.written, 0] = x[run.st.written]
@@ -219,7 +247,7 @@ class _Continuation:
                  slide: SlideView | None, opt: GlobalOptions,
                  progress: Callable[[int, int, int, Callable[[], np.ndarray]], Any] | None,
                  run_lbfgs: Solver,
-                 n_inv: int, dmin: float):
+                 n_inv: int, dmin: float, resume: Resume | None = None):
         self.en, self.st, self.later, self.free, self.slide = en, st, later, free, slide
         self.opt, self.progress, self.run_lbfgs = opt, progress, run_lbfgs
         self.v = st.pack(st.x, st.y)
@@ -239,6 +267,54 @@ class _Continuation:
         self.rounds = 0
         self.cancel = False
         self.gave_up = False  # `_stalled` ended the run
+        self.resume = resume
+        if resume is not None:
+            self._resumed(resume, dmin)
+
+    def _resumed(self, r: Resume, dmin: float) -> None:
+        """Go on from the last call's continuation (`Resume`): its eps and open round while
+        the mesh is tangled, its progress marks (`_stalled`)."""
+        r.calls += 1
+        if dmin > 0.0 or r.eps is None:
+            r.eps, r.used = None, 0
+            return
+        self.eps = r.eps
+        if r.top_det is not None and r.top_inv is not None:
+            self.top_det, self.top_inv, self.stall = r.top_det, r.top_inv, r.stall
+
+    def keep_resume(self) -> None:
+        """Where the continuation stands, into `resume` for the next call."""
+        r = self.resume
+        if r is None:
+            return
+        if self.valid:
+            r.eps, r.used = None, 0
+        else:
+            r.eps = self.eps
+        r.top_det, r.top_inv, r.stall = self.top_det, self.top_inv, self.stall
+
+    def _open_round(self, guard: bool, e_start: float) -> float:
+        """F_eps at the round's start: the open round's (`Resume`) when it goes on."""
+        r = self.resume
+        if r is None or guard or not r.used:
+            return e_start
+        return r.e_start
+
+    def _cut(self, guard: bool, its: int, cap: int, e_start: float) -> bool:
+        """A resumable call whose budget ended inside an untangling round: the round stays
+        open for the next call (eps unchanged); True ends this call."""
+        r = self.resume
+        if r is None or guard or self.valid:
+            if r is not None:
+                r.used = 0
+            return False
+        left = self.inner - r.used
+        if its >= cap and cap < left:
+            r.used += its
+            r.e_start = e_start
+            return True
+        r.used = 0
+        return False
 
     def solve(self, t_start: float) -> None:
         """Rounds until the budget, a stop rule or a cancel ends them."""
@@ -248,7 +324,7 @@ class _Continuation:
             self.eps_hist.append(self.eps)
             guard = self.valid  # valid: polish the quality, never invert a corner again
             en.power = float(opt.polish_power) if guard else 1.0
-            e_start = en.value(*self.st.unpack(self.v), self.eps)
+            e_start = self._open_round(guard, en.value(*self.st.unpack(self.v), self.eps))
             cap = self._cap(guard)
             if cap <= 0:
                 break
@@ -257,6 +333,8 @@ class _Continuation:
             if self.cancel or (self.progress is not None and stops(self.progress(
                     self.total, self.budget, n_inv, partial(self._points, self.v)))):
                 self.status = "cancelled"
+                break
+            if self._cut(guard, its, cap, e_start):
                 break
             decrease = (e_start - e_end) / abs(e_start) if e_start != 0.0 else 0.0
             if self._done(guard, decrease, its, t_start):
@@ -279,7 +357,7 @@ class _Continuation:
         instead of starting over (docs/global_untangle.md, "Budget")."""
         self.dmins.append(dmin)
         spent = self.total >= self.budget
-        if (not spent or self.valid or len(self.dmins) < 3
+        if (not spent or self.valid or len(self.dmins) < 3 or self.resume is not None
                 or -dmin > EXTEND_SHRINK * -self.dmins[-3]):
             return
         more = min(self.inner, int(EXTEND_SHARE * self.opt.max_iter) - self.granted)
@@ -308,6 +386,8 @@ class _Continuation:
         left = self.budget - self.total
         if guard:
             return min(left + self._extra(), self._polish_budget() - self.polish_used)
+        if self.resume is not None:
+            return min(left, self.inner - self.resume.used)
         return min(left, self.inner)
 
     def _extra(self) -> int:

@@ -35,22 +35,29 @@ from ..eegt.distance import NearestBoundary
 from ..eegt.engine_numpy import NumpyEngine, edge_lengths
 from ..mesh.faces import FaceSet, as_faceset
 from ..mesh.topology import checked_edges, free_nodes
-from ..metrics.face_quality import Stats
-from ..metrics.targets import prepare_targets
+from ..metrics.face_quality import Stats, stats_of
+from ..metrics.kept import Kept, kept_corners
+from ..metrics.targets import Targets, prepare_targets
 from ..params import EEGTParams
 from ..uv.uv_layout import UVLayout, island_faces
 from .acceptance import accept
 from .algorithm1 import Deadline, smooth_loop, untangle_loop
+from .live_repair import RegionRepair, RepairStep, carried
 from .live_reuse import AnchorSearch, GivenQuality, StillDistances
 from .pipeline import as_given, frozen_faces, normalisation
 
-__all__ = ["CURSOR_REACH", "FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession",
+__all__ = ["CURSOR_REACH", "FINISH_BUDGET", "FINISH_GO_ON", "FINISH_KEEP", "FINISH_LIMIT",
+           "FINISH_RESTORE", "FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession",
            "UVRegion", "clamp_cursor", "cursor_bounds", "live_params", "storable_float32",
            "uv_region", "uv_vertex_corners"]
 
 FRAME_ITERATIONS = 50  # at most this many untangling and this many smoothing steps a frame
 FRAME_BUDGET = 0.04  # seconds a frame aims at, its writes into Blender included (at least
 # one iteration runs: a mesh whose single iteration takes longer passes it)
+FINISH_KEEP, FINISH_GO_ON, FINISH_RESTORE = "keep", "go on", "restore"  # `finishing`
+FINISH_BUDGET = 0.1  # seconds of a frame while a release finishes the repair (the editor
+# stays responsive to Esc between frames)
+FINISH_LIMIT = 30.0  # seconds a release finishes the repair at most (then as FINISH_RESTORE)
 CURSOR_REACH = 1000.0  # a drag's cursor is kept within the dragged mesh's bounding box grown
 # on every side by this many times the box's longer side: farther than any pull on screen,
 # near enough that every place is finite in float32 and the frame's scaling stays sane
@@ -106,6 +113,8 @@ class LiveFrame:
     untangle_iterations: int
     smooth_iterations: int
     seconds: float
+    n_tangled: int = 0  # inverted faces a move can change (the rest are frozen)
+    repair: RepairStep | None = None  # the escalation's region solves, if they ran
 
 
 class LiveSession:
@@ -118,11 +127,12 @@ class LiveSession:
     input or when nothing but some grabbed nodes can move."""
 
     def __init__(self, points, faces, grab, fixed=None, params: EEGTParams | None = None,
-                 targets=None):
+                 targets=None, escalate: bool = True, keep_as_given: bool = True):
         p = np.array(points, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != 2 or not np.isfinite(p).all():
             raise ValueError("points must be a finite (N, 2) array")
         self.fs: FaceSet = as_faceset(faces, p.shape[0])
+        self.faces = self.fs  # the caller's faces (``fs`` is what the frames measure)
         n = p.shape[0]
         self.grab = np.asarray(grab, dtype=np.int64).ravel()
         if self.grab.size and (self.grab.min() < 0 or self.grab.max() >= n):
@@ -144,6 +154,13 @@ class LiveSession:
             raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
         self.params = params if params is not None else EEGTParams()
         self._engine_params = live_params(self.params, 1)  # steps read no iteration cap
+        self.kept = None if self.rigid or not keep_as_given else \
+            self._kept_at(p, grabbed, targets)
+        if self.kept is not None:  # the frames measure the faces without the kept vertices
+            self.fs = self.kept.measured
+            if targets is not None:
+                targets = np.asarray(targets, dtype=np.float64)[~self.kept.corner]
+            used = self.fs.used_nodes(n)
         self.targets = prepare_targets(targets, self.fs)
         self.points = p.copy()
         still = ~self.free & used
@@ -153,10 +170,34 @@ class LiveSession:
         self._frame_of: tuple[float, float, float] | None = None  # the still search's frame
         self._still: StillDistances | None = None
         self._given = GivenQuality(self.fs, self.targets)
+        self._search: AnchorSearch | None = None  # the frame's distance search
         self.step_seconds = 0.0  # the last frame's time per iteration
         self._tail = 0.0  # the last frame's seconds after its iterations
+        self.repair: RegionRepair | None = None  # the escalation (None: EEGT only)
+        self.start_inverted = 0  # inverted faces at the drag's start
+        self._valid: np.ndarray | None = None  # the last positions with no movable face
+        #                                        inverted (a carried start's base) ...
+        self._start: np.ndarray | None = None  # ... and the drag's start, when valid
         if not self.rigid:
+            if escalate:
+                self.repair = RegionRepair(self.fs, self.free, self.targets)
             self._prepare()
+
+    def _kept_at(self, p: np.ndarray, grabbed: np.ndarray, targets) -> Kept | None:
+        """The corners kept as given (``core.metrics.kept``) at the start, as the one-shot
+        run decides them: straight or concave corners of fixed vertices only in simple faces.
+        A corner with a grabbed node is never kept (the cursor moves it); prepared
+        ``Targets`` keep every corner (the one-shot run's rule)."""
+        if isinstance(targets, Targets):
+            return None
+        center, scale = normalisation(p, self.fs)
+        return kept_corners(as_given(p, self.fs, center, scale), self.fs, self.free | grabbed)
+
+    @property
+    def held(self) -> int:
+        """Faces the escalation gave up on (the largest region solved without progress: a
+        fold no move it finds opens, e.g. a grabbed node outside the fixed border)."""
+        return 0 if self.repair is None else int(self.repair.held.sum())
 
     def _engine_at(self, work: np.ndarray, key: tuple[float, float, float]) -> NumpyEngine:
         """The engine restarted at ``work`` (normalised) with the fixed nodes' search: the
@@ -176,24 +217,56 @@ class LiveSession:
                     min_cell=0.5 * min_edge))
                 self._still.query(cx, cy)  # the centroids at the start, measured once
             self._frame_of = key
-        search = AnchorSearch(self._still, work[self.grab, 0].copy(), work[self.grab, 1].copy())
-        self._engine = self._engine.restarted(work, search, keep_quality=True)
+        self._search = AnchorSearch(self._still, work[self.grab, 0].copy(),
+                                    work[self.grab, 1].copy())
+        self._engine = self._engine.restarted(work, self._search, keep_quality=True)
         return self._engine
+
+    def _stats(self, given: np.ndarray) -> Stats:
+        """Stats of the positions as the caller has them (``pipeline.as_given``), the kept
+        corners left out as the one-shot run measures them."""
+        s = self._given.stats(given)
+        if self.kept is None:
+            return s
+        return stats_of([self.kept.check(given, self._given.q)])
+
+    def finishing(self, frame: LiveFrame | None) -> str:
+        """What a release (or Enter) after ``frame`` does (``FINISH_*``): keep the result
+        (no face a move can change is inverted), go on with frames (the escalation still has
+        a fold to open) or give up (only folds it held are left: kept when no more faces
+        are inverted than at the drag's start, else every value goes back)."""
+        if frame is None or frame.status != "tangled":
+            return FINISH_KEEP
+        if self.repair is not None and frame.n_tangled > self.held:
+            return FINISH_GO_ON
+        return FINISH_KEEP if frame.stats.n_inverted <= self.start_inverted else FINISH_RESTORE
 
     def _prepare(self) -> None:
         """The drag's set-up at the start positions: the engine's state and the still nodes'
         search with their distances, so that the first frame costs what later ones do."""
         center, scale = normalisation(self.points, self.fs)
+        given = as_given(self.points, self.fs, center, scale)
+        self.start_inverted = self._stats(given).n_inverted
+        if self.start_inverted <= int(frozen_faces(given, self.fs, self.free).sum()):
+            self._valid = self._start = self.points
         self._engine_at((self.points - center) / scale,
                         (float(center[0]), float(center[1]), float(scale)))
 
     def frame(self, grab_to=None, iterations: int = FRAME_ITERATIONS,
               budget: float | None = FRAME_BUDGET) -> LiveFrame:
-        """Move the grabbed nodes to ``grab_to`` ((k, 2) in ``grab`` order; None: where they
-        are), run at most ``iterations`` untangling then smoothing iterations from the last
-        frame's positions, stopping once ``budget`` seconds would be passed (after one
-        iteration at least; None: no time limit; the work after the iterations counts, as
-        long as the last frame's took), and keep the result as the next frame's start."""
+        """Move the grabbed nodes to ``grab_to`` ((k, 2) in ``grab`` order; None: where the
+        last frame was asked to put them), run at most ``iterations`` untangling then
+        smoothing iterations from the last frame's positions, stopping once ``budget``
+        seconds would be passed (after one iteration at least; None: no time limit; the
+        work after the iterations counts, as long as the last frame's took), and keep the
+        result as the next frame's start.
+
+        Escalation (``core.run.live_repair``): when the EEGT untangling (half the frame's
+        time) leaves a face inverted that a move can change, the rest of the frame goes to
+        the foldover-free stage on the region around the inverted faces
+        (``RegionRepair.solve``), and while the frames start tangled the following frames go
+        straight to it, each resuming the last one's solve; once a frame ends with no such
+        face, EEGT smooths on and the escalation ends."""
         t0 = time.perf_counter()
         p = self.points.copy()
         if grab_to is not None:
@@ -215,48 +288,102 @@ class LiveSession:
         engine.save_best()
         current = best
         n_untangle = n_smooth = 0
-        timed = clock.timed(engine.step)
+        timed = clock.timed(lambda phase: self._engine.step(phase))
 
         def advance(phase: str) -> Stats:
             nonlocal best
             s = timed(phase)
             if s.better_than(best):
                 best = s
-                engine.save_best()
+                self._engine.save_best()
             return s
 
         def tangled(s: Stats) -> bool:
             return s.n_inverted > n_frozen
 
-        failed = False
-        if tangled(current):
+        repair = self.repair
+        failed, fixed_by = False, None
+        if tangled(current) and (repair is None or not repair.active):
+            late = clock.late
+            if repair is not None and clock.at is not None:  # half the frame, the rest
+                mid = t0 + 0.5 * (clock.at - t0)             # for the region if needed
+
+                def late(_s: Stats | None = None) -> bool:
+                    return time.perf_counter() + clock.step > mid
             last, n_untangle = untangle_loop(partial(advance, "untangle"), tangled,
-                                             prm.max_untangle_iterations, clock.late)
+                                             prm.max_untangle_iterations, late)
             current = current if last is None else last
             failed = tangled(best)
-        if not failed and (n_untangle == 0 or not clock.late()):
+        elif tangled(current):
+            failed = True
+        if failed and repair is not None:
+            # the foldover-free stage on the region: from the last valid frame with the
+            # grabbed nodes' move carried around them when the cursor moved (or the
+            # escalation starts), else from the last frame, resuming its solve
+            start = work
+            if grab_to is not None or not repair.active:
+                start = self._carried_start(work, center, scale)
+                repair.restart()
+            fixed_by = repair.solve(start, frozen[repair.elem_face], clock.at)
+            failed = fixed_by.n_bad > 0 or repair.held.any()
+            if not failed:  # valid: EEGT smooths on from there
+                self._engine = self._engine.restarted(fixed_by.points, self._search,
+                                                      keep_quality=True)
+                current = best = self._engine.stats()
+                self._engine.save_best()
+        if not failed and not clock.late():
             current, n_smooth = smooth_loop(partial(advance, "smooth"), current, prm,
                                             clock.late)
+        engine = self._engine
         t_tail = time.perf_counter()
-        before = self._given.stats(given)
+        before = self._stats(given)
         out, after = p.copy(), before
         # still tangled: the last iterate, so that the next frame goes on from there (the
         # best one may be the frame's start, and the untangling would never get further)
-        reached = engine.points() if failed else engine.best_points()
+        if failed and fixed_by is not None:  # (its solve resumes from here)
+            reached = fixed_by.points
+        else:
+            reached = engine.points() if failed else engine.best_points()
         changed = np.any(reached != work, axis=1) & free
         out[changed] = reached[changed] * scale + center
         if changed.any():
-            after = self._given.stats(as_given(out, fs, center, scale))
+            after = self._stats(as_given(out, fs, center, scale))
             if not failed and not accept(before, after):
                 out, after = p.copy(), before
         self.points = out
         if n_untangle + n_smooth:
             self.step_seconds = clock.step
+        if repair is not None and not failed and after.n_inverted <= n_frozen:
+            repair.reset()
+        if not failed and after.n_inverted <= n_frozen:
+            self._valid = out
         status = "tangled" if after.n_inverted else (
             "untangled" if before.n_inverted else "valid")
         t1 = time.perf_counter()
         self._tail = t1 - t_tail
-        return LiveFrame(out, after, status, n_untangle, n_smooth, t1 - t0)
+        return LiveFrame(out, after, status, n_untangle, n_smooth, t1 - t0,
+                         max(after.n_inverted - n_frozen, 0), fixed_by)
+
+    def _carried_start(self, work: np.ndarray, center: np.ndarray, scale: float
+                       ) -> np.ndarray:
+        """The region solve's start after a move of the grabbed nodes (normalised): the
+        drag's start or the last frame that ended with no movable face inverted, its free
+        nodes carried along with the grabbed ones (``live_repair.carried``), whichever has
+        fewer inverted faces; ``work`` when there is none."""
+        best, fewest = work, None
+        for base in (self._start, self._valid):  # the drag's start first: its cells are
+            if base is None:                      # as given (the last valid frame's may
+                continue                          # be barely valid, flipped by any move)
+            out = carried((base - center) / scale, self.grab, work[self.grab], self.free)
+            if out is None:
+                continue
+            n_bad = int(self.repair.bad_elements(out, np.zeros(self.repair.elem_face.size,
+                                                                 dtype=bool)).sum())
+            if fewest is None or n_bad < fewest:
+                best, fewest = out, n_bad
+            if n_bad == 0:
+                break
+        return best
 
     def _translated(self, p: np.ndarray, t0: float) -> LiveFrame:
         """A rigid session's frame: the grabbed nodes where ``p`` has them, measured; no

@@ -12,6 +12,7 @@ result (one undo step); Esc or the right button puts every value back.
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import bpy
@@ -19,6 +20,13 @@ import numpy as np
 from bpy_extras import view3d_utils
 from mathutils import Vector, geometry
 
+from ...core.run.live import (
+    FINISH_BUDGET,
+    FINISH_GO_ON,
+    FINISH_KEEP,
+    FINISH_LIMIT,
+    FINISH_RESTORE,
+)
 from ..ui import props
 from ..uv import uv_props
 from .drag import MeshDrag, UVDrag
@@ -35,13 +43,18 @@ def _window_region(area: bpy.types.Area) -> bpy.types.Region | None:
     return next((r for r in area.regions if r.type == "WINDOW"), None)
 
 
-def status_text(frame: Any) -> str:
-    """The header line of a running drag."""
+def status_text(frame: Any, finishing: float | None = None) -> str:
+    """The header line of a running drag (``finishing``: seconds since a release began to
+    finish the repair)."""
     if frame is None:
         return "Live Untangle: press the left mouse button on a vertex and drag (Esc: cancel)"
     s = frame.stats
-    return (f"Live Untangle: inverted {s.n_inverted}, worst {s.q_min:.3f}, mean {s.q_avg:.3f}"
-            "  |  release / Enter: apply, Esc / right button: cancel")
+    what = ""
+    if finishing is not None:
+        return (f"Live Untangle: finishing, {s.n_inverted} faces still inverted{what}, "
+                f"{finishing:.1f} s  |  Esc: cancel the drag")
+    return (f"Live Untangle: inverted {s.n_inverted}{what}, worst {s.q_min:.3f}, mean "
+            f"{s.q_avg:.3f}  |  release / Enter: apply, Esc / right button: cancel")
 
 
 class _LiveModal:
@@ -68,6 +81,7 @@ class _LiveModal:
             return {"CANCELLED"}
         self._area, self._drag, self._at, self._pending, self._settle = area, None, None, \
             False, 0
+        self._finish_from: float | None = None  # perf_counter when a release began finishing
         LAST_FRAMES.clear()
         wm = context.window_manager
         self._timer = wm.event_timer_add(TICK, window=context.window)
@@ -93,12 +107,37 @@ class _LiveModal:
         return result
 
     def _frame(self) -> None:
-        frame = self._drag.step(self._at if self._pending else None)
+        if self._finish_from is not None:
+            frame = self._drag.step(None, budget=FINISH_BUDGET)
+        else:
+            frame = self._drag.step(self._at if self._pending else None)
         LAST_FRAMES.append((frame, self._drag.times))
         self._settle = 0 if self._pending else self._settle + 1
         self._pending = False
-        self._area.header_text_set(status_text(frame))
+        since = None if self._finish_from is None else time.perf_counter() - self._finish_from
+        self._area.header_text_set(status_text(frame, since))
         self._area.tag_redraw()
+
+    def _release(self, context: bpy.types.Context) -> set[str]:
+        """Release or Enter (and each frame after one that goes on finishing): keep the
+        result when nothing is left to open (one undo step), go on with frames while the
+        escalation opens a fold, put every value back when it cannot (warned)."""
+        if self._finish_from is not None and \
+                time.perf_counter() - self._finish_from > FINISH_LIMIT:
+            what = FINISH_RESTORE
+        else:
+            what = self._drag.session.finishing(self._drag.frame)
+        if what == FINISH_KEEP:
+            return self._end(context, {"FINISHED"})
+        if what == FINISH_GO_ON:
+            if self._finish_from is None:
+                self._finish_from = time.perf_counter()
+                self._area.header_text_set(status_text(self._drag.frame, 0.0))
+            return {"RUNNING_MODAL"}
+        self._drag.restore()
+        self.report({"WARNING"}, "Live Untangle could not open the fold: every value put "
+                    "back (nothing kept)")
+        return self._end(context, {"CANCELLED"})
 
     def _frame_or_restore(self) -> bool:
         """Run a frame; False when the mesh cannot take it (every value put back, warned)."""
@@ -125,13 +164,19 @@ class _LiveModal:
             if self._drag is not None:
                 self._drag.restore()
             return self._end(context, {"CANCELLED"})
+        if self._finish_from is not None:  # finishing the repair: frames until it is done
+            if kind == "TIMER":
+                if not self._frame_or_restore():
+                    return self._end(context, {"CANCELLED"})
+                return self._release(context)
+            return {"RUNNING_MODAL"}
         if (kind in {"RET", "NUMPAD_ENTER"} and value == "PRESS") or \
                 (kind == "LEFTMOUSE" and value == "RELEASE" and self._drag is not None):
             if self._drag is None:
                 return self._end(context, {"CANCELLED"})
             if self._pending and not self._frame_or_restore():
                 return self._end(context, {"CANCELLED"})
-            return self._end(context, {"FINISHED"})
+            return self._release(context)
         if kind == "LEFTMOUSE" and value == "PRESS" and self._drag is None:
             return self._press(context, event)
         if kind in {"MOUSEMOVE", "INBETWEEN_MOUSEMOVE"} and self._drag is not None:
