@@ -8,6 +8,9 @@ from .uv_untangle import (
     UVMeasures,
     UVResult,
     flipped_faces,
+    keeps_corners,
+    kept_as_given,
+    kept_face_mask,
     measure,
     overlaps_around,
     tangled_faces,
@@ -15,5 +18,5 @@ from .uv_untangle import (
 )
 
 __all__ = ["UVLayout", "UVMeasures", "UVResult", "components", "corner_loops", "flipped_faces",
-           "island_faces", "measure", "overlapping_faces", "overlaps_around", "tangled_faces",
-           "untangle_uv", "weld_uv"]
+           "island_faces", "keeps_corners", "kept_as_given", "kept_face_mask", "measure",
+           "overlapping_faces", "overlaps_around", "tangled_faces", "untangle_uv", "weld_uv"]

@@ -4,7 +4,10 @@ Flipped faces (inverted in their island's orientation) are the visible half of a
 other half is made of valid-looking faces lying over their neighbours, which no orientation
 test sees. This module finds them directly: faces are split into triangles, a uniform grid
 proposes pairs whose bounding boxes meet, and the separating-axis test keeps the pairs whose
-interiors overlap (touching along a shared edge or corner is no overlap). Faces of different
+interiors overlap (touching along a shared edge or corner is no overlap). Faces the caller
+knows to be valid simple polygons that need not be convex (``exact``: the faces with a
+corner kept as given, ``core.metrics.kept``, such as an L-shaped hexagon) are cut into
+triangles inside them (ear clipping), not fanned across their notch. Faces of different
 islands are never compared: where islands lie relative to each other is the layout's
 business, not a tangle. NumPy only, vectorized over triangles and pairs.
 """
@@ -21,11 +24,16 @@ _CHUNK = 1 << 20  # pairs per narrow-phase batch (memory bound)
 _MAX_CELLS = 64  # a box over more grid cells than this is tested against every box
 
 
-def face_triangles(points: np.ndarray, fs: FaceSet) -> tuple[np.ndarray, np.ndarray]:
+def face_triangles(points: np.ndarray, fs: FaceSet,
+                   exact: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """((T, 3) nodes, (T,) face) triangles covering every face: a quad is cut along the
     diagonal whose two triangles turn the same way (its interior one), other n-gons are
-    fanned from their first corner (exact for the convex faces of a valid layout)."""
+    fanned from their first corner (exact for the convex faces of a valid layout), but the
+    n-gons of ``exact`` ((F,) bool: simple counterclockwise polygons, convex or not), which
+    are cut by ear clipping (exact for them)."""
     tris, owner = [], []
+    ears = np.zeros(fs.n_faces, dtype=bool) if exact is None else \
+        np.asarray(exact, dtype=bool)
     for g in fs.groups:
         nd = g.nodes  # (n, F)
         if g.n == 3:
@@ -41,10 +49,47 @@ def face_triangles(points: np.ndarray, fs: FaceSet) -> tuple[np.ndarray, np.ndar
             tris += [first.T, second.T]
             owner += [g.ids, g.ids]
             continue
+        clip = ears[g.ids]
+        fan, ids = nd[:, ~clip], g.ids[~clip]
         for k in range(1, g.n - 1):
-            tris.append(np.stack([nd[0], nd[k], nd[k + 1]], axis=1))
-            owner.append(g.ids)
+            tris.append(np.stack([fan[0], fan[k], fan[k + 1]], axis=1))
+            owner.append(ids)
+        for col in np.flatnonzero(clip):
+            cut = _ear_clipped(points, nd[:, col])
+            tris.append(cut)
+            owner.append(np.full(cut.shape[0], g.ids[col]))
     return np.concatenate(tris).astype(np.int64), np.concatenate(owner).astype(np.int64)
+
+
+def _ear_clipped(points: np.ndarray, ring: np.ndarray) -> np.ndarray:
+    """(n - 2, 3) triangles of a simple counterclockwise polygon (its nodes ``ring``) that
+    cover it exactly: ears (a convex corner whose triangle holds no other vertex of the
+    polygon, its border included) cut off one at a time; the rest fanned if none is left
+    (a polygon that is not simple after all). Straight corners are never ears (their
+    triangle has no area)."""
+    idx = [int(v) for v in ring]
+    out = []
+
+    def orient(a: int, b: int, c: int) -> float:
+        return float((points[b, 0] - points[a, 0]) * (points[c, 1] - points[a, 1])
+                     - (points[b, 1] - points[a, 1]) * (points[c, 0] - points[a, 0]))
+
+    while len(idx) > 3:
+        m = len(idx)
+        for k in range(m):
+            a, b, c = idx[k - 1], idx[k], idx[(k + 1) % m]
+            if orient(a, b, c) <= 0.0:
+                continue
+            if any(orient(a, b, v) >= 0.0 and orient(b, c, v) >= 0.0 and orient(c, a, v) >= 0.0
+                   for v in idx if v not in (a, b, c)):
+                continue
+            out.append((a, b, c))
+            del idx[k]
+            break
+        else:
+            break
+    out += [(idx[0], idx[k], idx[k + 1]) for k in range(1, len(idx) - 1)]
+    return np.array(out, dtype=np.int64).reshape(-1, 3)
 
 
 def _area2(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
@@ -168,13 +213,15 @@ def triangles_overlap(p: np.ndarray, ta: np.ndarray, tb: np.ndarray,
 
 
 def overlapping_faces(points: np.ndarray, fs: FaceSet, island: np.ndarray,
-                      faces: np.ndarray | None = None) -> np.ndarray:
+                      faces: np.ndarray | None = None,
+                      exact: np.ndarray | None = None) -> np.ndarray:
     """(F,) bool: faces (among ``faces``, a bool mask; default all) that share interior area
     with another face of the same island (also among ``faces``). Triangles of zero area
-    overlap nothing."""
+    overlap nothing. ``exact``: (F,) bool, faces that are simple polygons to cut inside
+    themselves (``face_triangles``; the faces with a corner kept as given)."""
     p = np.asarray(points, dtype=np.float64)
     out = np.zeros(fs.n_faces, dtype=bool)
-    tri, owner = face_triangles(p, fs)
+    tri, owner = face_triangles(p, fs, exact)
     if faces is not None:
         keep = np.asarray(faces, dtype=bool)[owner]
         tri, owner = tri[keep], owner[keep]

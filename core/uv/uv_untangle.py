@@ -18,6 +18,14 @@ orientation), inverted faces (flipped, or a reflex or crossed corner: what the c
 overlapping faces (share area with another face of the same island, ``uv_overlap``) and the
 distortion against the targets (the mean ratio of each face against its target shape: 1 =
 similar to its 3D face).
+
+Corners kept as given (``core.metrics.kept``, the mesh path's rule): a straight corner, or a
+concave corner of a simple counterclockwise n-gon, whose three UV vertices are all fixed
+(island border, pinned, border of the selection) is how the map was made (a knife cut, a
+partial loop cut or a bevel, then unwrapped), not a fold: the face is valid and measured
+without those vertices, in every measure here, the runs' acceptance, the report and the
+overlap check (``kept_as_given``). Decided once from the map as stored (fixed UV vertices
+never move). The paper's mode (``untangle="eegt"``, ``keeps_corners``) counts every corner.
 """
 
 from __future__ import annotations
@@ -25,7 +33,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -33,6 +41,7 @@ from .. import choices
 from ..mesh.faces import FaceSet
 from ..mesh.topology import boundary_nodes, free_nodes, pinched_faces
 from ..metrics.face_quality import Stats, quality, stats_of
+from ..metrics.kept import Kept, kept_corners, kept_note
 from ..params import EEGTParams
 from ..run import acceptance
 from ..run.pipeline import untangle_and_smooth
@@ -41,9 +50,14 @@ from .uv_overlap import overlapping_faces
 
 __all__ = [
     "IslandRun",
+    "KeptFaces",
     "UVMeasures",
     "UVResult",
+    "fixed_uv_vertices",
     "flipped_faces",
+    "keeps_corners",
+    "kept_as_given",
+    "kept_face_mask",
     "measure",
     "overlaps_around",
     "tangled_faces",
@@ -64,58 +78,146 @@ class UVMeasures:
     distortion_mean: float  # mean ratio against the targets (flipped count as 0)
     distortion_worst: float  # the lowest one
     zero_area: int = 0  # faces of islands with no area (side unknown: not measured)
+    kept: int = 0  # valid faces with a corner kept as given (core.metrics.kept)
 
     def as_dict(self) -> dict[str, Any]:
         return {"n_faces": self.n_faces, "flipped": self.flipped, "inverted": self.inverted,
                 "overlapping": self.overlapping,
                 "distortion_mean": self.distortion_mean,
-                "distortion_worst": self.distortion_worst, "zero_area": self.zero_area}
+                "distortion_worst": self.distortion_worst, "zero_area": self.zero_area,
+                "kept": self.kept}
+
+
+def keeps_corners(params: EEGTParams | None) -> bool:
+    """Whether a run with ``params`` keeps corners as given (``core.metrics.kept``): every
+    mode but the paper's (untangle "eegt"), as ``core.run.untangle_and_smooth`` decides."""
+    return (params if params is not None else EEGTParams()).untangle != "eegt"
+
+
+def fixed_uv_vertices(layout: UVLayout, faces: np.ndarray,
+                      fixed: np.ndarray | None = None) -> np.ndarray:
+    """(V,) bool: the UV vertices a run on the faces ``faces`` (bool (F,)) holds besides the
+    borders of its faces: the pins ``fixed`` and every UV vertex of a face outside
+    ``faces`` (the border of the selection)."""
+    keep = np.zeros(layout.n_nodes, dtype=bool) if fixed is None else \
+        np.array(fixed, dtype=bool)
+    keep[layout.faces.indices[np.repeat(~np.asarray(faces, dtype=bool),
+                                        layout.faces.counts)]] = True
+    return keep
+
+
+def _kept(points: np.ndarray, sub: FaceSet, held: np.ndarray) -> Kept | None:
+    """The corners kept as given of the faces ``sub`` at their (oriented) UV vertices
+    ``points``: fixed are ``held`` and the nodes of the faces' own border."""
+    n = points.shape[0]
+    free = sub.used_nodes(n) & ~boundary_nodes(n, sub) & ~held
+    return kept_corners(points, sub, free)
+
+
+class KeptFaces(NamedTuple):
+    """Faces of a UV map as one FaceSet (``island_faces``: face ids, UV vertices, corner
+    rows; None when there are no faces) and their corners kept as given (None: none, or
+    the paper's mode)."""
+
+    ids: np.ndarray
+    sub: FaceSet | None
+    nodes: np.ndarray
+    rows: np.ndarray
+    kept: Kept | None
+
+
+def kept_as_given(layout: UVLayout, faces: np.ndarray | None = None,
+                  fixed: np.ndarray | None = None, side: np.ndarray | None = None,
+                  keep: bool = True, among: np.ndarray | None = None) -> KeptFaces:
+    """The faces of the mask ``among`` (default ``faces``) in islands with area, and their
+    corners kept as given (``core.metrics.kept.kept_corners``) for a run on the faces
+    ``faces`` (default every face) with the pins ``fixed``: fixed are the island borders,
+    the border of ``faces`` and the pins. Judged at the map's own points (oriented): the
+    fixed UV vertices are the ones no run moves. ``keep`` False (the paper's mode): none."""
+    side = layout.orientation() if side is None else side
+    n_faces = layout.faces.n_faces
+    faces = np.ones(n_faces, dtype=bool) if faces is None else np.asarray(faces, dtype=bool)
+    among = faces if among is None else np.asarray(among, dtype=bool)
+    ids = np.flatnonzero(among & (side[layout.island] != 0))
+    if ids.size == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return KeptFaces(ids, None, empty, empty, None)
+    sub, nodes, rows = island_faces(layout.faces, ids)
+    kept = None
+    if keep:
+        held = fixed_uv_vertices(layout, faces, fixed)[nodes]
+        kept = _kept(layout.oriented_points(side)[nodes], sub, held)
+    return KeptFaces(ids, sub, nodes, rows, kept)
+
+
+def kept_face_mask(layout: UVLayout, found: KeptFaces) -> np.ndarray:
+    """(F,) bool: the faces of ``found`` with a corner kept as given."""
+    out = np.zeros(layout.faces.n_faces, dtype=bool)
+    if found.kept is not None:
+        out[found.ids[found.kept.ids]] = True
+    return out
 
 
 def overlaps_around(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
-                    side: np.ndarray | None = None) -> np.ndarray:
+                    side: np.ndarray | None = None, fixed: np.ndarray | None = None,
+                    keep: bool = True) -> np.ndarray:
     """(F,) bool: faces of the islands that ``faces`` touch that overlap another face of
-    their island (selected or not), at UV vertex ``points`` (as stored)."""
+    their island (selected or not), at UV vertex ``points`` (as stored). Faces with a corner
+    kept as given (``kept_as_given`` for a run on ``faces`` with the pins ``fixed``) are
+    covered by their own polygon (a concave n-gon is not fanned across its notch)."""
     side = layout.orientation() if side is None else side
-    around = np.isin(layout.island, np.unique(layout.island[np.asarray(faces, dtype=bool)]))
+    faces = np.asarray(faces, dtype=bool)
+    around = np.isin(layout.island, np.unique(layout.island[faces]))
+    exact = kept_face_mask(layout, kept_as_given(layout, faces, fixed, side, keep, around))
     return overlapping_faces(layout.oriented_points(side, points), layout.faces, layout.island,
-                             faces=around)
+                             faces=around, exact=exact)
 
 
 def measure(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
             targets: np.ndarray | None = None, side: np.ndarray | None = None,
-            overlap: np.ndarray | None = None) -> UVMeasures:
+            overlap: np.ndarray | None = None, fixed: np.ndarray | None = None,
+            keep: bool = True) -> UVMeasures:
     """Measures of the faces in the bool mask ``faces`` at UV vertex ``points`` (as stored,
     unmirrored). ``targets``: (C, 2) rows in ``layout.faces`` corner order, or None;
-    ``overlap``: ``overlaps_around`` of the same points when already known."""
+    ``overlap``: ``overlaps_around`` of the same points when already known. Corners kept as
+    given (``kept_as_given`` for a run on ``faces`` with the pins ``fixed``; ``keep`` False:
+    the paper's mode, none) are left out of the distortion and do not make a face inverted."""
     side = layout.orientation() if side is None else side
     faces = np.asarray(faces, dtype=bool)
     zero = faces & (side[layout.island] == 0)
-    chosen = faces & ~zero
-    ids = np.flatnonzero(chosen)
+    found = kept_as_given(layout, faces, fixed, side, keep)
+    ids, sub, nodes, rows, kept = found
     if ids.size == 0:
         return UVMeasures(0, 0, 0, 0, 0.0, 0.0, int(zero.sum()))
     p = layout.oriented_points(side, points)
-    sub, nodes, rows = island_faces(layout.faces, ids)
-    q = quality(p[nodes], sub, targets=None if targets is None else targets[rows])
+    q = quality(p[nodes], sub, targets=None if targets is None else targets[rows], kept=kept)
     s = stats_of([q])
-    over = overlaps_around(layout, points, faces, side) if overlap is None else overlap
+    over = overlaps_around(layout, points, faces, side, fixed, keep) if overlap is None \
+        else overlap
     flipped = int(np.count_nonzero(signed_face_areas(p[nodes], sub) <= 0.0))
+    chosen = np.zeros(layout.faces.n_faces, dtype=bool)
+    chosen[ids] = True
     return UVMeasures(int(ids.size), flipped, int(s.n_inverted),
                       int(np.count_nonzero(over & chosen)), float(s.q_avg), float(s.q_min),
-                      int(zero.sum()))
+                      int(zero.sum()), 0 if kept is None else kept.n_faces)
 
 
 def flipped_faces(layout: UVLayout, points: np.ndarray, side: np.ndarray | None = None,
-                  corners: bool = False) -> np.ndarray:
+                  corners: bool = False, fixed: np.ndarray | None = None,
+                  faces: np.ndarray | None = None, keep: bool = True) -> np.ndarray:
     """(F,) bool: faces whose signed area is zero or against their island's orientation;
     with ``corners`` also those with a reflex or crossed corner (the inverted faces the core
-    removes). Islands without area have none."""
+    removes), but for the corners kept as given (``kept_as_given`` for a run on ``faces``,
+    default every face, with the pins ``fixed``; ``keep`` False: the paper's mode, none).
+    Islands without area have none."""
     side = layout.orientation() if side is None else side
     p = layout.oriented_points(side, points)
     bad = signed_face_areas(p, layout.faces) <= 0.0
     if corners:
-        bad |= quality(p, layout.faces) <= 0.0
+        ids, sub, nodes, _, kept = kept_as_given(layout, faces, fixed, side, keep,
+                                                 np.ones(layout.faces.n_faces, dtype=bool))
+        if sub is not None:
+            bad[ids] |= quality(p[nodes], sub, kept=kept) <= 0.0
     return bad & (side[layout.island] != 0)
 
 
@@ -137,6 +239,7 @@ class IslandRun:
     global_iterations: int = 0
     n_frozen: int = 0
     n_target_fallback: int = 0
+    n_kept: int = 0  # selected faces with a corner kept as given (core.metrics.kept)
     seconds: float = 0.0
     inverted_left: int = 0  # selected faces still inverted at the end
     stuck: int = 0  # ... of them with every corner fixed (pinned, border): no move helps
@@ -154,6 +257,12 @@ class UVResult:
     backend: str = ""
     notes: list[str] = field(default_factory=list)
     message: str = ""  # why it failed: the faces that stay inverted and why
+    kept: Kept | None = None  # the selection's corners kept as given (``kept_as_given``)
+
+    @property
+    def n_kept(self) -> int:
+        """Selected faces with a corner kept as given: valid, measured without it."""
+        return 0 if self.kept is None else self.kept.n_faces
 
     @property
     def n_free(self) -> int:
@@ -175,15 +284,19 @@ SCOPES = choices.ids(choices.UV_SCOPE)
 
 
 def tangled_faces(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
-                  side: np.ndarray | None = None,
-                  overlap: np.ndarray | None = None) -> np.ndarray:
+                  side: np.ndarray | None = None, overlap: np.ndarray | None = None,
+                  fixed: np.ndarray | None = None, keep: bool = True) -> np.ndarray:
     """(F,) bool: the faces (among the mask ``faces``) that are inverted in their island's
-    orientation or overlap another face of their island (``overlap``: ``overlaps_around``
-    when known): where untangling has to work."""
+    orientation (corners kept as given are not, as in ``flipped_faces``) or overlap another
+    face of their island (``overlap``: ``overlaps_around`` when known): where untangling has
+    to work."""
     side = layout.orientation() if side is None else side
-    bad = flipped_faces(layout, points, side, corners=True)
-    bad |= overlaps_around(layout, points, faces, side) if overlap is None else overlap
-    return bad & np.asarray(faces, dtype=bool)
+    faces = np.asarray(faces, dtype=bool)
+    bad = flipped_faces(layout, points, side, corners=True, fixed=fixed, faces=faces,
+                        keep=keep)
+    bad |= overlaps_around(layout, points, faces, side, fixed, keep) if overlap is None \
+        else overlap
+    return bad & faces
 
 
 def _grown(fs_nodes: np.ndarray, face_of: np.ndarray, n_faces: int, seed: np.ndarray,
@@ -252,16 +365,20 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     ``store`` and an island changes only when its rounded stats are accepted over its input
     stats, both over its selected faces: ``core.run.accept(before, after, store)`` (float32:
     qualities within 1e-6 tie and keep the input), or ``accept(before, after)`` when given.
+    Corners kept as given (``kept_as_given``: straight or concave corners of fixed UV
+    vertices only; not in the paper's mode, ``keeps_corners``) leave their faces valid in
+    every measure, as the core's runs do (``keep_as_given``).
     ValueError (one line) when nothing can move: no face selected, only islands without area,
     or every selected UV vertex fixed.
     """
     t0 = time.perf_counter()
     selected = _checked_selection(layout, selected, scope)
     side = layout.orientation()
-    keep = np.zeros(layout.n_nodes, dtype=bool) if fixed is None else np.array(fixed, bool)
-    keep[layout.faces.indices[np.repeat(~selected, layout.faces.counts)]] = True
+    keep = fixed_uv_vertices(layout, selected, fixed)
+    keep_corners = keeps_corners(params)
     if scope == "tangles" and tangled is None:
-        tangled = tangled_faces(layout, layout.points, selected, side)
+        tangled = tangled_faces(layout, layout.points, selected, side, fixed=fixed,
+                                keep=keep_corners)
     work = layout.oriented_points(side, layout.points)
     out = layout.points.copy()
     moved = np.zeros(layout.n_nodes, dtype=bool)
@@ -278,12 +395,14 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         sub, nodes, rows = island_faces(layout.faces, ids)
         tk = None if targets is None else targets[rows]
         start = work[nodes]
-        run.before = run.after = stats_of([quality(start, sub, targets=tk)])
+        kept = _kept(start, sub, keep[nodes]) if keep_corners else None
+        run.n_kept = 0 if kept is None else kept.n_faces
+        run.before = run.after = stats_of([quality(start, sub, targets=tk, kept=kept)])
         label = f"island {k + 1}/{len(groups)}"
         bad = None if scope == "selection" else tangled[ids]
         try:
             best = _island(sub, start, keep[nodes], tk, _regions(sub, bad, rings), params,
-                           backend, progress, label, store, run, scope == "tangles")
+                           backend, progress, label, store, run, scope == "tangles", kept)
         except _Cancel:
             result = UVResult(layout.points.copy(), np.zeros_like(moved), "cancelled", runs,
                               time.perf_counter() - t0, backend_name or backend)
@@ -313,9 +432,13 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         reasons = {r.message for r in runs if r.message}
         raise ValueError("nothing to move: " + "; ".join(sorted(reasons))
                          if reasons else "nothing to move")
-    result.message = _settle(layout, out, selected, side, keep, fixed, targets, runs)
+    found = kept_as_given(layout, selected, fixed, side, keep_corners)
+    result.kept = found.kept
+    result.message = _settle(layout, out, found, side, keep, fixed, targets, runs)
     result.status = _overall(runs)
     result.notes = _notes(runs)
+    if found.kept is not None:
+        result.notes.append(kept_note(found.kept))
     return result
 
 
@@ -339,19 +462,19 @@ def _selected_by_island(layout: UVLayout, selected: np.ndarray) -> list[np.ndarr
     return np.split(sel_ids, np.flatnonzero(np.diff(layout.island[sel_ids])) + 1)
 
 
-def _settle(layout: UVLayout, points: np.ndarray, selected: np.ndarray, side: np.ndarray,
+def _settle(layout: UVLayout, points: np.ndarray, found: KeptFaces, side: np.ndarray,
             keep: np.ndarray, pins: np.ndarray | None, targets: np.ndarray | None,
             runs: list[IslandRun]) -> str:
-    """Mark ``failed`` every island whose selected faces (with area) are still inverted at
-    the final ``points``, measured as ``measure`` does; the reason, "" when none is left.
+    """Mark ``failed`` every island whose selected faces (with area: ``found``, with their
+    corners kept as given) are still inverted at the final ``points``, measured as
+    ``measure`` does; the reason, "" when none is left.
     Why a face stays: every corner of it is fixed (``keep``: pins and the selection's
     border, or an island border), so no move changes it; or a corner of it inside the island
     is used by two faces only, which cannot both be convex there (their angles at it add up
     to a full turn); else the engine could not untangle it."""
-    ids = np.flatnonzero(selected & (side[layout.island] != 0))
-    sub, nodes, rows = island_faces(layout.faces, ids)
+    ids, sub, nodes, rows, kept = found
     q = quality(layout.oriented_points(side, points)[nodes], sub,
-                targets=None if targets is None else targets[rows])
+                targets=None if targets is None else targets[rows], kept=kept)
     bad = q == 0.0  # what stats_of counts as inverted
     if not bad.any():
         return ""
@@ -384,7 +507,10 @@ def _settle(layout: UVLayout, points: np.ndarray, selected: np.ndarray, side: np
               "the engine could not untangle")]
     parts = [p for p in parts if p[0]]
     why = parts[0][1] if len(parts) == 1 else ", ".join(f"{k} {short}" for k, _, short in parts)
-    return f"{int(bad.sum())} faces stay inverted: {why}"
+    n = int(bad.sum())
+    if n == 1:
+        return f"1 face stays inverted: {why.replace(' of them', ' of it').replace(' them', ' it')}"
+    return f"{n} faces stay inverted: {why}"
 
 
 class _Cancel(Exception):
@@ -408,10 +534,10 @@ class _Island:
     def __init__(self, sub: FaceSet, start: np.ndarray, pin: np.ndarray,
                  tk: np.ndarray | None, params: EEGTParams | None, backend: str,
                  progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
-                 run: IslandRun) -> None:
+                 run: IslandRun, kept: Kept | None = None) -> None:
         self.sub, self.start, self.pin, self.tk = sub, start, pin, tk
         self.params, self.backend, self.progress, self.label = params, backend, progress, label
-        self.store, self.run = store, run
+        self.store, self.run, self.kept = store, run, kept
 
     def attempt(self, region: np.ndarray, base: np.ndarray) -> _Attempt | None:
         """One core run on the faces ``region`` from ``base``, the rest fixed; None when
@@ -434,7 +560,7 @@ class _Island:
         res = untangle_and_smooth(base[local], part_fs, fixed=part_pin, params=self.params,
                                   backend=self.backend, progress=relay if progress else None,
                                   targets=None if self.tk is None else self.tk[prow],
-                                  keep_as_given=False)  # the island's measures: every corner
+                                  keep_as_given=self.kept is not None)
         if res.status == "cancelled":
             raise _Cancel
         run.untangle_iterations += int(res.untangle_iterations)
@@ -446,7 +572,7 @@ class _Island:
         pts = base.copy()
         rounded = np.asarray(res.points).astype(self.store).astype(np.float64)
         pts[local[free]] = rounded[free]
-        after = stats_of([quality(pts, sub, targets=self.tk)])
+        after = stats_of([quality(pts, sub, targets=self.tk, kept=self.kept)])
         attempt = _Attempt(pts, after, res, free)
         attempt.part = part
         return attempt
@@ -462,15 +588,17 @@ class _Island:
 def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | None,
             regions: list[np.ndarray], params: EEGTParams | None, backend: str,
             progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
-            run: IslandRun, smooth_both: bool = False) -> _Attempt | None:
+            run: IslandRun, smooth_both: bool = False, kept: Kept | None = None
+            ) -> _Attempt | None:
     """Run the core on one island's selected faces, region after region, each from the best
     result so far, until one ends untangled; a whole island that still has inverted faces
     runs again from its best while their number decreases (up to WHOLE_ROUNDS runs). With
     ``smooth_both`` (scope "tangles") a run that only smooths (an island without inverted
     faces, or the whole island once more after its tangles were undone) is kept only when
     neither the worst nor the mean quality drops (``_both_better``). The best attempt
-    (island stats), or None when nothing changes. Fills ``run``; _Cancel when stopped."""
-    isl = _Island(sub, start, pin, tk, params, backend, progress, label, store, run)
+    (island stats, the corners ``kept`` as given left out), or None when nothing changes.
+    Fills ``run``; _Cancel when stopped."""
+    isl = _Island(sub, start, pin, tk, params, backend, progress, label, store, run, kept)
     initial = run.before
     best: _Attempt | None = None
     whole_runs = 0

@@ -17,7 +17,14 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty
 
-from ...core.uv import flipped_faces, overlapping_faces, weld_uv
+from ...core.uv import (
+    flipped_faces,
+    keeps_corners,
+    kept_as_given,
+    kept_face_mask,
+    overlapping_faces,
+    weld_uv,
+)
 from ..mesh import mesh_io
 from ..shared import modes
 from ..shared.run_mixin import EEGTRunMixin
@@ -105,9 +112,13 @@ class UVAnalysis:
     loop_node: np.ndarray  # (L,) UV vertex of each loop
 
 
-def analyze_uv(obj: bpy.types.Object, sync: bool) -> UVAnalysis:
+def analyze_uv(obj: bpy.types.Object, sync: bool, use_pins: bool = True,
+               keep: bool = True) -> UVAnalysis:
     """Analyze the active UV map of ``obj`` over the faces the UV editor shows (Object
-    Mode); ValueError with a one-line reason."""
+    Mode); ValueError with a one-line reason. Corners kept as given (``keep``; False: the
+    paper's mode) are judged as a run on the shown faces judges them: island borders, the
+    UVs of faces not shown and (``use_pins``) the pinned UVs are fixed, so a face with a
+    straight or concave corner of such UVs only is not inverted (``core.metrics.kept``)."""
     me = obj.data
     layer = uv_mesh.uv_layer(me)
     topo = mesh_io.read_topology(me)
@@ -119,11 +130,16 @@ def analyze_uv(obj: bpy.types.Object, sync: bool) -> UVAnalysis:
     if not sync:
         shown &= mesh_io.read_face_selection(me)
     side = lay.orientation()
+    pins = np.zeros(lay.n_nodes, dtype=bool)
+    if use_pins:
+        pins[lay.loop_node[uv_mesh.read_uv_pins(me, layer)]] = True
     masks = {
         "FLIPPED": flipped_faces(lay, lay.points, side) & shown,
-        "INVERTED": flipped_faces(lay, lay.points, side, corners=True) & shown,
-        "OVERLAPPING": overlapping_faces(lay.oriented_points(side), lay.faces, lay.island,
-                                         faces=shown),
+        "INVERTED": flipped_faces(lay, lay.points, side, corners=True, fixed=pins,
+                                  faces=shown, keep=keep) & shown,
+        "OVERLAPPING": overlapping_faces(
+            lay.oriented_points(side), lay.faces, lay.island, faces=shown,
+            exact=kept_face_mask(lay, kept_as_given(lay, shown, pins, side, keep))),
     }
     return UVAnalysis(layer, shown, masks, lay.loop_node)
 
@@ -154,10 +170,11 @@ class UV_OT_eegt_select_flipped(bpy.types.Operator):
         else:
             ts.uv_select_mode = "FACE"
         changed = False
+        use_pins, keep = _run_rules(context)
         with modes.object_mode(context):
             for obj in objs:
                 try:
-                    found = analyze_uv(obj, sync)
+                    found = analyze_uv(obj, sync, use_pins, keep)
                 except ValueError as exc:
                     self.report({"WARNING"}, f"{obj.name}: {str(exc).splitlines()[0]}")
                     continue
@@ -169,6 +186,18 @@ class UV_OT_eegt_select_flipped(bpy.types.Operator):
                 self.report({"INFO"}, _count_line(obj.name, found.layer.name, found.masks,
                                                   self.kind, int(np.count_nonzero(pick))))
         return {"FINISHED"} if changed else {"CANCELLED"}
+
+
+def _run_rules(context: bpy.types.Context) -> tuple[bool, bool]:
+    """(pinned UVs fixed, corners kept as given) as Untangle & Smooth UVs would run with the
+    scene's settings: what Select Flipped calls inverted is what such a run removes."""
+    uv_settings = getattr(context.scene, "eegt_uv_settings", None)
+    use_pins = bool(getattr(uv_settings, "use_pins", True))
+    try:
+        keep = keeps_corners(props.params_from(context.scene.eegt_settings))
+    except (AttributeError, ValueError, TypeError):
+        keep = True
+    return use_pins, keep
 
 
 def _count_line(obj: str, uv_map: str, masks: dict[str, np.ndarray], kind: str,

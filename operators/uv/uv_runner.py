@@ -24,6 +24,7 @@ from ...core.uv import (
     UVLayout,
     UVMeasures,
     UVResult,
+    keeps_corners,
     measure,
     overlaps_around,
     tangled_faces,
@@ -162,21 +163,24 @@ def compute(job: UVJob, params: EEGTParams, backend: str = "numpy",
         runner.select_opencl_device(device)
     lay = job.layout
     side = lay.orientation()
-    over = overlaps_around(lay, lay.points, job.selected, side)
-    job.before = measure(lay, lay.points, job.selected, job.targets, side, over)
+    keep = keeps_corners(params)  # corners kept as given: the run's rule (core.metrics.kept)
+    over = overlaps_around(lay, lay.points, job.selected, side, job.fixed, keep)
+    job.before = measure(lay, lay.points, job.selected, job.targets, side, over, job.fixed,
+                         keep)
     try:
         res = untangle_uv(lay, job.selected, fixed=job.fixed, targets=job.targets,
                           params=params, backend=backend, progress=progress,
                           scope=job.scope,
-                          tangled=tangled_faces(lay, lay.points, job.selected, side, over))
+                          tangled=tangled_faces(lay, lay.points, job.selected, side, over,
+                                                job.fixed, keep))
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return
     job.result = res
     if res.status == "cancelled":
         return
-    job.after = measure(lay, res.points, job.selected, job.targets, side) \
-        if res.moved.any() else job.before
+    job.after = measure(lay, res.points, job.selected, job.targets, side, None, job.fixed,
+                        keep) if res.moved.any() else job.before
     if res.moved.any():
         loops = res.moved[lay.loop_node]
         new = job.uv.copy()

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from .conftest import positions
+from .uvkept import pin_one_inverted_face
 from .uvtools import (
     inverted_uv_faces,
     jitter_uv_vertices,
@@ -179,12 +180,7 @@ def test_uv_pins_holding_an_inverted_face_exit_3_failed(bpy, ext, tmp_path, capf
     inside = np.ones(len(me.polygons), bool)
     np.logical_and.at(inside, lf, ~uv_border_loops(obj, groups))
     bad = inverted_uv_faces(obj, uv0, groups)
-    face = int(np.flatnonzero(bad & inside)[0])
-    pins = np.isin(groups, groups[lf == face])
-    layer = me.uv_layers.active
-    if hasattr(layer, "pin_ensure"):
-        layer.pin_ensure()
-    layer.pin.foreach_set("value", pins)
+    face, pins = pin_one_inverted_face(ext, obj, groups, bad, inside)
     path, out, rep = tmp_path / "pinned.blend", tmp_path / "out.blend", tmp_path / "r.json"
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     assert cli(ext).execute([str(path), "--uv", "-o", str(out), "--report", str(rep),
@@ -193,9 +189,10 @@ def test_uv_pins_holding_an_inverted_face_exit_3_failed(bpy, ext, tmp_path, capf
     (o,) = report["objects"]
     assert report["exit_code"] == 3
     assert o["status"] == "failed" and o["written"]
-    assert o["message"] == "1 faces stay inverted: every corner of them is pinned"
-    assert (o["before"]["inverted"], o["after"]["inverted"]) == (int(bad.sum()), 1)
-    assert "FAILED: 1 faces stay inverted: every corner of them is pinned" in \
+    assert o["message"] == "1 face stays inverted: every corner of it is pinned"
+    assert (o["before"]["inverted"], o["after"]["inverted"]) == (
+        int(bad.sum()) - o["before"]["kept"], 1)  # faces kept as given once pinned: valid
+    assert "FAILED: 1 face stays inverted: every corner of it is pinned" in \
         capfd.readouterr().out
     bpy.ops.wm.open_mainfile(filepath=str(out))
     obj = bpy.data.objects["Sphere"]

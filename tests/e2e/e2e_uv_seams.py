@@ -51,8 +51,11 @@ side = meshcheck.uv_check(uv, faces, cv)["orientation"]  # one island: its total
 bad = [i for i, f in enumerate(faces)
        if meshcheck.face_quality(uv.astype(np.float64) * [side, 1.0], np.asarray(f)) <= 0.0]
 pinned = -1
-if mode == "pinned":  # every loop of every vertex of one inverted inner face
-    pinned = next(i for i in bad if inner[cv[faces[i]]].all())
+def _area(f):  # signed area (island orientation): a simple positive face pinned is kept
+    x, y = uv[f, 0].astype(np.float64) * side, uv[f, 1].astype(np.float64)
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+if mode == "pinned":  # every loop of every vertex of one inverted inner face turned over
+    pinned = next(i for i in bad if inner[cv[faces[i]]].all() and _area(faces[i]) < 0.0)
     layer = me.uv_layers.active
     if hasattr(layer, "pin_ensure"):
         layer.pin_ensure()
@@ -171,7 +174,7 @@ def t_uv_pinned_inverted_face_exit3():
     blend, made = _make_grid("pinned")
     check(made["pinned_face"] >= 0, "no inverted inner face to pin")
     e, c, out = _run_uv("uv_grid_pinned", blend, 3)
-    want = "1 faces stay inverted: every corner of them is pinned"
+    want = "1 face stays inverted: every corner of it is pinned"
     check(e["status"] == "failed" and e["message"] == want and e["written"],
           f"report: {e['status']}, {e['message']!r}, written {e['written']}")
     check(f"FAILED: {want}" in out, f"no FAILED line: {tail(out)}")
