@@ -1,0 +1,63 @@
+"""bench.repair_bench and bench.repair_meshes on one tiny case (seconds): the case is made,
+cached and reloaded with the same bits, the repair leaves nothing inverted and keeps every
+node outside its region, and the measures read 1 / 0 where nothing changed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bench import repair_bench as rb
+from bench import repair_meshes as rm
+from core import faces_from_csr, mesh_stats
+
+TINY = rm.Spec("ogrid", 1000, "slide", {"dx": 0.1, "reach": 0.1, "first": 1e-2})
+
+
+@pytest.fixture(autouse=True)
+def tmp_cache(tmp_path, monkeypatch):
+    monkeypatch.setattr(rm, "CACHE", tmp_path)
+
+
+def test_tiny_o_grid_case_folds_near_the_wall_and_reloads_the_same_bits():
+    case = rm.load(TINY)
+    assert TINY.path.exists()
+    assert mesh_stats(case.reference, case.faces).n_inverted == 0
+    folded = mesh_stats(case.points, case.faces).n_inverted
+    assert 10 < folded < 0.2 * case.n_faces
+    assert case.wall.sum() == 32 and np.all(case.fixed[case.wall])
+    far = case.fixed & ~case.wall
+    assert np.array_equal(case.points[far], case.reference[far])
+    again = rm.load(TINY)
+    assert np.array_equal(again.points, case.points)
+    assert np.array_equal(again.faces.indices, case.faces.indices)
+
+
+def test_repair_row_leaves_nothing_inverted_and_the_input_row_measures_the_deformation():
+    case = rm.load(TINY)
+    rows = rb.run_case(case, ("keep",), timeout=120.0)
+    assert [r.column for r in rows] == ["input", "keep"]
+    inp, keep = rows
+    assert inp.inverted == inp.folded > 0 and inp.moved == 0.0
+    assert keep.inverted == 0, keep.note
+    assert 0.0 < keep.moved < 0.5 and keep.rings is not None and keep.rings >= 3
+    # the wall cells away from the fold keep the input's first layer (here the deformation's
+    # own change: a first cell of 1e-2 chords lags behind the slid wall)
+    assert keep.layer_med == inp.layer_med and keep.layer_worst_away == inp.layer_worst_away
+    text = rb.table(rows)
+    assert len(text) == 4 and text[3].startswith("| ogrid-1000-slide")
+    assert len(rb.summary(rows)) == 4
+
+
+def test_measures_of_a_rectangle_and_a_triangle():
+    p = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [0.0, 1.0], [2.0, 3.0]])
+    fs = faces_from_csr([0, 4], [4, 3], [0, 1, 2, 3, 3, 2, 4], 5)
+    assert np.allclose(rb.aspects(p, fs)[0], 4.0)
+    assert np.allclose(rb.signed_areas(p, fs), [4.0, 4.0])
+    eq = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, np.sqrt(0.75)]])
+    assert np.allclose(rb.aspects(eq, faces_from_csr([0], [3], [0, 1, 2], 3)), 1.0)
+    wall = np.array([True, True, False, False, False])
+    f, a, b = rb.wall_cells(fs, wall)
+    assert f.tolist() == [0] and {a[0], b[0]} == {0, 1}
+    assert rb.abs_log_ratio(np.array([-1.0, 2.0]), np.array([1.0, 2.0])).tolist() == [np.inf,
+                                                                                      0.0]
