@@ -25,13 +25,15 @@ from typing import Any
 
 import numpy as np
 
+from ..mesh.csr import ragged_arange
 from ..mesh.faces import FaceSet, face_subset
 from ..params import EEGTParams
 from .harmonic import harmonic_positions
 
 __all__ = ["FIRST_RINGS", "Repaired", "attempt_budget", "folded_faces", "grow_region",
-           "inverted_corners", "keep_targets", "repair_folds", "touching"]
+           "inverted_corners", "keep_targets", "neighbour_shapes", "repair_folds", "touching"]
 
+NEIGHBOUR_PASSES = 64  # rings a folded patch takes its shapes across (`neighbour_shapes`)
 FIRST_RINGS = 3  # the first margin around the folded faces, in rings of faces
 BUDGET_PER_FACE = 2  # an attempt on a region below the whole mesh: this many optimizer and
 BUDGET_MIN = 400  # EEGT iterations per face of the region, at least BUDGET_MIN, at most the
@@ -95,8 +97,10 @@ def attempt_budget(params: EEGTParams, n_region: int, whole: bool) -> int:
 def keep_targets(p: np.ndarray, fs: FaceSet, free: np.ndarray, folded: np.ndarray,
                  reference: np.ndarray | None = None) -> np.ndarray:
     """(n_corners, 2) targets of target "keep": every face's own corners as given; the
-    folded faces' corners from `reference` ((N, 2), same topology) when given, else from the
-    harmonic fill of their free nodes (the other nodes held)."""
+    folded faces' corners from `reference` ((N, 2), same topology) when given, else the
+    shape of a neighbour across an edge (`neighbour_shapes`: in a boundary layer, the cell
+    beside it has its size and aspect), and for a face no neighbour of its arity reaches,
+    its corners once the folded faces' free nodes are at the harmonic fill of the rest."""
     corners = np.asarray(p, dtype=np.float64)[fs.indices, :2].copy()
     rows = np.repeat(folded, fs.counts)
     if not folded.any():
@@ -104,12 +108,70 @@ def keep_targets(p: np.ndarray, fs: FaceSet, free: np.ndarray, folded: np.ndarra
     if reference is not None:
         corners[rows] = np.asarray(reference, dtype=np.float64)[fs.indices[rows], :2]
         return corners
-    movable = np.zeros(p.shape[0], dtype=bool)
-    movable[fs.indices[rows]] = True
-    movable &= free
-    filled = harmonic_positions(np.asarray(p, dtype=np.float64)[:, :2], fs, movable)
-    corners[rows] = filled[fs.indices[rows]]
+    reached = neighbour_shapes(corners, fs, folded)
+    left = folded & ~reached
+    if left.any():
+        movable = np.zeros(p.shape[0], dtype=bool)
+        movable[fs.indices[np.repeat(folded, fs.counts)]] = True
+        movable &= free
+        filled = harmonic_positions(np.asarray(p, dtype=np.float64)[:, :2], fs, movable)
+        lrows = np.repeat(left, fs.counts)
+        corners[lrows] = filled[fs.indices[lrows]]
     return corners
+
+
+def neighbour_shapes(corners: np.ndarray, fs: FaceSet, missing: np.ndarray,
+                     passes: int = NEIGHBOUR_PASSES) -> np.ndarray:
+    """Give each face in `missing` ((F,) bool) the shape of a face of its arity across one
+    of its edges that has one, in place in `corners` ((n_corners, 2) per-corner targets),
+    spreading from the faces that have theirs for up to `passes` rings. The neighbour's
+    shape is turned half a turn (a point reflection keeps the orientation): its corner that
+    starts the shared edge maps to the one that starts it in the face, the rest in cyclic
+    order, so a cell of a structured layer gets its neighbour's size and aspect. Returns
+    (F,) bool: the faces of `missing` that got one."""
+    n = int(fs.indices.max()) + 1 if fs.indices.size else 0
+    counts = fs.counts
+    face = np.repeat(np.arange(fs.n_faces), counts)
+    start = fs.offsets[:-1]
+    local = np.arange(fs.indices.size) - start[face]
+    nxt = start[face] + (local + 1) % counts[face]
+    a, b = fs.indices.astype(np.int64), fs.indices[nxt].astype(np.int64)
+    key = a * n + b
+    order = np.argsort(key, kind="stable")
+    rev = b * n + a
+    pos = np.minimum(np.searchsorted(key[order], rev), key.size - 1)
+    twin = np.where(key[order][pos] == rev, order[pos], -1)  # the row walking it back
+    has = ~missing.copy()
+    got = np.zeros(fs.n_faces, dtype=bool)
+    for _ in range(passes):
+        want = ~has[face] & (twin >= 0)
+        ok = want.copy()
+        ok[want] = has[face[twin[want]]] & (counts[face[twin[want]]] == counts[face[want]])
+        cand = np.flatnonzero(ok)
+        if cand.size == 0:
+            break
+        fsel, first = np.unique(face[cand], return_index=True)
+        r, t = cand[first], twin[cand[first]]
+        m = counts[fsel]
+        step = ragged_arange(np.zeros_like(m), m)
+        rr, tt = np.repeat(r, m), np.repeat(t, m)
+        ff, gg = np.repeat(fsel, m), face[tt]
+        dst = start[ff] + (local[rr] + step) % counts[ff]
+        src = start[gg] + (local[tt] + step) % counts[gg]
+        corners[dst] = -corners[src]
+        has[fsel] = True
+        got[fsel] = True
+    return got
+
+
+def _encloses(p: np.ndarray, fs: FaceSet) -> bool:
+    """Whether the faces' signed areas add up to more than 0 (the area their rim encloses,
+    whatever their free nodes do)."""
+    total = 0.0
+    for g in fs.groups:
+        x, y = p[g.nodes, 0], p[g.nodes, 1]
+        total += float((x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y).sum())
+    return total > 0.0
 
 
 Run = Callable[..., Any]
@@ -158,6 +220,9 @@ def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParam
         for g in fs.groups:
             rim[g.nodes[:, ~region[g.ids]]] = True
         held = ~free[nodes] | rim[nodes]
+        if not whole and not _encloses(p[nodes], sub):
+            rings *= 2  # its faces' areas add up to the area its rim encloses: not > 0, no
+            continue  # positions inside make them all valid (core/run/hopeless_groups.py)
         if params.target == "keep":
             ref = None if keep_from is None else keep_from[nodes]
             tg = keep_targets(p[nodes], sub, ~held, seed[ids], ref)
