@@ -241,14 +241,13 @@ def readme_shots(before):
     shot_mesh("readme_after")
 
 
-def big_impossible_mesh(n=120, seed=1):
-    """A jittered n x n triangle grid (tangled but fixable) plus a separate U-star component
-    (data/u_star_impossible.obj: cannot be untangled) with its first triangle split at a
-    second free vertex, so the run goes on to the iteration limit: long enough to press ESC
-    in the middle of it. The split matters: the plain U-star's centre has only fixed
-    neighbours, so the run recognises it as hopeless before it starts and ends at once
-    (core/run/hopeless.py); with a free neighbour it is not examined, and the optimizer
-    spends its whole budget on it (about a minute of core time on the component alone)."""
+def big_impossible_mesh(n=320, seed=1):
+    """A jittered n x n triangle grid (tangled but fixable, about 200k triangles: several
+    seconds of work, long enough to press ESC in the middle of it) plus a separate U-star
+    component (data/u_star_impossible.obj: cannot be untangled) with its first triangle
+    split at a second free vertex. The run recognises the U-star as hopeless before it
+    starts (core/run/hopeless.py: its centre's faces without the second free vertex cannot
+    all be valid), so the grid's size is what makes the run long."""
     rng = np.random.default_rng(seed)
     g = np.arange(n, dtype=np.float64)
     x, y = np.meshgrid(g, g)
