@@ -15,7 +15,7 @@ import numpy as np
 
 from .csr import ragged_arange
 
-__all__ = ["ArityGroup", "FaceSet", "as_faceset", "face_subset", "faces_from_csr"]
+__all__ = ["ArityGroup", "FaceSet", "as_faceset", "face_subset", "faces_from_csr", "next_corner"]
 
 
 @dataclass(frozen=True)
@@ -188,3 +188,9 @@ def face_subset(fs: FaceSet, face_ids: np.ndarray) -> tuple[FaceSet, np.ndarray,
     nodes, local = np.unique(fs.indices[rows], return_inverse=True)
     return FaceSet(offsets, local.reshape(-1)), nodes, rows
 
+
+def next_corner(fs: FaceSet) -> np.ndarray:
+    """(C,) row of the next corner of the same face, for every corner row of ``fs``."""
+    nxt = np.arange(1, fs.n_corners + 1, dtype=np.int64)
+    nxt[fs.offsets[1:] - 1] = fs.offsets[:-1]
+    return nxt

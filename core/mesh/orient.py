@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .faces import FaceSet, as_faceset
+from .faces import FaceSet, as_faceset, next_corner
 
 __all__ = ["FaceOrientation", "orient_faces", "reverse_faces"]
 
@@ -69,18 +69,11 @@ def reverse_faces(faces: FaceSet, flip: np.ndarray) -> FaceSet:
     return out
 
 
-def _next_corner(fs: FaceSet) -> np.ndarray:
-    """(C,) the corner after each corner in its face (the last one's next is the first)."""
-    nxt = np.arange(1, fs.n_corners + 1, dtype=np.int64)
-    nxt[fs.offsets[1:] - 1] = fs.offsets[:-1]
-    return nxt
-
-
 def _relations(fs: FaceSet, n_nodes: int) -> tuple[np.ndarray, ...]:
     """The manifold edges as relations: (face f, face g, same, lo, hi) per edge of exactly
     two faces, `same` when both walk it the same way (f and g need opposite orientations)."""
     a = fs.indices
-    b = a[_next_corner(fs)]
+    b = a[next_corner(fs)]
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     key = lo * n_nodes + hi
     order = np.argsort(key)  # which of an edge's two corners comes first does not matter
@@ -153,7 +146,7 @@ def _vector_areas(points: np.ndarray, fs: FaceSet) -> np.ndarray:
     nodes' bounding box; x and y zero for 2D points)."""
     used = points[fs.used_nodes(points.shape[0])]
     q = points - (0.5 * used.min(axis=0) + 0.5 * used.max(axis=0))
-    a, b = fs.indices, fs.indices[_next_corner(fs)]
+    a, b = fs.indices, fs.indices[next_corner(fs)]
     out = np.zeros((fs.n_faces, 3))
     starts = fs.offsets[:-1]
     for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):

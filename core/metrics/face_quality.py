@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fpmath import add_reduce
-from ..mesh.faces import as_faceset
+from ..mesh.faces import FaceSet, as_faceset
 from ..mesh.points import check_points
 from .kept import Kept
 from .mean_ratio import scaled_group_quality
@@ -20,8 +20,10 @@ from .targets import Targets, corner_vectors, prepare_targets
 __all__ = [
     "Stats",
     "folded_area",
+    "inverted_corners",
     "mesh_stats",
     "quality",
+    "signed_face_areas",
     "stats_of",
 ]
 
@@ -107,4 +109,27 @@ def folded_area(points: np.ndarray, faces) -> np.ndarray:
         ax, ay, bx, by = corner_vectors(p[g.nodes, 0], p[g.nodes, 1])
         det = ax * by - ay * bx
         out[g.ids] = 0.5 * np.maximum(-det, 0.0).sum(axis=0)
+    return out
+
+
+def signed_face_areas(points: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """(F,) signed area of every face (shoelace; positive = counterclockwise)."""
+    out = np.empty(fs.n_faces)
+    for g in fs.groups:
+        x, y = points[g.nodes, 0], points[g.nodes, 1]
+        out[g.ids] = 0.5 * np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y, axis=0)
+    return out
+
+
+def inverted_corners(p: np.ndarray, fs: FaceSet) -> np.ndarray:
+    """(F,) bool: faces with a corner that does not turn left."""
+    out = np.zeros(fs.n_faces, dtype=bool)
+    for g in fs.groups:
+        xr, yr = p[g.nodes, 0], p[g.nodes, 1]
+        bad = np.zeros(g.size, dtype=bool)
+        for k in range(g.n):
+            a, b = (k + 1) % g.n, k - 1
+            det = (xr[a] - xr[k]) * (yr[b] - yr[k]) - (yr[a] - yr[k]) * (xr[b] - xr[k])
+            bad |= ~(det > 0.0)
+        out[g.ids] = bad
     return out

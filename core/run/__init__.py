@@ -11,19 +11,37 @@ stage, on a plane in 2D or 3D, in one go or frame by frame under a cursor.
 - a repair (region "folds", target "keep"): the folded faces and a growing margin only,
   each face pulled towards its own shape: `repair.repair_folds`, `folded_faces`,
   `keep_targets`; hopeless folds held before the run: `hopeless`, `hopeless_groups`.
-- live drags, a frame at a time: `live.LiveSession`, `LiveFrame`; what a frame reuses from
-  the last: `live_reuse`.
+- live drags, a frame at a time: `live.LiveSession`, `LiveFrame`, the cursor's bound
+  (`cursor_bounds`, `clamp_cursor`), what may be written (`storable_float32`); what a
+  frame reuses from the last: `live_reuse`.
 """
 
 from .acceptance import FLOAT32_TIE, accept, tie_tolerance
 from .harmonic import harmonic_positions
-from .live import FRAME_BUDGET, FRAME_ITERATIONS, LiveFrame, LiveSession, live_params, uv_region
+from .live import (
+    FINISH_BUDGET,
+    FINISH_GO_ON,
+    FINISH_KEEP,
+    FINISH_LIMIT,
+    FINISH_RESTORE,
+    FRAME_BUDGET,
+    FRAME_ITERATIONS,
+    LiveFrame,
+    LiveSession,
+    clamp_cursor,
+    cursor_bounds,
+    live_params,
+    storable_float32,
+    uv_region,
+    uv_vertex_corners,
+)
 from .pipeline import Cancelled, EEGTResult, frozen_note, untangle_and_smooth
 from .pipeline_3d import untangle_and_smooth_3d
 from .repair import folded_faces, keep_targets
 
-__all__ = ["FLOAT32_TIE", "FRAME_BUDGET", "FRAME_ITERATIONS", "Cancelled", "EEGTResult",
-           "LiveFrame", "LiveSession", "accept", "folded_faces", "frozen_note",
-           "harmonic_positions", "keep_targets",
-           "live_params", "tie_tolerance", "untangle_and_smooth", "untangle_and_smooth_3d",
-           "uv_region"]
+__all__ = ["FINISH_BUDGET", "FINISH_GO_ON", "FINISH_KEEP", "FINISH_LIMIT", "FINISH_RESTORE",
+           "FLOAT32_TIE", "FRAME_BUDGET", "FRAME_ITERATIONS", "Cancelled", "EEGTResult",
+           "LiveFrame", "LiveSession", "accept", "clamp_cursor", "cursor_bounds",
+           "folded_faces", "frozen_note", "harmonic_positions", "keep_targets", "live_params",
+           "storable_float32", "tie_tolerance", "untangle_and_smooth", "untangle_and_smooth_3d",
+           "uv_region", "uv_vertex_corners"]

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh.faces import FaceSet
+from ..metrics.face_quality import inverted_corners
 
 __all__ = ["HopelessGroups", "hopeless_groups", "hopeless_groups_note"]
 
@@ -52,17 +53,10 @@ class HopelessGroups:
 def _tangled_seeds(p: np.ndarray, fs: FaceSet, free: np.ndarray) -> np.ndarray:
     """(N,) bool: free nodes of faces with a corner that does not turn left."""
     seeds = np.zeros(free.size, dtype=bool)
+    bad = inverted_corners(p, fs)
     for g in fs.groups:
-        xr, yr = p[g.nodes, 0], p[g.nodes, 1]  # (n, F) corner coordinates
-        bad = np.zeros(g.size, dtype=bool)
-        for k in range(g.n):
-            a, b = (k + 1) % g.n, k - 1
-            ex, ey = xr[a] - xr[k], yr[a] - yr[k]
-            fx, fy = xr[b] - xr[k], yr[b] - yr[k]
-            bad |= ~(ex * fy - ey * fx > 0.0)
-        if bad.any():
-            hit = g.nodes[:, bad]
-            seeds[hit[free[hit]]] = True
+        hit = g.nodes[:, bad[g.ids]]
+        seeds[hit[free[hit]]] = True
     return seeds
 
 

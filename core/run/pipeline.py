@@ -20,7 +20,14 @@ from ..mesh.faces import FaceSet, as_faceset, face_subset
 from ..mesh.points import check_points
 from ..mesh.reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from ..mesh.topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
-from ..metrics.face_quality import Stats, folded_area, mesh_stats, quality, stats_of
+from ..metrics.face_quality import (
+    Stats,
+    folded_area,
+    inverted_corners,
+    mesh_stats,
+    quality,
+    stats_of,
+)
 from ..metrics.kept import Kept, fixed_corners, kept_corners, kept_note
 from ..metrics.mean_ratio import group_quality
 from ..metrics.reference_shapes import reference_targets
@@ -43,7 +50,7 @@ from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
 from .hopeless_groups import hopeless_groups, hopeless_groups_note
-from .repair import folded_faces, inverted_corners, keep_targets, repair_folds, touching
+from .repair import keep_targets, repair_folds, touching
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -238,9 +245,10 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
     p = check_points(points)
     fs = as_faceset(faces, p.shape[0])
     targets, keep_from = _target_corners(p, fs, params, targets, reference_points)
-    if keep_from is not None or params.target == "keep":
+    if params.target == "keep":  # (its edge analysis serves the free nodes below too)
+        edges = checked_edges(edges, fs, p.shape[0])
         targets = keep_targets(p, fs, free_nodes(p.shape[0], fs, fixed, edges=edges),
-                               _folded(p, fs), keep_from)
+                               inverted_corners(p, fs), keep_from)
     tg = prepare_targets(targets, fs)  # its one-line checks first
     corners = None if targets is None or isinstance(targets, Targets) else \
         np.asarray(targets, dtype=np.float64)
@@ -313,11 +321,6 @@ def _target_corners(p: np.ndarray, fs: FaceSet, params: EEGTParams, targets, ref
     return targets, None
 
 
-def _folded(p: np.ndarray, fs: FaceSet) -> np.ndarray:
-    """(F,) bool: faces with a corner that does not turn left."""
-    return folded_faces(p, fs, np.ones(p.shape[0], dtype=bool))
-
-
 def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
                     progress: Progress | None, targets, reference_points,
                     edges: EdgeInfo | None, keep_as_given: bool, t0: float) -> EEGTResult:
@@ -337,28 +340,28 @@ def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
         prepare_targets(whole, fs)  # its one-line checks
         whole = np.asarray(whole, dtype=np.float64)
     edges = checked_edges(edges, fs, n)
-    pins = free_nodes(n, fs, fixed, edges=edges)
+    movable = free_nodes(n, fs, fixed, edges=edges)
     if params.boundary != "fixed":  # boundary nodes of the region move as the mode says
-        pins = pins | (fs.used_nodes(n) & edges.boundary_mask() & ~_pinned(fixed, p))
-    if not pins.any():
+        movable = movable | (fs.used_nodes(n) & edges.boundary_mask() & ~_pinned(fixed, p))
+    if not movable.any():
         raise ValueError("every node is fixed (boundary or pinned): nothing to optimize")
     center, scale = normalisation(p, fs)
     _check_orientation((p - center) / scale, fs)
     bad = inverted_corners(p, fs)
-    seed = bad & touching(fs, pins)
+    seed = bad & touching(fs, movable)
     keep = params.target == "keep"
     if not seed.any():
         region = np.zeros(fs.n_faces, dtype=bool)
-        before = stats_of(_outside_stats(p, fs, region, bad, pins, whole, keep,
+        before = stats_of(_outside_stats(p, fs, region, bad, movable, whole, keep,
                                          keep_as_given, params))
         text = "no folded face a move can change: nothing moved (region 'folds')"
         return EEGTResult(p.copy(), "valid" if before.n_inverted == 0 else "failed", before,
                           before, 0, 0, time.perf_counter() - t0, backend, text,
                           np.zeros(n, dtype=bool))
-    done = repair_folds(p, fs, pins, params, whole, untangle_and_smooth, keep_from, seed,
+    done = repair_folds(p, fs, movable, params, whole, untangle_and_smooth, keep_from, seed,
                         backend=backend, progress=progress, keep_as_given=keep_as_given)
     res = done.result
-    out = _outside_stats(p, fs, done.region, bad, pins, whole, keep, keep_as_given, params)
+    out = _outside_stats(p, fs, done.region, bad, movable, whole, keep, keep_as_given, params)
     paper = params.untangle == "eegt" or not keep_as_given
     sub, nodes = done.faces, done.nodes
     kept = None if paper else kept_corners(p[nodes], sub, ~done.held)
@@ -379,7 +382,7 @@ def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
 
 
 def _outside_stats(p: np.ndarray, fs: FaceSet, region: np.ndarray, bad: np.ndarray,
-                   pins: np.ndarray, whole: np.ndarray | None, keep: bool,
+                   movable: np.ndarray, whole: np.ndarray | None, keep: bool,
                    keep_as_given: bool, params: EEGTParams) -> list[np.ndarray]:
     """The qualities of the faces outside `region` ([] when there are none). Target "keep":
     1 for each (a face is its own target), 0 for an inverted one (its vertices are all
@@ -394,11 +397,11 @@ def _outside_stats(p: np.ndarray, fs: FaceSet, region: np.ndarray, bad: np.ndarr
         stuck = np.flatnonzero(bad[ids])
         if stuck.size:
             sub, nodes, _ = face_subset(fs, ids[stuck])
-            kept = None if paper else kept_corners(p[nodes], sub, pins[nodes])
+            kept = None if paper else kept_corners(p[nodes], sub, movable[nodes])
             q[stuck] = quality(p[nodes], sub, None, kept=kept)
         return [q]
     sub, nodes, rows = face_subset(fs, ids)
-    kept = None if paper else kept_corners(p[nodes], sub, pins[nodes])
+    kept = None if paper else kept_corners(p[nodes], sub, movable[nodes])
     tg = None if whole is None else whole[rows]
     return [quality(p[nodes], sub, tg, kept=kept)]
 

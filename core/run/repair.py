@@ -25,33 +25,21 @@ from typing import Any
 
 import numpy as np
 
+from ..fpmath import add_reduce
 from ..mesh.csr import ragged_arange
-from ..mesh.faces import FaceSet, face_subset
+from ..mesh.faces import FaceSet, face_subset, next_corner
+from ..metrics.face_quality import inverted_corners, signed_face_areas
 from ..params import EEGTParams
 from .harmonic import harmonic_positions
 
 __all__ = ["FIRST_RINGS", "Repaired", "attempt_budget", "folded_faces", "grow_region",
-           "inverted_corners", "keep_targets", "neighbour_shapes", "repair_folds", "touching"]
+           "keep_targets", "neighbour_shapes", "repair_folds", "touching"]
 
 NEIGHBOUR_PASSES = 64  # rings a folded patch takes its shapes across (`neighbour_shapes`)
 FIRST_RINGS = 3  # the first margin around the folded faces, in rings of faces
 BUDGET_PER_FACE = 2  # an attempt on a region below the whole mesh: this many optimizer and
 BUDGET_MIN = 400  # EEGT iterations per face of the region, at least BUDGET_MIN, at most the
 # run's max_untangle_iterations (a margin that is too tight fails in a fraction of a second)
-
-
-def inverted_corners(p: np.ndarray, fs: FaceSet) -> np.ndarray:
-    """(F,) bool: faces with a corner that does not turn left."""
-    out = np.zeros(fs.n_faces, dtype=bool)
-    for g in fs.groups:
-        xr, yr = p[g.nodes, 0], p[g.nodes, 1]
-        bad = np.zeros(g.size, dtype=bool)
-        for k in range(g.n):
-            a, b = (k + 1) % g.n, k - 1
-            det = (xr[a] - xr[k]) * (yr[b] - yr[k]) - (yr[a] - yr[k]) * (xr[b] - xr[k])
-            bad |= ~(det > 0.0)
-        out[g.ids] = bad
-    return out
 
 
 def touching(fs: FaceSet, nodes: np.ndarray) -> np.ndarray:
@@ -134,8 +122,7 @@ def neighbour_shapes(corners: np.ndarray, fs: FaceSet, missing: np.ndarray,
     face = np.repeat(np.arange(fs.n_faces), counts)
     start = fs.offsets[:-1]
     local = np.arange(fs.indices.size) - start[face]
-    nxt = start[face] + (local + 1) % counts[face]
-    a, b = fs.indices.astype(np.int64), fs.indices[nxt].astype(np.int64)
+    a, b = fs.indices.astype(np.int64), fs.indices[next_corner(fs)].astype(np.int64)
     key = a * n + b
     order = np.argsort(key, kind="stable")
     rev = b * n + a
@@ -167,11 +154,7 @@ def neighbour_shapes(corners: np.ndarray, fs: FaceSet, missing: np.ndarray,
 def _encloses(p: np.ndarray, fs: FaceSet) -> bool:
     """Whether the faces' signed areas add up to more than 0 (the area their rim encloses,
     whatever their free nodes do)."""
-    total = 0.0
-    for g in fs.groups:
-        x, y = p[g.nodes, 0], p[g.nodes, 1]
-        total += float((x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y).sum())
-    return total > 0.0
+    return add_reduce(signed_face_areas(p, fs)) > 0.0
 
 
 Run = Callable[..., Any]

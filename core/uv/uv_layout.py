@@ -15,7 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..mesh.faces import FaceSet, face_subset, faces_from_csr
+from ..mesh.faces import FaceSet, face_subset, faces_from_csr, next_corner
+from ..metrics.face_quality import signed_face_areas
 
 # Blender's STD_UV_CONNECT_LIMIT: two corners of one vertex whose UVs differ by less than
 # this in u and in v are one UV vertex for its island tools (Select Linked, UV islands).
@@ -27,8 +28,6 @@ __all__ = [
     "components",
     "corner_loops",
     "island_faces",
-    "next_corner",
-    "signed_face_areas",
     "weld_uv",
 ]
 
@@ -105,22 +104,6 @@ class UVLayout:
         p = np.array(self.points if points is None else points, dtype=np.float64)
         p[side[self.node_island] < 0, 0] *= -1.0
         return p
-
-
-def signed_face_areas(points: np.ndarray, fs: FaceSet) -> np.ndarray:
-    """(F,) signed area of every face (shoelace; positive = counterclockwise)."""
-    out = np.empty(fs.n_faces)
-    for g in fs.groups:
-        x, y = points[g.nodes, 0], points[g.nodes, 1]
-        out[g.ids] = 0.5 * np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y, axis=0)
-    return out
-
-
-def next_corner(fs: FaceSet) -> np.ndarray:
-    """(C,) row of the next corner of the same face, for every corner row of ``fs``."""
-    nxt = np.arange(1, fs.n_corners + 1)
-    nxt[fs.offsets[1:] - 1] = fs.offsets[:-1]
-    return nxt
 
 
 def _near_pairs(vert: np.ndarray, uv: np.ndarray, limit: np.float32) -> tuple[np.ndarray,

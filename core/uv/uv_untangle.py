@@ -40,12 +40,12 @@ import numpy as np
 from .. import choices
 from ..mesh.faces import FaceSet
 from ..mesh.topology import boundary_nodes, free_nodes, pinched_faces
-from ..metrics.face_quality import Stats, quality, stats_of
+from ..metrics.face_quality import Stats, quality, signed_face_areas, stats_of
 from ..metrics.kept import Kept, kept_corners, kept_note
 from ..params import EEGTParams
 from ..run import acceptance
 from ..run.pipeline import untangle_and_smooth
-from .uv_layout import UVLayout, island_faces, signed_face_areas
+from .uv_layout import UVLayout, island_faces
 from .uv_overlap import overlapping_faces
 
 __all__ = [

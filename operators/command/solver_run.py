@@ -47,8 +47,8 @@ from ...core import (
     summaries,
 )
 from ...core.mesh import orient_faces
-from ...core.metrics import reference_targets, reference_to_2d
-from ...core.run import accept, folded_faces, frozen_note, untangle_and_smooth_3d
+from ...core.metrics import inverted_corners, reference_targets, reference_to_2d
+from ...core.run import accept, frozen_note, untangle_and_smooth_3d
 from ...fileio import checked_write, solver_mesh
 from ...fileio.solver_formats import SOLVER_EXTENSIONS, solver_format
 from ..mesh import reference_mesh, runner
@@ -137,7 +137,7 @@ def judge_targets(points2d: np.ndarray, fs: FaceSet) -> np.ndarray:
     the folded ones NaN (their shape is the run's to choose; judged against the regular
     polygon, as an unusable target is)."""
     corners = points2d[fs.indices, :2].copy()
-    folded = np.repeat(folded_faces(points2d, fs, np.ones(points2d.shape[0], dtype=bool)),
+    folded = np.repeat(inverted_corners(points2d, fs),
                        fs.counts)
     corners[folded] = np.nan
     return corners

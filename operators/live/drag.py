@@ -23,7 +23,7 @@ import numpy as np
 
 from ...core import EEGTParams, faces_from_csr
 from ...core.metrics import face_shapes_2d
-from ...core.run.live import (
+from ...core.run import (
     FRAME_BUDGET,
     FRAME_ITERATIONS,
     LiveFrame,

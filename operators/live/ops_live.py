@@ -20,7 +20,7 @@ import numpy as np
 from bpy_extras import view3d_utils
 from mathutils import Vector, geometry
 
-from ...core.run.live import (
+from ...core.run import (
     FINISH_BUDGET,
     FINISH_GO_ON,
     FINISH_KEEP,

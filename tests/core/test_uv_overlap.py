@@ -73,7 +73,7 @@ def test_fold_with_consistent_orientation_is_found():
     p[10] = (1.5, 1.9)
     faces = [[k, k + 1, k + 7, k + 6] for k in range(5)]
     fs = as_faceset(faces, 12)
-    from core.uv.uv_layout import signed_face_areas
+    from core.metrics import signed_face_areas
     assert (signed_face_areas(p, fs) > 0).all()
     p[5] = (0.5, 0.3)  # the last quad lies on the first one
     p[11] = (0.5, 0.8)
