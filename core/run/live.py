@@ -264,9 +264,10 @@ class LiveSession:
         Escalation (``core.run.live_repair``): when the EEGT untangling (half the frame's
         time) leaves a face inverted that a move can change, the rest of the frame goes to
         the foldover-free stage on the region around the inverted faces
-        (``RegionRepair.solve``), and while the frames start tangled the following frames go
-        straight to it, each resuming the last one's solve; once a frame ends with no such
-        face, EEGT smooths on and the escalation ends."""
+        (``RegionRepair.solve``); while the frames start tangled, each gives EEGT its half
+        again (a fold it opens ends the escalation) and the region's solve the rest, resuming
+        the last one's; once a frame ends with no such face, EEGT smooths on and the
+        escalation ends."""
         t0 = time.perf_counter()
         p = self.points.copy()
         if grab_to is not None:
@@ -303,8 +304,8 @@ class LiveSession:
 
         repair = self.repair
         failed, fixed_by = False, None
-        if tangled(current) and (repair is None or not repair.active):
-            late = clock.late
+        if tangled(current):  # EEGT first, also while escalated: a fold it can open (the
+            late = clock.late  # region's solve stalled on one) ends the escalation
             if repair is not None and clock.at is not None:  # half the frame, the rest
                 mid = t0 + 0.5 * (clock.at - t0)             # for the region if needed
 
@@ -314,8 +315,6 @@ class LiveSession:
                                              prm.max_untangle_iterations, late)
             current = current if last is None else last
             failed = tangled(best)
-        elif tangled(current):
-            failed = True
         if failed and repair is not None:
             # the foldover-free stage on the region: from the last valid frame with the
             # grabbed nodes' move carried around them when the cursor moved (or the
