@@ -133,6 +133,9 @@ UV_TARGET: Enumeration = (
            "also lowers stretch); distortion 1 = similar to the 3D face"),
     Choice("REGULAR", "Regular", "Pull each UV face towards the regular polygon (the paper's "
            "EEGT)"),
+    Choice("KEEP", "Keep Shapes", "Pull each UV face towards its own shape as laid out (a "
+           "repair keeps the layout's grading and stretch); a folded face takes a neighbour's "
+           "shape, else its 3D face's. With Around Tangles only the tangles and a margin move"),
 )
 
 # Every checked EEGTParams field, in the order the checks run (the first failure is

@@ -6,7 +6,8 @@ selection, every UV vertex also used by an unselected face and the pinned UV ver
 where they are. A mirrored island is reflected (u -> -u, exact) before the runs and back after
 them, so the core always sees counterclockwise faces. With scope "tangles" only the tangled
 faces and a few rings around them run first, grown until they untangle (see
-``untangle_uv``). Results are rounded to the UV map's storage type and an island is only
+``untangle_uv``); a repair (``repair``: target "Keep Shapes", ``uv_targets``) moves nothing
+else. Results are rounded to the UV map's storage type and an island is only
 changed when its rounded result is accepted over its input (``core.run.accept`` with the
 storage type's ties). A run never claims more than its result: an island whose selected
 faces are still inverted at the end is ``failed``, with the reason (``UVResult.message``: how
@@ -353,7 +354,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
                 backend: str = "numpy", progress: Callable[[int, str, Any], Any] | None = None,
                 store: type = np.float32, accept: Accept | None = None,
                 scope: str = "tangles", tangled: np.ndarray | None = None,
-                rings: int = 2) -> UVResult:
+                rings: int = 2, repair: bool = False, shapes: str = "3D") -> UVResult:
     """Untangle and smooth the ``selected`` faces (bool (F,)) of a welded UV map.
 
     ``fixed``: (V,) extra UV vertices that must not move (pins). ``targets``: (C, 2) target
@@ -368,6 +369,11 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     Corners kept as given (``kept_as_given``: straight or concave corners of fixed UV
     vertices only; not in the paper's mode, ``keeps_corners``) leave their faces valid in
     every measure, as the core's runs do (``keep_as_given``).
+    ``repair`` (target "Keep Shapes", ``uv_targets.keep_shape_targets``) with scope
+    "tangles": only the tangled faces and their margin move, nothing else: an island without
+    tangles is left as it is and an untangled island is not smoothed as a whole afterwards,
+    so every UV vertex outside the region keeps its bits. ``shapes`` names the targets'
+    shapes in the note on targets that fell back to the regular polygon.
     ValueError (one line) when nothing can move: no face selected, only islands without area,
     or every selected UV vertex fixed.
     """
@@ -385,6 +391,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     runs: list[IslandRun] = []
     groups = _selected_by_island(layout, selected)
     backend_name = ""
+    spared = 0  # islands without tangles a repair leaves as they are
     for k, ids in enumerate(groups):
         isl = int(layout.island[ids[0]])
         run = IslandRun(isl, int(ids.size), bool(side[isl] < 0), "skipped")
@@ -400,9 +407,14 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         run.before = run.after = stats_of([quality(start, sub, targets=tk, kept=kept)])
         label = f"island {k + 1}/{len(groups)}"
         bad = None if scope == "selection" else tangled[ids]
+        if repair and bad is not None and not bad.any():
+            run.status, run.message = "valid", "no tangles: island kept as laid out"
+            spared += 1
+            continue
         try:
             best = _island(sub, start, keep[nodes], tk, _regions(sub, bad, rings), params,
-                           backend, progress, label, store, run, scope == "tangles", kept)
+                           backend, progress, label, store, run, scope == "tangles", kept,
+                           smooth_whole=not repair)
         except _Cancel:
             result = UVResult(layout.points.copy(), np.zeros_like(moved), "cancelled", runs,
                               time.perf_counter() - t0, backend_name or backend)
@@ -428,7 +440,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
         moved[nodes[change]] = True
     result = UVResult(out, moved, "cancelled", runs, time.perf_counter() - t0,
                       backend_name or backend)
-    if not any(r.n_free for r in runs):
+    if not spared and not any(r.n_free for r in runs):
         reasons = {r.message for r in runs if r.message}
         raise ValueError("nothing to move: " + "; ".join(sorted(reasons))
                          if reasons else "nothing to move")
@@ -436,7 +448,7 @@ def untangle_uv(layout: UVLayout, selected: np.ndarray, fixed: np.ndarray | None
     result.kept = found.kept
     result.message = _settle(layout, out, found, side, keep, fixed, targets, runs)
     result.status = _overall(runs)
-    result.notes = _notes(runs)
+    result.notes = _notes(runs, shapes)
     if found.kept is not None:
         result.notes.append(kept_note(found.kept))
     return result
@@ -588,14 +600,15 @@ class _Island:
 def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | None,
             regions: list[np.ndarray], params: EEGTParams | None, backend: str,
             progress: Callable[[int, str, Any], Any] | None, label: str, store: type,
-            run: IslandRun, smooth_both: bool = False, kept: Kept | None = None
-            ) -> _Attempt | None:
+            run: IslandRun, smooth_both: bool = False, kept: Kept | None = None,
+            smooth_whole: bool = True) -> _Attempt | None:
     """Run the core on one island's selected faces, region after region, each from the best
     result so far, until one ends untangled; a whole island that still has inverted faces
     runs again from its best while their number decreases (up to WHOLE_ROUNDS runs). With
     ``smooth_both`` (scope "tangles") a run that only smooths (an island without inverted
     faces, or the whole island once more after its tangles were undone) is kept only when
-    neither the worst nor the mean quality drops (``_both_better``). The best attempt
+    neither the worst nor the mean quality drops (``_both_better``); ``smooth_whole`` False
+    (a repair) leaves out that last run on the whole island. The best attempt
     (island stats, the corners ``kept`` as given left out), or None when nothing changes.
     Fills ``run``; _Cancel when stopped."""
     isl = _Island(sub, start, pin, tk, params, backend, progress, label, store, run, kept)
@@ -632,7 +645,8 @@ def _island(sub: FaceSet, start: np.ndarray, pin: np.ndarray, tk: np.ndarray | N
                     run.status, run.message = "valid", "smoothing would lower the worst or " \
                         "the mean quality: island unchanged"
                     return None
-            elif best.after.n_inverted <= run.n_frozen:  # untangled: smooth it all again
+            elif best.after.n_inverted <= run.n_frozen and smooth_whole:
+                # untangled: smooth it all again
                 whole = isl.attempt(np.ones(sub.n_faces, dtype=bool), best.points)
                 if whole is not None and _both_better(whole.after, best.after):
                     where = "in a region" if best.part else "first"
@@ -663,8 +677,9 @@ def _overall(runs: list[IslandRun]) -> str:
     return "valid"
 
 
-def _notes(runs: list[IslandRun]) -> list[str]:
-    """One note per kind of island problem (counts, not one line per island)."""
+def _notes(runs: list[IslandRun], shapes: str = "3D") -> list[str]:
+    """One note per kind of island problem (counts, not one line per island); ``shapes``
+    names the targets' shapes."""
     notes = []
     skipped = [r for r in runs if r.status == "skipped" and r.n_free == 0 and r.before is None]
     if skipped:
@@ -681,6 +696,6 @@ def _notes(runs: list[IslandRun]) -> list[str]:
         notes.append(f"{mirrored} mirrored island(s)")
     fallback = sum(r.n_target_fallback for r in runs)
     if fallback:
-        notes.append(f"{fallback} faces with a concave or degenerate 3D shape used the "
-                     "regular polygon as target")
+        notes.append(f"{fallback} faces with a concave or degenerate {shapes} shape used "
+                     "the regular polygon as target")
     return notes

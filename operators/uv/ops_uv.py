@@ -61,7 +61,7 @@ def _annotations() -> dict[str, Any]:
 
 
 class UV_OT_eegt_untangle_smooth(EEGTRunMixin, bpy.types.Operator):
-    """Untangle flipped and folded UV faces and smooth them towards their 3D shapes (EEGT). Island borders, pinned UVs and the border of the selection stay"""  # noqa: E501
+    """Untangle flipped and folded UV faces and smooth them towards their target shapes (EEGT): their 3D faces, regular polygons, or their own laid-out shapes (Keep Shapes). Island borders, pinned UVs and the border of the selection stay"""  # noqa: E501
 
     bl_idname = "uv.eegt_untangle_smooth"
     bl_label = "Untangle & Smooth UVs"

@@ -24,6 +24,7 @@ from ...core.uv import (
     UVLayout,
     UVMeasures,
     UVResult,
+    keep_shape_targets,
     keeps_corners,
     measure,
     overlaps_around,
@@ -37,7 +38,10 @@ from ..shared.refusal import refusal
 from ..shared.result import RunResult
 from . import uv_mesh
 
-TARGETS = ids(UV_TARGET)  # target shape of a UV face: its 3D face, or the regular polygon
+TARGETS = ids(UV_TARGET)  # target shape of a UV face: its 3D face, the regular polygon, or
+# its own as laid out ("KEEP": the core's keep_shape_targets, a repair under scope "tangles")
+UNIT = {"3D": "as in 3D", "REGULAR": "regular", "KEEP": "as laid out"}  # what 1 means
+SHAPES = {"KEEP": "target (laid-out, a neighbour's or 3D)"}  # the core's fallback note
 
 
 @dataclass
@@ -63,7 +67,7 @@ class UVObjectResult(RunResult):
         if unchanged:
             return unchanged
         text = (f"{name}: {self.stats_text()} "
-                f"(1 = {'as in 3D' if self.targets == '3D' else 'regular'}), "
+                f"(1 = {UNIT.get(self.targets, 'regular')}), "
                 f"{self.islands_run}/{self.islands} islands, {self.seconds:.2f} s, {self.backend}")
         if self.status == "failed":
             text += f"; FAILED: {self.message}" if self.message else \
@@ -87,7 +91,8 @@ class UVJob:
     selected: np.ndarray | None = None  # (F,) faces to work on
     fixed: np.ndarray | None = None  # (V,) pinned UV vertices
     targets: np.ndarray | None = None  # (C, 2) or None (regular polygons)
-    target_kind: str = "3D"
+    target_kind: str = "3D"  # TARGETS
+    shapes3d: np.ndarray | None = None  # (C, 2) 3D face shapes (targets "3D" and "KEEP")
     scope: str = "tangles"  # core.uv.uv_untangle.SCOPES
     notes: list[str] = field(default_factory=list)
     error: str | None = None
@@ -108,7 +113,8 @@ def prepare(obj: bpy.types.Object, uv_name: str | None = None, *, selected_only:
     """Read one object's UV map (``uv_name``, default the active one) into a :class:`UVJob`
     (``job.error`` set for bad input). ``selected_only``: only the faces selected in the UV
     editor (see ``uv_mesh.read_uv_face_selection``); else every face. ``scope``: see
-    ``core.uv.uv_untangle.untangle_uv``."""
+    ``core.uv.uv_untangle.untangle_uv``. ``targets``: an id of TARGETS ("KEEP": the targets
+    are made in ``compute``, from the map and the run's rule for corners kept as given)."""
     me = obj.data
     job = UVJob(object=obj.name, mesh=me.name, target_kind=targets, scope=scope)
     why = refusal(obj)
@@ -141,16 +147,20 @@ def prepare(obj: bpy.types.Object, uv_name: str | None = None, *, selected_only:
     job.fixed = np.zeros(job.layout.n_nodes, dtype=bool)
     if use_pins:
         job.fixed[job.layout.loop_node[uv_mesh.read_uv_pins(me, layer)]] = True
-    if targets == "3D":
+    if targets not in TARGETS:
+        return _fail(job, f"target must be one of {', '.join(TARGETS)}, got {targets!r}")
+    if targets in ("3D", "KEEP"):
         co = mesh_io.read_positions(me)
         if not np.isfinite(co[topo.corner_verts]).all():
             return _fail(job, "vertices with NaN or infinite coordinates")
         try:
             fs3d = faces_from_csr(topo.loop_start, topo.loop_total, topo.corner_verts,
                                   len(me.vertices))
-            job.targets = face_shapes_2d(co.astype(np.float64), fs3d)
+            job.shapes3d = face_shapes_2d(co.astype(np.float64), fs3d)
         except ValueError as exc:
             return _fail(job, str(exc).splitlines()[0])
+        if targets == "3D":
+            job.targets = job.shapes3d
     return job
 
 
@@ -165,14 +175,22 @@ def compute(job: UVJob, params: EEGTParams, backend: str = "numpy",
     side = lay.orientation()
     keep = keeps_corners(params)  # corners kept as given: the run's rule (core.metrics.kept)
     over = overlaps_around(lay, lay.points, job.selected, side, job.fixed, keep)
+    tangled = tangled_faces(lay, lay.points, job.selected, side, over, job.fixed, keep)
+    repair = job.target_kind == "KEEP"
+    if repair:  # each face its own shape, a tangled one a neighbour's or its 3D face's
+        shapes = keep_shape_targets(lay, lay.points, job.selected, job.fixed, job.shapes3d,
+                                    side, keep, tangled)
+        job.targets = shapes.targets
+        note = shapes.note()
+        if note and note not in job.notes:
+            job.notes.append(note)
     job.before = measure(lay, lay.points, job.selected, job.targets, side, over, job.fixed,
                          keep)
     try:
         res = untangle_uv(lay, job.selected, fixed=job.fixed, targets=job.targets,
                           params=params, backend=backend, progress=progress,
-                          scope=job.scope,
-                          tangled=tangled_faces(lay, lay.points, job.selected, side, over,
-                                                job.fixed, keep))
+                          scope=job.scope, tangled=tangled, repair=repair,
+                          shapes=SHAPES.get(job.target_kind, "3D"))
     except ValueError as exc:
         job.error = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         return
