@@ -11,10 +11,11 @@ little.
 
 Target "keep" (`keep_targets`): every face is pulled towards its own shape as given, so that
 the grading, the anisotropy and the sizes the user built survive; a folded face has no shape
-of its own to keep and takes its reference shape when a reference mesh is given, else the
-shape its corners have once the folded faces' free nodes are moved to the harmonic map of
-the rest of the region (a smooth fill from the valid neighbours; a face still unusable there
-falls back to the regular polygon and is counted). Details: docs/repair.md.
+of its own to keep, and the faces around it (DRAGGED_RINGS) have the fold's: they take their
+reference shape when a reference mesh is given, else a neighbour's across an edge
+(`neighbour_shapes`), else the shape their corners have at the harmonic fill of the rest
+(a face still unusable there falls back to the regular polygon and is counted). Details:
+docs/repair.md.
 """
 
 from __future__ import annotations
@@ -32,11 +33,12 @@ from ..metrics.face_quality import inverted_corners, signed_face_areas
 from ..params import EEGTParams
 from .harmonic import harmonic_positions
 
-__all__ = ["FIRST_RINGS", "Repaired", "attempt_budget", "folded_faces", "grow_region",
-           "keep_targets", "neighbour_shapes", "repair_folds", "touching"]
+__all__ = ["DRAGGED_RINGS", "FIRST_RINGS", "Repaired", "attempt_budget", "folded_faces",
+           "grow_region", "keep_targets", "neighbour_shapes", "repair_folds", "touching"]
 
 NEIGHBOUR_PASSES = 64  # rings a folded patch takes its shapes across (`neighbour_shapes`)
 FIRST_RINGS = 3  # the first margin around the folded faces, in rings of faces
+DRAGGED_RINGS = 1  # target "keep": faces this near a folded one lose their own shape too
 BUDGET_PER_FACE = 2  # an attempt on a region below the whole mesh: this many optimizer and
 BUDGET_MIN = 400  # EEGT iterations per face of the region, at least BUDGET_MIN, at most the
 # run's max_untangle_iterations (a margin that is too tight fails in a fraction of a second)
@@ -84,15 +86,19 @@ def attempt_budget(params: EEGTParams, n_region: int, whole: bool) -> int:
 
 def keep_targets(p: np.ndarray, fs: FaceSet, free: np.ndarray, folded: np.ndarray,
                  reference: np.ndarray | None = None) -> np.ndarray:
-    """(n_corners, 2) targets of target "keep": every face's own corners as given; the
-    folded faces' corners from `reference` ((N, 2), same topology) when given, else the
-    shape of a neighbour across an edge (`neighbour_shapes`: in a boundary layer, the cell
-    beside it has its size and aspect), and for a face no neighbour of its arity reaches,
-    its corners once the folded faces' free nodes are at the harmonic fill of the rest."""
+    """(n_corners, 2) targets of target "keep": every face's own corners as given, except
+    the folded faces and those within DRAGGED_RINGS of them (a fold drags the faces around
+    it over each other: valid, but their shapes are the fold's, not the user's; kept, they
+    fight the repair). Those take their corners from `reference` ((N, 2), same topology)
+    when given, else the shape of a neighbour across an edge (`neighbour_shapes`: in a
+    boundary layer, the cell beside it has its size and aspect), and a face no neighbour of
+    its arity reaches, its corners once their free nodes are at the harmonic fill of the
+    rest."""
     corners = np.asarray(p, dtype=np.float64)[fs.indices, :2].copy()
-    rows = np.repeat(folded, fs.counts)
     if not folded.any():
         return corners
+    folded = grow_region(fs, p.shape[0], folded, DRAGGED_RINGS)
+    rows = np.repeat(folded, fs.counts)
     if reference is not None:
         corners[rows] = np.asarray(reference, dtype=np.float64)[fs.indices[rows], :2]
         return corners

@@ -6,7 +6,7 @@ import pytest
 
 from core import EEGTParams, mesh_stats, quality, untangle_and_smooth
 from core.mesh.faces import as_faceset
-from core.run.repair import FIRST_RINGS, folded_faces, grow_region, keep_targets
+from core.run.repair import DRAGGED_RINGS, FIRST_RINGS, folded_faces, grow_region, keep_targets
 
 
 def _grid(n: int) -> tuple[np.ndarray, list[list[int]]]:
@@ -129,22 +129,25 @@ def test_keep_targets_on_a_valid_jittered_mesh_keep_every_bit():
     assert res.before.q_min > 0.999999 and res.after.q_avg == res.before.q_avg
 
 
-def test_keep_targets_take_folded_faces_from_the_reference_else_from_the_harmonic_fill():
-    p, faces = _grid(4)
+def test_keep_targets_of_folded_faces_and_their_ring_come_from_the_reference_or_a_neighbour():
+    p, faces = _grid(8)
     fs = as_faceset(faces, len(p))
     q = p.copy()
-    q[12] = [3.4, 2.6]  # the centre node pushed across its neighbours
+    q[40] = [5.4, 4.6]  # the centre node (4, 4) pushed across its neighbours
     free = np.zeros(len(p), dtype=bool)
-    free[[6, 7, 8, 11, 12, 13, 16, 17, 18]] = True
+    free[[30, 31, 32, 39, 40, 41, 48, 49, 50]] = True
     folded = folded_faces(q, fs, free)
     assert folded.any()
-    rows = np.repeat(folded, fs.counts)
+    lost = grow_region(fs, len(p), folded, DRAGGED_RINGS)  # the folded faces and their ring
+    assert lost.sum() > folded.sum()
+    rows = np.repeat(lost, fs.counts)
     own = keep_targets(q, fs, free, folded)
-    assert np.array_equal(own[~rows], q[fs.indices[~rows]])  # valid faces: their own corners
-    # a folded face takes a neighbour's shape (a unit square, turned half a turn)
-    assert np.array_equal(quality(p, fs, own)[folded], np.ones(int(folded.sum())))
+    assert np.array_equal(own[~rows], q[fs.indices[~rows]])  # the rest: their own corners
+    # a folded or dragged face takes a neighbour's shape (a unit square, turned half a turn)
+    assert np.array_equal(quality(p, fs, own)[lost], np.ones(int(lost.sum())))
     ref = keep_targets(q, fs, free, folded, reference=p * 2.0)
     assert np.array_equal(ref[rows], 2.0 * p[fs.indices[rows]])
+    assert np.array_equal(ref[~rows], q[fs.indices[~rows]])
 
 
 def test_grow_region_adds_the_faces_sharing_a_node_per_ring():
