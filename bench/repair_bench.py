@@ -5,6 +5,8 @@ peer, measured against the undeformed mesh.
 Columns (one row each per case):
 - `input`: the deformed mesh as given (what the deformation alone did);
 - `keep`: ours, the solver-mesh default: EEGTParams(target="keep", region="folds");
+- `keep-cl`: the same with backend "auto" (the region's optimizer on the OpenCL device when
+  pyopencl finds one, as `--backend auto` does; skipped without one);
 - `ref`: ours with the reference: EEGTParams(target="reference", region="folds"),
   reference_points = the undeformed mesh;
 - `whole`: ours, today's whole-mesh default (target "regular", region "mesh"), only on
@@ -43,9 +45,10 @@ import numpy as np
 from bench import repair_meshes as rm
 from bench.peer_invertible_maps import PeerMissing, run_peer
 from core import EEGTParams, FaceSet, mesh_stats, untangle_and_smooth
+from core.choices import global_stage_on_device
 
 AWAY = 6  # wall cells this many rings or more from every folded cell: "away from the fold"
-COLUMNS = ("keep", "ref", "whole", "peer")
+COLUMNS = ("keep", "keep-cl", "ref", "whole", "peer")
 
 __all__ = ["AWAY", "COLUMNS", "Row", "default_specs", "measure", "more_specs", "run_case",
            "scale_specs"]
@@ -258,19 +261,21 @@ def measure(case: rm.Case, geo: Geometry, pts: np.ndarray, row: Row) -> Row:
 
 PARAMS = {
     "keep": EEGTParams(target="keep", region="folds"),
+    "keep-cl": EEGTParams(target="keep", region="folds"),
     "ref": EEGTParams(target="reference", region="folds"),
     "whole": EEGTParams(),
 }
+BACKENDS = {"keep-cl": "auto"}  # the others: "numpy"
 
 
 def _ours_child(case: rm.Case, col: str, out) -> None:
     ref = case.reference if col == "ref" else None
     t0 = time.perf_counter()
     res = untangle_and_smooth(case.points, case.faces, fixed=case.fixed, params=PARAMS[col],
-                              reference_points=ref)
+                              reference_points=ref, backend=BACKENDS.get(col, "numpy"))
     secs = time.perf_counter() - t0
     out.send((np.asarray(res.points, dtype=np.float64)[:, :2],
-              np.asarray(res.moved, dtype=bool), res.status, res.message, secs))
+              np.asarray(res.moved, dtype=bool), res.status, res.message, secs, res.backend))
     out.close()
 
 
@@ -324,7 +329,10 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
                 row.seconds = float("nan") if got else timeout
                 rows.append(row)
                 continue
-            pts, moved, status, message, row.seconds = got
+            pts, moved, status, message, row.seconds, backend = got
+            if col in BACKENDS and not global_stage_on_device(backend):
+                print(f"<!-- {col}: no OpenCL device ({backend}) -->", file=sys.stderr)
+                continue
             m = re.search(r"\((\d+) rings around", message)
             row.rings = int(m.group(1)) if m else None
             row.note = "" if status in ("untangled", "valid") else f"{status}: {message[:160]}"

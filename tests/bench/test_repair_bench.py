@@ -49,6 +49,16 @@ def test_repair_row_leaves_nothing_inverted_and_the_input_row_measures_the_defor
     assert len(rb.summary(rows)) == 4
 
 
+def test_keep_on_the_device_repairs_like_keep_or_is_left_out_without_one():
+    case = rm.load(TINY)
+    rows = rb.run_case(case, ("keep", "keep-cl"), timeout=120.0)
+    by = {r.column: r for r in rows}
+    assert set(by) <= {"input", "keep", "keep-cl"} and "keep" in by
+    if "keep-cl" in by:  # (its bits are NumPy's on a CPU device: tests/opencl)
+        assert by["keep-cl"].inverted == 0, by["keep-cl"].note
+        assert 0.0 < by["keep-cl"].moved < 0.5
+
+
 def test_measures_of_a_rectangle_and_a_triangle():
     p = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [0.0, 1.0], [2.0, 3.0]])
     fs = faces_from_csr([0, 4], [4, 3], [0, 1, 2, 3, 3, 2, 4], 5)
