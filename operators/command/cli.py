@@ -358,7 +358,8 @@ def _run_objects(objs, ns, params, backend: str, device, reference,
         if ns.uv is not None:
             res = uv_runner.run_object(obj, params, ns.uv or None, backend=backend,
                                        device=device, use_pins=not ns.no_pinned,
-                                       scope=ns.uv_scope, progress=progress,
+                                       targets=ns.uv_target, scope=ns.uv_scope,
+                                       progress=progress,
                                        write_on_fail=not ns.no_write_on_fail)
             m = None  # --metrics measure positions, which --uv leaves alone
         else:

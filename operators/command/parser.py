@@ -7,7 +7,7 @@ import argparse
 from typing import Any
 
 from ...core import EEGTParams
-from ...core.choices import BACKEND, UV_SCOPE, ids
+from ...core.choices import BACKEND, UV_SCOPE, UV_TARGET, ids
 from ...fileio.solver_formats import SOLVER_EXTENSIONS
 from ..ui import props
 from . import metrics
@@ -77,6 +77,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--uv-scope", choices=ids(UV_SCOPE), default=UV_SCOPE[0].id,
                    help="with --uv: move only tangled faces and the faces around them "
                         "(tangles, default) or every face (selection)")
+    p.add_argument("--uv-target", choices=ids(UV_TARGET), default=UV_TARGET[0].id,
+                   help="with --uv: the shape each UV face is pulled towards: " +
+                        ", ".join(f"{c.id} ({c.label})" for c in UV_TARGET) +
+                        f" (default {UV_TARGET[0].id})")
     p.add_argument("--project", action="store_true",
                    help="project slightly non-planar meshes onto their plane")
     p.add_argument("--reference", metavar="OBJ", default=None,

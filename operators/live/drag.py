@@ -34,7 +34,8 @@ from ...core.run import (
     uv_region,
     uv_vertex_corners,
 )
-from ...core.uv import weld_uv
+from ...core.run.live import UVRegion
+from ...core.uv import UVLayout, keep_shape_targets, weld_uv
 from ..mesh import mesh_io, runner
 from ..shared import modes
 from ..shared.refusal import refusal
@@ -65,6 +66,22 @@ def nearest_within(points: np.ndarray, at: np.ndarray, radius: float,
     return i if i >= 0 and d[i] <= radius else None
 
 
+def press_shapes(layout: UVLayout, region: UVRegion, pins: np.ndarray | None,
+                 shapes3d: np.ndarray) -> np.ndarray:
+    """Target "Keep Shapes" (``choices.UV_TARGET`` "KEEP") of a UV drag: (C, 2) per-corner
+    targets in ``layout.faces`` order, the layout as it is at the press
+    (``core.uv.keep_shape_targets``): each face its own shape (island orientation, as the
+    region sees it), a face tangled at the press (among the region's faces, with the pins
+    ``pins``; a grabbed UV vertex counts as free, as the session's corners kept as given
+    have it) a same-arity neighbour's, else its 3D face's (``shapes3d``). Made once per
+    drag: the frames pull towards the layout the drag started from."""
+    faces = np.zeros(layout.faces.n_faces, dtype=bool)
+    faces[region.face_ids] = True
+    held = np.zeros(layout.n_nodes, dtype=bool) if pins is None else pins.copy()
+    held[region.nodes[region.grab]] = False
+    return keep_shape_targets(layout, layout.points, faces, held, shapes3d).targets
+
+
 class UVDrag:
     """A drag of UV vertices of ``obj``'s active UV map (Edit Mode).
 
@@ -72,7 +89,11 @@ class UVDrag:
     vertex nearest to ``cursor`` within ``radius`` (UV units), else the UV vertices of the
     selected faces. The grabbed vertices keep their offset to the cursor (both clamped into
     ``self.bounds``). A moved UV vertex moves with all its loops, also those of faces outside
-    the region (scope "selection": unselected faces that share it), so nothing tears."""
+    the region (scope "selection": unselected faces that share it), so nothing tears.
+
+    ``target_shape`` (``choices.UV_TARGET``): "3D" each face's 3D face, "REGULAR" the
+    regular polygon, "KEEP" the layout at the press (``press_shapes``); made once, sliced
+    to the region's corners (``self.target_shapes``)."""
 
     def __init__(self, obj: bpy.types.Object, cursor: tuple[float, float], params: EEGTParams,
                  *, radius: float = 0.0, grab: np.ndarray | None = None, use_pins: bool = True,
@@ -111,10 +132,14 @@ class UVDrag:
             pins[lay.loop_node[pinned]] = True
         region = uv_region(lay, grab, selected, scope, pins)
         targets = None
-        if target_shape == "3D":
+        if target_shape in ("3D", "KEEP"):
             fs3d = faces_from_csr(topo.loop_start, topo.loop_total, topo.corner_verts,
                                   len(me.vertices))
-            targets = face_shapes_2d(co, fs3d)[region.rows]
+            targets = face_shapes_2d(co, fs3d)
+            if target_shape == "KEEP":
+                targets = press_shapes(lay, region, pins, targets)
+            targets = targets[region.rows]
+        self.target_shapes = targets  # (c, 2) the region's corners' targets; None: regular
         self.region = region
         self.session = LiveSession(region.points, region.faces, region.grab,
                                    fixed=region.fixed, params=params, targets=targets)
