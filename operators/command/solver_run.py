@@ -47,8 +47,8 @@ from ...core import (
     summaries,
 )
 from ...core.mesh import orient_faces
-from ...core.metrics import inverted_corners, reference_targets, reference_to_2d
-from ...core.run import accept, frozen_note, untangle_and_smooth_3d
+from ...core.metrics import reference_targets, reference_to_2d
+from ...core.run import accept, folded_faces, frozen_note, keep_targets, untangle_and_smooth_3d
 from ...fileio import checked_write, solver_mesh
 from ...fileio.solver_formats import SOLVER_EXTENSIONS, solver_format
 from ..mesh import reference_mesh, runner
@@ -132,15 +132,13 @@ REPAIR = {"target": "keep", "region": "folds"}  # a solver mesh's defaults: a re
 # keeps every cell as built outside the folds (--target regular --region mesh: the paper's)
 
 
-def judge_targets(points2d: np.ndarray, fs: FaceSet) -> np.ndarray:
-    """Target "keep"'s per-corner targets for judging the file: each face's own corners,
-    the folded ones NaN (their shape is the run's to choose; judged against the regular
-    polygon, as an unusable target is)."""
-    corners = points2d[fs.indices, :2].copy()
-    folded = np.repeat(inverted_corners(points2d, fs),
-                       fs.counts)
-    corners[folded] = np.nan
-    return corners
+def judge_targets(points2d: np.ndarray, fs: FaceSet, movable: np.ndarray,
+                  reference2d: np.ndarray | None = None) -> np.ndarray:
+    """Target "keep"'s per-corner targets for judging the file: the run's own rule
+    (core.run.keep_targets: each face's own corners, the folded faces and those they drag
+    a neighbour's or the reference's shape)."""
+    return keep_targets(points2d, fs, movable, folded_faces(points2d, fs, movable),
+                        reference2d)
 
 
 @dataclasses.dataclass
@@ -200,10 +198,11 @@ def plan(ns: argparse.Namespace, params: EEGTParams
                       "move")
     p = SolverPlan(sm, name, fs, fixed, plane, plane.to_2d(points3d), Stats(0, 0.0, 0.0),
                    clockwise=clockwise)
-    if ns.reference:
-        _plan_reference(p, ns.reference)
-    elif params.target == "keep":
-        p.targets = judge_targets(p.points2d, fs)
+    ref2d = _plan_reference(p, ns.reference) if ns.reference else None
+    if params.target == "keep":
+        p.targets = judge_targets(p.points2d, fs, movable, ref2d)
+    elif ref2d is not None:
+        p.targets = reference_targets(ref2d, fs, sm.n_points)
     p.before = mesh_stats(p.points2d, fs, p.targets)
     if ns.output:
         try:  # the output format can hold this mesh: the same check as the real write
@@ -244,9 +243,10 @@ def clockwise_note(clockwise: int, n_faces: int) -> str:
             "its own node order")
 
 
-def _plan_reference(p: SolverPlan, path: str) -> None:
+def _plan_reference(p: SolverPlan, path: str) -> np.ndarray:
     """--reference with a solver mesh: an .obj or a solver mesh of the input's topology
-    (same points, same faces in the same order), normalised; its face-corner targets."""
+    (same points, same faces in the same order), normalised into ``p.reference``; returns
+    its points in the input's plane (N, 2), checked as reference shapes."""
     sm, fs = p.sm, p.faces
     try:
         if is_solver(path):
@@ -274,7 +274,8 @@ def _plan_reference(p: SolverPlan, path: str) -> None:
         ref2d = reference_to_2d(p.reference, fs, sm.n_points, PLANE_TOL)
     except ValueError as exc:
         raise _refuse(f"reference '{path}': {str(exc).splitlines()[0]}") from None
-    p.targets = reference_targets(ref2d, fs, sm.n_points)
+    reference_targets(ref2d, fs, sm.n_points)  # its one-line checks
+    return ref2d
 
 
 @dataclasses.dataclass
@@ -328,6 +329,8 @@ def run(p: SolverPlan, ns: argparse.Namespace, params: EEGTParams, backend: str,
         out.notes.append("no improvement over the input: mesh unchanged")
     out.written = keep
     out.before, out.after = runner.stats_dict(p.before), runner.stats_dict(after)
+    if p.targets is not None:
+        out.regular = runner.regular_stats(p.points2d, after2d, p.faces)
     out.claim_no_more_than_result()
     return SolverOutcome(out, staged, after2d)
 

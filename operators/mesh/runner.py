@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 import bpy
 import numpy as np
 
-from ...core import EEGTParams, faces_from_csr
+from ...core import EEGTParams, faces_from_csr, mesh_stats
 from ...core.mesh import EdgeInfo, PlaneFrame, ragged_arange
 from ...core.metrics import reference_targets, reference_to_2d
 from ...core.run import frozen_note, untangle_and_smooth_3d
@@ -36,6 +36,15 @@ def stats_dict(stats: Any) -> dict[str, Any] | None:
             "q_avg": float(stats.q_avg)}
 
 
+def regular_stats(before2d: np.ndarray, after2d: np.ndarray, faces: Any
+                  ) -> dict[str, Any]:
+    """The `ObjectResult.regular` block: the mesh's stats against regular polygons at the
+    input's and at the result's 2D points (a run with target shapes reports these beside
+    its own)."""
+    return {"before": stats_dict(mesh_stats(before2d, faces)),
+            "after": stats_dict(mesh_stats(after2d, faces))}
+
+
 def stats_from_quality(q: np.ndarray) -> dict[str, Any]:
     """n_inverted / q_min / q_avg of per-face mean ratios (inverted faces count as 0)."""
     return {"n_inverted": int(np.count_nonzero(q <= 0.0)),
@@ -51,6 +60,17 @@ class ObjectResult(RunResult):
     KIND: ClassVar[str] = "mesh"
 
     n_nodes: int = 0
+    # with target shapes (keep, reference): the mean ratio against the regular polygon
+    # beside them, {"before": stats, "after": stats} (`regular_stats`); None: regular targets
+    regular: dict[str, Any] | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON report's entry (`RunResult.as_dict`); "regular" only for runs with
+        target shapes."""
+        out = super().as_dict()
+        if out.get("regular") is None:
+            out.pop("regular", None)
+        return out
 
     def claim_no_more_than_result(self) -> None:
         """Make a 'valid' / 'untangled' status 'failed' when the kept or written positions
@@ -73,6 +93,10 @@ class ObjectResult(RunResult):
             text += f"; FAILED to untangle: {self.message}"
         if not self.written:
             text += "; nothing written" if self.status != "failed" else "; not written"
+        if self.regular:
+            b, a = self.regular["before"], self.regular["after"]
+            text += (f"; against regular polygons: q_min {b['q_min']:.4f} -> {a['q_min']:.4f}, "
+                     f"q_avg {b['q_avg']:.4f} -> {a['q_avg']:.4f}")
         if self.notes:
             text += "; " + "; ".join(self.notes)
         return text
@@ -109,6 +133,7 @@ class Job:
     result: Any = None
     new_co: np.ndarray | None = None  # (N, 3) float32 to write, None when nothing changed
     after: dict[str, Any] | None = None
+    regular: dict[str, Any] | None = None  # `regular_stats` (runs with target shapes)
 
 
 def _fail(job: Job, message: str) -> Job:
@@ -326,6 +351,9 @@ def compute(job: Job, params: EEGTParams, backend: str = "numpy", progress: Prog
     if res.status == "cancelled":
         return
     new_co = _positions_to_write(job, res.points)
+    if params.target != "regular":
+        after2d = job.points2d if new_co is None else written_2d(job, new_co)
+        job.regular = regular_stats(job.points2d, after2d, job.faces)
     if new_co is None:
         job.after = stats_dict(res.before)
         if res.status != "failed":
@@ -403,6 +431,9 @@ def apply(obj: bpy.types.Object, job: Job, *, write: bool = True) -> ObjectResul
         out.written = True
     if not out.written:
         out.after = out.before if job.new_co is not None else out.after
+    if job.regular is not None:
+        out.regular = dict(job.regular, after=job.regular["after"] if out.written else
+                           job.regular["before"])
     out.claim_no_more_than_result()
     return out
 

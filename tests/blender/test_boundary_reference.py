@@ -189,6 +189,9 @@ def test_reference_from_the_basis_key_keeps_the_grading(bpy, ext):
     lr = obj.eegt_last_run
     assert lr.inverted_before == 43 and lr.inverted_after == 0
     assert "face shapes of shape key 'Basis'" in lr.message
+    # beside the stats against the reference's shapes, the mean ratio against regular
+    # polygons (the report line's last stats)
+    assert "; against regular polygons: q_min 0.0000 -> " in lr.message
     moved = key_positions(obj, "Moved")
     med, p95 = size_ratios(moved[:, :2].astype(np.float64), ref, faces)
     assert med < 1.05 and p95 < 1.2  # measured 1.02 / 1.06 in the core

@@ -38,6 +38,22 @@ def test_solver_mesh_default_is_a_repair_that_keeps_every_node_outside_the_margi
     assert code == 0 and w["after"]["n_inverted"] == 0
     assert not w["message"].startswith("folds only")
     assert _moved(src, whole_out).sum() > 0.5 * n_points  # every free node moved
+    # the repair reports against its own targets and against regular polygons beside them;
+    # the whole-mesh run's targets are regular polygons: no second block
+    reg = o["regular"]
+    assert reg["before"]["n_inverted"] == o["before"]["n_inverted"] > 0
+    assert reg["after"]["n_inverted"] == 0 and 0.0 < reg["after"]["q_min"] <= 1.0
+    assert "regular" not in w
+
+
+def test_repair_report_line_gives_the_regular_mean_ratio_beside_the_targets(bpy, ext, tmp_path,
+                                                                           capfd):
+    src = channel_msh(tmp_path / "c.msh", shift=0.15)
+    code = ext.operators.command.cli.run([str(src), "-o", str(tmp_path / "r.msh")])[0]
+    assert code == 0
+    line = [ln for ln in capfd.readouterr().out.splitlines()
+            if ln.startswith("EEGT c: inverted ")][-1]
+    assert "; against regular polygons: q_min 0.0000 -> " in line
 
 
 def test_repair_of_a_valid_solver_mesh_writes_it_unchanged(bpy, ext, tmp_path):
