@@ -209,7 +209,8 @@ class FoldoverEnergy:
                             for a in corner_factor_values(groups, factors, False))
         self.power = 1.0
         self._full = None  # the layout of z = [x, y], built on first use
-        self._pack = None  # (state, layout, fixed coordinates) of the last lbfgs call
+        self._pack = None  # (state, layout, fixed coordinates, free nodes) of the last
+        # lbfgs call
         if self.n_elem == 0:
             self.i0 = self.i1 = self.i2 = np.zeros(0, dtype=np.int64)
             return None
@@ -305,13 +306,18 @@ class FoldoverEnergy:
             fixed = np.ones(self.n_nodes, dtype=bool)
             fixed[st.fidx] = False
             fix = np.flatnonzero(fixed)
-            nf, nx = st.nf, fix.size
-            pos = np.empty((2, self.n_nodes), dtype=np.int64)
-            pos[0, st.fidx] = np.arange(nf)
-            pos[1, st.fidx] = np.arange(nf, 2 * nf)
-            pos[0, fix] = np.arange(2 * nf, 2 * nf + nx)
-            pos[1, fix] = np.arange(2 * nf + nx, 2 * nf + 2 * nx)
-            self._pack = (st, self.flat_layout(pos), np.concatenate([st.x[fix], st.y[fix]]))
+            layout = None  # the layout depends on the free nodes only: another state of
+            if self._pack is not None and np.array_equal(self._pack[3], st.fidx):  # them
+                layout = self._pack[1]  # (a resumed solve's next call) keeps it
+            else:
+                nf, nx = st.nf, fix.size
+                pos = np.empty((2, self.n_nodes), dtype=np.int64)
+                pos[0, st.fidx] = np.arange(nf)
+                pos[1, st.fidx] = np.arange(nf, 2 * nf)
+                pos[0, fix] = np.arange(2 * nf, 2 * nf + nx)
+                pos[1, fix] = np.arange(2 * nf + nx, 2 * nf + 2 * nx)
+                layout = self.flat_layout(pos)
+            self._pack = (st, layout, np.concatenate([st.x[fix], st.y[fix]]), st.fidx)
         return self._pack[1], self._pack[2]
 
     # -- corner Jacobians ------------------------------------------------------------------

@@ -141,6 +141,10 @@ class Resume:
     top_inv: int | None = None
     stall: int = 0
     calls: int = 0  # calls that used it
+    energy: Any = None  # the first call's FoldoverEnergy (`_energy_for`): its tables and
+    # reference sizes, as one long call keeps them; reused while the fixed nodes keep ...
+    fixed_at: np.ndarray | None = None  # ... these coordinates (bit for bit) and the ...
+    free_at: np.ndarray | None = None  # ... same free nodes
 
 
 def untangle_budget(iterations: int, n_free: int) -> int:
@@ -195,7 +199,7 @@ def untangle_global(
     if not np.all(np.isfinite(P)):
         raise ValueError("points contain NaN or inf")
     opt = options if options is not None else GlobalOptions()
-    en = FoldoverEnergy(P, groups, free, factors)
+    en = _energy_for(P, groups, free, factors, resume if slide is None else None)
     run_lbfgs = opt.run(sliding=slide is not None)
     st, later = _untangle_state(P, free, slide, en)
     n_inv = en.n_inverted(st.x, st.y)
@@ -236,6 +240,25 @@ def untangle_global(
         gave_up=run.gave_up,
     )
     return out, info
+
+
+def _energy_for(P: np.ndarray, groups: Mapping[int, np.ndarray], free: np.ndarray,
+                factors: Factors | None, resume: Resume | None) -> FoldoverEnergy:
+    """The call's energy: the resumed solve's own (built by its first call: the same
+    tables, frozen corners and reference sizes, as in one long call) while the sub-mesh's
+    fixed nodes keep their bits and the free ones are the same; else a new one (kept in
+    `resume` for the next call). Building it costs about 60 ms at 50 000 faces, a
+    frame's share."""
+    fixed = P[~free]
+    r = resume
+    if r is not None and r.energy is not None and r.free_at is not None and \
+            r.free_at.shape == free.shape and np.array_equal(r.free_at, free) and \
+            r.fixed_at.tobytes() == fixed.tobytes():
+        return r.energy
+    en = FoldoverEnergy(P, groups, free, factors)
+    if r is not None:
+        r.energy, r.fixed_at, r.free_at = en, fixed.copy(), free.copy()
+    return en
 
 
 class _Continuation:
