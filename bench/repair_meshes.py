@@ -32,7 +32,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing as mp
 import subprocess
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -46,7 +48,7 @@ from core.mesh.topology import boundary_nodes
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "build" / "repair_bench"
-VERSION = 1  # part of every cache name: bump when a generator changes its output
+VERSION = 2  # part of every cache name: bump when a generator changes its output
 
 __all__ = ["CACHE", "PUBLIC", "Case", "Spec", "load", "make"]
 
@@ -310,6 +312,16 @@ def gmsh_bl(body: str, n: int, first: float = 1e-4, quads: bool = True
     return p, fs, wall, 1.0
 
 
+def fresh_gmsh_bl(body: str, n: int, first: float = 1e-4, quads: bool = True
+                  ) -> tuple[np.ndarray, FaceSet, np.ndarray, float]:
+    """`gmsh_bl` in a new process: gmsh keeps state from one mesh to the next inside a
+    process (the same call made twice in one process gives another mesh), so each case is
+    made from a fresh gmsh and is the same mesh whatever was made before it."""
+    ctx = mp.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+        return pool.submit(gmsh_bl, body, n, first, quads).result()
+
+
 def _gmsh_bl_once(gmsh, body: str, h: float, first: float, quads: bool):
     gmsh.initialize(readConfigFiles=False)
     try:
@@ -458,7 +470,7 @@ def base(spec: Spec, mirror: Path | None = None):
         return cgrid(int(n), first or 1e-5, quads=m == "cgrid")
     if m.startswith("gmshbl"):
         body = "naca" if m.endswith("naca") else "cylinder"
-        return gmsh_bl(body, int(n), first or 1e-4, quads="tri" not in m)
+        return fresh_gmsh_bl(body, int(n), first or 1e-4, quads="tri" not in m)
     if m == "public":
         return public_mesh(str(n), mirror)
     raise ValueError(f"unknown mesh {m!r}")

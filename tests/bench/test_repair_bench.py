@@ -59,6 +59,16 @@ def test_keep_on_the_device_repairs_like_keep_or_is_left_out_without_one():
         assert 0.0 < by["keep-cl"].moved < 0.5
 
 
+def test_a_gmsh_boundary_layer_mesh_is_the_same_whatever_was_made_before_it():
+    pytest.importorskip("gmsh", reason="gmsh is not installed")
+    first = rm.fresh_gmsh_bl("cylinder", 1000)
+    rm.fresh_gmsh_bl("naca", 1000, quads=False)  # another mesh in between
+    again = rm.fresh_gmsh_bl("cylinder", 1000)
+    assert first[0].tobytes() == again[0].tobytes()
+    assert np.array_equal(first[1].indices, again[1].indices)
+    assert np.array_equal(first[2], again[2])
+
+
 def test_measures_of_a_rectangle_and_a_triangle():
     p = np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [0.0, 1.0], [2.0, 3.0]])
     fs = faces_from_csr([0, 4], [4, 3], [0, 1, 2, 3, 3, 2, 4], 5)
