@@ -44,7 +44,7 @@ from .acceptance import accept
 from .algorithm1 import Deadline, smooth_loop, untangle_loop
 from .live_repair import RegionRepair, RepairStep, carried
 from .live_reuse import AnchorSearch, GivenQuality, StillDistances
-from .pipeline import as_given, frozen_faces, normalisation
+from .pipeline import as_given, frozen_faces, normalisation, untangle_and_smooth
 
 __all__ = ["CURSOR_REACH", "FINISH_BUDGET", "FINISH_GO_ON", "FINISH_KEEP", "FINISH_LIMIT",
            "FINISH_RESTORE", "FRAME_BUDGET", "FRAME_ITERATIONS", "LiveFrame", "LiveSession",
@@ -142,6 +142,9 @@ class LiveSession:
         pins = np.zeros(n, dtype=bool) if fixed is None else np.array(fixed, dtype=bool)
         if pins.shape != (n,):
             raise ValueError(f"fixed must be an ({n},) bool array, got shape {pins.shape}")
+        self._pins_given = pins.copy()  # the caller's pins without the grabbed nodes
+        self._targets_given = None if targets is None or isinstance(targets, Targets) else \
+            np.asarray(targets, dtype=np.float64)  # `released`'s (region "folds" takes arrays)
         pins[self.grab] = True
         self.pins = pins
         edges = checked_edges(None, self.fs, n)
@@ -240,6 +243,27 @@ class LiveSession:
         if self.repair is not None and frame.n_tangled > self.held:
             return FINISH_GO_ON
         return FINISH_KEEP if frame.stats.n_inverted <= self.start_inverted else FINISH_RESTORE
+
+    def released(self, points: np.ndarray) -> np.ndarray | None:
+        """The drag's end ``points`` ((N, 2), this session's coordinates) repaired with the
+        grabbed nodes let go: a release that cannot open the fold with them at the cursor
+        (``finishing`` says restore) keeps the drag this way instead of putting every value
+        back. It is the one-shot repair (``untangle_and_smooth``, region "folds": the
+        folded faces and a margin grown while needed; the session's pins and targets; every
+        other node keeps its bits), so the grabbed nodes move only as far as the fold needs.
+        None when that run does not end valid either (or the drag is rigid)."""
+        if self.rigid:
+            return None
+        params = replace(self.params, region="folds", target="regular")
+        try:
+            res = untangle_and_smooth(np.asarray(points, dtype=np.float64), self.faces,
+                                      fixed=self._pins_given, params=params,
+                                      targets=self._targets_given)
+        except ValueError:
+            return None
+        if res.status not in ("valid", "untangled"):
+            return None
+        return np.asarray(res.points, dtype=np.float64)
 
     def _prepare(self) -> None:
         """The drag's set-up at the start positions: the engine's state and the still nodes'

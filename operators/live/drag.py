@@ -191,16 +191,19 @@ class UVDrag:
         frame = self.session.frame(self.targets_for(cursor), iterations=iterations,
                                    budget=core_budget(budget, self.times))
         t1 = time.perf_counter()
-        # only the loops of UV vertices that moved: a loop a float32 step away from its UV
-        # vertex's value (welded) keeps its own bits, as Untangle & Smooth UVs keeps them
-        moved = np.any(frame.points != self.region.points, axis=1)[self.loop_local]
-        values = self.original.copy()
-        values[moved] = storable_float32(
-            self.region.to_uv(frame.points)[self.loop_local[moved]])
-        self._write(values)
+        self.write_points(frame.points)
         self.frame = frame
         self.times = StepTimes(t1 - t0, time.perf_counter() - t1)
         return frame
+
+    def write_points(self, points: np.ndarray) -> None:
+        """The region's UV vertices at ``points`` (the session's coordinates) into the edit
+        mesh: only the loops of UV vertices that moved (a loop a float32 step away from its
+        UV vertex's value, welded, keeps its own bits, as Untangle & Smooth UVs keeps them)."""
+        moved = np.any(points != self.region.points, axis=1)[self.loop_local]
+        values = self.original.copy()
+        values[moved] = storable_float32(self.region.to_uv(points)[self.loop_local[moved]])
+        self._write(values)
 
     def _write(self, values: np.ndarray) -> None:
         if not self.bm.is_valid:
@@ -291,14 +294,19 @@ class MeshDrag:
         frame = self.session.frame(targets, iterations=iterations,
                                    budget=core_budget(budget, self.times))
         t1 = time.perf_counter()
-        moved = frame.points != self.job.points2d
-        co = self.original.copy()
-        rows = np.flatnonzero(moved.any(axis=1))
-        co[rows] = storable_float32(self.job.frame.to_3d(frame.points[rows]))
-        self._write(co)
+        self.write_points(frame.points)
         self.frame = frame
         self.times = StepTimes(t1 - t0, time.perf_counter() - t1)
         return frame
+
+    def write_points(self, points: np.ndarray) -> None:
+        """The mesh's nodes at ``points`` (plane coordinates) into the edit mesh: only the
+        vertices that moved."""
+        moved = points != self.job.points2d
+        co = self.original.copy()
+        rows = np.flatnonzero(moved.any(axis=1))
+        co[rows] = storable_float32(self.job.frame.to_3d(points[rows]))
+        self._write(co)
 
     def _write(self, co: np.ndarray) -> None:
         if not self.bm.is_valid:

@@ -121,7 +121,8 @@ class _LiveModal:
     def _release(self, context: bpy.types.Context) -> set[str]:
         """Release or Enter (and each frame after one that goes on finishing): keep the
         result when nothing is left to open (one undo step), go on with frames while the
-        escalation opens a fold, put every value back when it cannot (warned)."""
+        escalation opens a fold; when it cannot, the one-shot repair with the grabbed
+        vertices let go (``LiveSession.released``), else every value back (warned)."""
         if self._finish_from is not None and \
                 time.perf_counter() - self._finish_from > FINISH_LIMIT:
             what = FINISH_RESTORE
@@ -134,6 +135,12 @@ class _LiveModal:
                 self._finish_from = time.perf_counter()
                 self._area.header_text_set(status_text(self._drag.frame, 0.0))
             return {"RUNNING_MODAL"}
+        kept = self._drag.session.released(self._drag.frame.points)
+        if kept is not None:  # the grabbed vertices let go: the repair opens the fold
+            self._drag.write_points(kept)
+            self.report({"INFO"}, "Live Untangle let the grabbed vertices move to open the "
+                        "fold (with them at the cursor it stayed folded)")
+            return self._end(context, {"FINISHED"})
         self._drag.restore()
         self.report({"WARNING"}, "Live Untangle could not open the fold: every value put "
                     "back (nothing kept)")

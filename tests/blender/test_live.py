@@ -289,3 +289,34 @@ def test_live_tools_registered_with_menus_and_panels(bpy, ext):
     assert hasattr(bpy.types, "MESH_OT_eegt_live_untangle")
     assert hasattr(bpy.types, "IMAGE_PT_eegt_live")
     assert _live(ext).ops_live.status_text(None).startswith("Live Untangle")
+
+
+def test_uv_drag_release_that_cannot_open_the_fold_lets_the_grabbed_vertex_go(bpy, ext):
+    """A UV vertex dragged out of its island: with it held at the cursor the fold cannot
+    open (a release would put every value back); the session's one-shot repair with the
+    vertex let go, written by the drag, leaves no face of the map inverted (signed areas
+    of the written loops) and every border loop bit-identical."""
+    obj = _grid(bpy)
+    before = _edit_uv(bpy, obj)
+    drag = _live(ext).drag.UVDrag(obj, (0.5, 0.9), ext.core.EEGTParams(), radius=0.05)
+    frame = drag.step((0.5, 1.12), budget=None)
+    for _ in range(100):
+        if drag.session.finishing(frame) != "go on":
+            break
+        frame = drag.step(None, budget=None)
+    assert drag.session.finishing(frame) == "restore"
+    kept = drag.session.released(frame.points)
+    assert kept is not None
+    drag.write_points(kept)
+    after = _edit_uv(bpy, obj).astype(np.float64)
+    face = loop_faces(obj)  # a face's loops are consecutive, in its order
+    nxt = np.arange(1, face.size + 1)
+    last = np.flatnonzero(np.append(face[1:] != face[:-1], True))
+    nxt[last] = np.append(0, last[:-1] + 1)
+    cross = after[:, 0] * after[nxt, 1] - after[nxt, 0] * after[:, 1]
+    assert (np.bincount(face, cross) > 0.0).all()
+    lay = drag.layout
+    on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
+    assert np.array_equal(after[on_border], before[on_border])
+    grabbed = lay.loop_node == drag.region.nodes[drag.region.grab][0]
+    assert (after[grabbed, 1] < 1.0).all()  # back inside the island (the cursor was at 1.12)

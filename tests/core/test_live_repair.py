@@ -110,3 +110,29 @@ def test_release_goes_on_while_a_fold_is_left_then_keeps():
         frame = live.frame(None, budget=0.1)
     assert live.finishing(frame) == "keep"
     assert frame.stats.n_inverted == 0
+
+
+def test_a_release_that_cannot_open_the_fold_with_the_node_held_lets_it_go():
+    """The grabbed node dragged out of the square (its faces can never all turn left with it
+    there): the escalation holds the fold and a release would put every value back; the
+    one-shot repair with the node let go (``released``) keeps the drag valid instead:
+    0 inverted faces by an independent count, the border and the nodes outside the repair's
+    margin bit-identical, the node moved back inside."""
+    p, fs = jittered_square(2000, jitter=0.0)
+    border = boundary_nodes(p.shape[0], fs)
+    g = int(np.argmin(np.hypot(p[:, 0] - 0.5, p[:, 1] - 0.9)))
+    live = LiveSession(p, fs, [g])
+    out = p[[g]] + [0.0, 0.2]  # above the top edge
+    frame = live.frame(out, budget=None)
+    for _ in range(100):
+        if live.finishing(frame) != "go on":
+            break
+        frame = live.frame(None, budget=None)
+    assert live.finishing(frame) == "restore" and frame.stats.n_inverted > 0
+    kept = live.released(frame.points)
+    assert kept is not None
+    assert not inverted_faces(kept, fs).any()
+    assert np.array_equal(kept[border], p[border])
+    assert kept[g, 1] < 1.0  # back inside the square
+    far = np.hypot(p[:, 0] - p[g, 0], p[:, 1] - p[g, 1]) > 0.5
+    assert np.array_equal(kept[far], frame.points[far])  # the repair's margin only
