@@ -50,7 +50,7 @@ from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
 from .hopeless_groups import hopeless_groups, hopeless_groups_note
-from .repair import keep_targets, repair_folds, touching
+from .repair import Repaired, keep_targets, repair_folds, touching
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -378,7 +378,20 @@ def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
     return EEGTResult(done.points, status, before, after, res.untangle_iterations,
                       res.smooth_iterations, time.perf_counter() - t0, res.backend, message,
                       moved, res.global_iterations, res.n_frozen, res.n_target_fallback,
-                      res.n_kept)
+                      res.n_kept, targets=_folds_targets(p, fs, done, whole, keep))
+
+
+def _folds_targets(p: np.ndarray, fs: FaceSet, done: Repaired, whole: np.ndarray | None,
+                   keep: bool) -> np.ndarray | None:
+    """The whole mesh's per-corner targets a region "folds" run measured against (what a
+    caller measuring its result again must use: the float32 check of
+    `untangle_and_smooth_3d`): target "keep", each face's own corners with the region's
+    from its run; else the caller's or the reference's (None: regular polygons)."""
+    if not keep:
+        return whole
+    out = p[fs.indices, :2].copy()
+    out[np.repeat(done.region, fs.counts)] = done.targets
+    return out
 
 
 def _outside_stats(p: np.ndarray, fs: FaceSet, region: np.ndarray, bad: np.ndarray,

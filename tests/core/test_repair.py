@@ -173,3 +173,24 @@ def test_keep_target_refusals_are_one_line(bad, why):
     params = EEGTParams(target=kw.pop("target"), region="folds")
     with pytest.raises(ValueError, match=why):
         untangle_and_smooth(p, faces, params=params, **kw)
+
+
+def test_folds_run_stored_as_float32_is_measured_against_the_runs_own_targets():
+    """The float32 check of the 3D entry measures the stored result again: against the
+    targets the folds run measured with (``EEGTResult.targets``: each face's own corners,
+    the region's from its run), not against regular polygons, so before and after speak of
+    the same targets."""
+    from core.run import untangle_and_smooth_3d
+
+    p, faces = _o_grid()
+    bent = _turned_wall(p, 25.0)
+    wall = np.hypot(p[:, 0], p[:, 1]) < 1.0 + 1e-12
+    p3 = np.column_stack([bent, np.zeros(len(bent))])
+    params = EEGTParams(target="keep", region="folds")
+    r64 = untangle_and_smooth_3d(p3, faces, fixed=wall, params=params, stored=np.float64)
+    r32 = untangle_and_smooth_3d(p3, faces, fixed=wall, params=params, stored=np.float32)
+    assert r64.status == r32.status == "untangled"
+    assert r32.before == r64.before and r32.after.n_inverted == 0
+    assert abs(r32.after.q_avg - r64.after.q_avg) < 1e-6
+    assert abs(r32.after.q_min - r64.after.q_min) < 1e-5
+    assert r32.targets.shape == (sum(len(f) for f in faces), 2)
