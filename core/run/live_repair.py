@@ -25,12 +25,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh.faces import FaceSet
+from ..metrics.face_quality import inverted_corners
 from ..metrics.targets import Targets, corner_factors
 from ..optimize import GlobalOptions, Resume, untangle_global
 from ..optimize.submesh import Neighbourhood
 
 __all__ = ["GROW_AFTER", "MAX_REGION", "RINGS", "SPREAD", "STUCK_AFTER", "RegionRepair",
-           "RepairStep", "carried", "inverted_faces"]
+           "RepairStep", "carried"]
 
 RINGS = (3, 6, 12, 24, 48)  # rings around the inverted faces, level by level (then the whole)
 GROW_AFTER = 4  # solves in a row without progress ...
@@ -50,18 +51,6 @@ FRONT = 1.25  # ... and at least this x its length ahead (a box with room for th
 SIDES = (3.0, 2.0, 1.0, 0.5, 0.25, 0.125)  # ... across it: the first of these x its length
 #                                            that leaves that room
 MAX_CARRIED = 64  # grabbed nodes `carried` moves one by one at most (more: no carried start)
-
-
-def inverted_faces(points: np.ndarray, fs: FaceSet) -> np.ndarray:
-    """(F,) bool: faces with a corner whose det is not positive at ``points`` (N, 2)."""
-    out = np.zeros(fs.n_faces, dtype=bool)
-    x, y = points[:, 0], points[:, 1]
-    for g in fs.groups:
-        gx, gy = x[g.nodes], y[g.nodes]
-        nx, ny = np.roll(gx, -1, axis=0) - gx, np.roll(gy, -1, axis=0) - gy
-        px, py = np.roll(gx, 1, axis=0) - gx, np.roll(gy, 1, axis=0) - gy
-        out[g.ids] = ((nx * py - ny * px) <= 0.0).any(axis=0)
-    return out
 
 
 def _lengths(a: np.ndarray, c: np.ndarray, length: float) -> tuple[float, float, float]:
@@ -196,7 +185,7 @@ class RegionRepair:
     def bad_elements(self, points: np.ndarray, skip: np.ndarray) -> np.ndarray:
         """(E,) bool, ``Neighbourhood`` order: elements inverted at ``points`` that a move
         can change (not ``skip``: frozen, (E,) bool) and not held."""
-        return inverted_faces(points, self.fs)[self.elem_face] & ~skip & ~self.held
+        return inverted_corners(points, self.fs)[self.elem_face] & ~skip & ~self.held
 
     def iterations(self, seconds: float | None, elements: int) -> int:
         """Iterations a solve of ``elements`` elements gets for ``seconds`` (None: no limit),

@@ -9,7 +9,18 @@ from bench.meshgen import jittered_square
 from core import boundary_nodes
 from core.optimize import GlobalOptions, Resume, untangle_global
 from core.run.live import LiveSession
-from core.run.live_repair import carried, inverted_faces
+from core.run.live_repair import carried
+
+
+def inverted_faces(points: np.ndarray, fs) -> np.ndarray:
+    """(F,) bool, counted here face by face: a face with a corner whose cross product of
+    its edges is not positive."""
+    out = np.zeros(fs.n_faces, dtype=bool)
+    for f in range(fs.n_faces):
+        ring = points[fs.indices[fs.offsets[f]:fs.offsets[f + 1]]]
+        e_next, e_prev = np.roll(ring, -1, axis=0) - ring, np.roll(ring, 1, axis=0) - ring
+        out[f] = bool(np.any(e_next[:, 0] * e_prev[:, 1] - e_next[:, 1] * e_prev[:, 0] <= 0.0))
+    return out
 
 
 def _folded(n: int = 800):
