@@ -306,9 +306,10 @@ class FoldoverEnergy:
             fixed = np.ones(self.n_nodes, dtype=bool)
             fixed[st.fidx] = False
             fix = np.flatnonzero(fixed)
-            layout = None  # the layout depends on the free nodes only: another state of
-            if self._pack is not None and np.array_equal(self._pack[3], st.fidx):  # them
-                layout = self._pack[1]  # (a resumed solve's next call) keeps it
+            # the layout depends on the free nodes only: another state of the same free
+            # nodes (a resumed solve's next call) keeps it
+            if self._pack is not None and np.array_equal(self._pack[3], st.fidx):
+                layout = self._pack[1]
             else:
                 nf, nx = st.nf, fix.size
                 pos = np.empty((2, self.n_nodes), dtype=np.int64)

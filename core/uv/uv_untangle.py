@@ -46,6 +46,7 @@ from ..metrics.kept import Kept, kept_corners, kept_note
 from ..params import EEGTParams
 from ..run import acceptance
 from ..run.pipeline import untangle_and_smooth
+from ..run.repair import grow_region
 from .uv_layout import UVLayout, island_faces
 from .uv_overlap import overlapping_faces
 
@@ -300,22 +301,6 @@ def tangled_faces(layout: UVLayout, points: np.ndarray, faces: np.ndarray,
     return bad & faces
 
 
-def _grown(fs_nodes: np.ndarray, face_of: np.ndarray, n_faces: int, seed: np.ndarray,
-           rings: int) -> np.ndarray:
-    """(F,) bool: ``seed`` faces and every face within ``rings`` rings of faces of them
-    (faces sharing a node count as neighbours)."""
-    region = seed.copy()
-    for _ in range(rings):
-        near = np.zeros(int(fs_nodes.max()) + 1, dtype=bool)
-        near[fs_nodes[region[face_of]]] = True
-        grown = np.zeros(n_faces, dtype=bool)
-        np.logical_or.at(grown, face_of, near[fs_nodes])
-        if np.array_equal(grown, region):
-            break
-        region = grown
-    return region
-
-
 REGION_SHARE = 0.75  # a region over this share of the island's faces: run the whole island
 
 
@@ -326,10 +311,10 @@ def _regions(sub: FaceSet, bad: np.ndarray | None, rings: int) -> list[np.ndarra
     every = np.ones(sub.n_faces, dtype=bool)
     if bad is None or not bad.any():
         return [every]
-    face_of = np.repeat(np.arange(sub.n_faces), sub.counts)
+    n_nodes = int(sub.indices.max()) + 1
     out, r = [], rings
     while True:
-        region = _grown(sub.indices, face_of, sub.n_faces, bad, r)
+        region = grow_region(sub, n_nodes, bad, r)
         if region.sum() > REGION_SHARE * sub.n_faces:
             break
         out.append(region)
