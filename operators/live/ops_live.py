@@ -49,11 +49,10 @@ def status_text(frame: Any, finishing: float | None = None) -> str:
     if frame is None:
         return "Live Untangle: press the left mouse button on a vertex and drag (Esc: cancel)"
     s = frame.stats
-    what = ""
     if finishing is not None:
-        return (f"Live Untangle: finishing, {s.n_inverted} faces still inverted{what}, "
+        return (f"Live Untangle: finishing, {s.n_inverted} faces still inverted, "
                 f"{finishing:.1f} s  |  Esc: cancel the drag")
-    return (f"Live Untangle: inverted {s.n_inverted}{what}, worst {s.q_min:.3f}, mean "
+    return (f"Live Untangle: inverted {s.n_inverted}, worst {s.q_min:.3f}, mean "
             f"{s.q_avg:.3f}  |  release / Enter: apply, Esc / right button: cancel")
 
 
