@@ -22,7 +22,18 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import guikit
 import meshcheck
-from guikit import check, finish, log, shot, to_x11, wait_until, xdo
+from guikit import (
+    check,
+    finish,
+    live_frames,
+    live_settled,
+    log,
+    n_ops,
+    shot,
+    to_x11,
+    wait_until,
+    xdo,
+)
 
 ART = sys.argv[sys.argv.index("--") + 1]
 OBJ = "Live"
@@ -35,11 +46,6 @@ def uv_editor():
     win = bpy.context.window_manager.windows[0]
     area = next(a for a in win.screen.areas if a.type == "IMAGE_EDITOR")
     return win, area, {r.type: r for r in area.regions}
-
-
-def frames():
-    ext = sys.modules["bl_ext.user_default.eegt_blender"]
-    return ext.operators.live.ops_live.LAST_FRAMES
 
 
 def read_uv():
@@ -67,15 +73,6 @@ def drag_to(w, start, n=12):
     for k in range(1, n + 1):
         xdo("mousemove", *screen_of(w, start + DRAG * k / n))
         yield 0.12
-
-
-def settled(count):
-    f = frames()
-    return len(f) > count and f[-1][0].status != "tangled" and f[-1][0].smooth_iterations <= 1
-
-
-def n_ops():
-    return len(bpy.context.window_manager.operators)
 
 
 def steps():
@@ -116,10 +113,11 @@ def steps():
     yield 0.3
     yield from drag_to(w, start)
     shot("live_during", w)
-    count = len(frames())
+    count = len(live_frames())
     check(count > 0, "no live frame ran during the drag")
-    ok = yield from wait_until(lambda: settled(0), 60)
-    check(ok, f"still tangled 60 s after the drag: {frames()[-1][0] if frames() else None}")
+    ok = yield from wait_until(lambda: live_settled(0), 60)
+    last = live_frames()[-1][0] if live_frames() else None
+    check(ok, f"still tangled 60 s after the drag: {last}")
     before_release = n_ops()
     xdo("mouseup", "1")
     done = yield from wait_until(lambda: n_ops() > before_release
@@ -141,7 +139,7 @@ def steps():
     area.tag_redraw()
     yield 0.8
     shot("live_after", uv_editor()[2]["WINDOW"])
-    log(f"drag: {len(frames())} frames, 0 inverted, border and {int(pins.sum())} pinned "
+    log(f"drag: {len(live_frames())} frames, 0 inverted, border and {int(pins.sum())} pinned "
         f"loops exact, {n_moved} loops moved, drop point within {err:.4f}")
 
     # 2. Ctrl+Z: every UV back
@@ -159,7 +157,7 @@ def steps():
     xdo("mousedown", "1")
     yield 0.3
     yield from drag_to(w, start, 6)
-    check(len(frames()) > 0, "no live frame ran during the second drag")
+    check(len(live_frames()) > 0, "no live frame ran during the second drag")
     mid = read_uv()[0]
     check(mid.tobytes() != uv0.tobytes(), "the second drag changed nothing before Esc")
     ops_before = n_ops()

@@ -26,7 +26,18 @@ from mathutils import Vector
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import guikit
 import meshcheck
-from guikit import check, finish, log, shot, to_x11, wait_until, xdo
+from guikit import (
+    check,
+    finish,
+    live_frames,
+    live_settled,
+    log,
+    n_ops,
+    shot,
+    to_x11,
+    wait_until,
+    xdo,
+)
 
 ART = sys.argv[sys.argv.index("--") + 1]
 OBJ = "Live"
@@ -41,11 +52,6 @@ def view3d():
     area = max((a for a in win.screen.areas if a.type == "VIEW_3D"),
                key=lambda a: a.width * a.height)
     return win, area, {r.type: r for r in area.regions}
-
-
-def frames():
-    ext = sys.modules["bl_ext.user_default.eegt_blender"]
-    return ext.operators.live.ops_live.LAST_FRAMES
 
 
 def positions():
@@ -69,15 +75,6 @@ def screen_of(w, rv3d, co):
     ob = bpy.data.objects[OBJ]
     p = location_3d_to_region_2d(w, rv3d, ob.matrix_world @ Vector(tuple(co)))
     return to_x11(w.x + p.x, w.y + p.y)
-
-
-def settled(count):
-    f = frames()
-    return len(f) > count and f[-1][0].status != "tangled" and f[-1][0].smooth_iterations <= 1
-
-
-def n_ops():
-    return len(bpy.context.window_manager.operators)
 
 
 def steps():
@@ -129,10 +126,11 @@ def steps():
         xdo("mousemove", *screen_of(w, rv3d, start + DRAG * k / 3))
         yield 0.12
     shot("live3d_during", w)
-    check(len(frames()) > 0, "no live frame ran during the drag")
-    tangled = sum(f.status == "tangled" for f, _ in frames())
-    ok = yield from wait_until(lambda: settled(0), 60)
-    check(ok, f"still tangled 60 s after the drag: {frames()[-1][0] if frames() else None}")
+    check(len(live_frames()) > 0, "no live frame ran during the drag")
+    tangled = sum(f.status == "tangled" for f, _ in live_frames())
+    ok = yield from wait_until(lambda: live_settled(0), 60)
+    last = live_frames()[-1][0] if live_frames() else None
+    check(ok, f"still tangled 60 s after the drag: {last}")
     before_release = n_ops()
     xdo("mouseup", "1")
     done = yield from wait_until(lambda: n_ops() > before_release
@@ -154,7 +152,7 @@ def steps():
     area.tag_redraw()
     yield 0.8
     shot("live3d_after", w)
-    log(f"drag: {len(frames())} frames ({tangled} tangled), 0 inverted, border and pins "
+    log(f"drag: {len(live_frames())} frames ({tangled} tangled), 0 inverted, border and pins "
         f"exact, {n_moved} vertices moved, drop point within {err:.4f}")
 
     # 2. Ctrl+Z: every position back

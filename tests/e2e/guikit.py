@@ -29,6 +29,23 @@ def check(cond, msg):
         raise CheckFailed(msg)
 
 
+def live_frames():
+    """The frames Live Untangle's tools ran (the extension's LAST_FRAMES: (frame, times))."""
+    ext = sys.modules["bl_ext.user_default.eegt_blender"]
+    return ext.operators.live.ops_live.LAST_FRAMES
+
+
+def live_settled(count):
+    """More than ``count`` live frames ran and the last one is untangled and smoothed."""
+    f = live_frames()
+    return len(f) > count and f[-1][0].status != "tangled" and f[-1][0].smooth_iterations <= 1
+
+
+def n_ops():
+    """Operators registered in the window manager (one more per undo step pushed)."""
+    return len(bpy.context.window_manager.operators)
+
+
 def log(msg):
     print(f"{TAG} {time.time() - T0:6.1f}s {msg}", flush=True)
 
