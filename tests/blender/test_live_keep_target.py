@@ -8,14 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .test_uv_keep_target import graded_grid
+from .test_uv_keep_target import GROWTH, H, graded_grid, graded_uv_grid
 from .uvtools import uv_values
 
 pytestmark = pytest.mark.blender
 
 N = 12  # vertices per side of the clean graded grid
-GROWTH = 1.08  # each column of cells this much wider than the one before
-H = 0.02  # cell height; column i is 4 * H * GROWTH**i wide (4:1 to 8.6:1)
 
 
 def _drag_mod(ext):
@@ -30,27 +28,9 @@ def _edit_uv(bpy, obj) -> np.ndarray:
 
 
 def clean_graded_grid(bpy, pins: tuple[tuple[int, int], ...] = ()):
-    """(N-1) x (N-1) unit quads in 3D, UVs graded and anisotropic (no fold); the UV vertices
-    (i, j) of ``pins`` pinned. The object, active, in Edit Mode; its UVs."""
-    me = bpy.data.meshes.new("Clean")
-    verts = [(float(i), float(j), 0.0) for j in range(N) for i in range(N)]
-    faces = [(j * N + i, j * N + i + 1, (j + 1) * N + i + 1, (j + 1) * N + i)
-             for j in range(N - 1) for i in range(N - 1)]
-    me.from_pydata(verts, [], faces)
-    layer = me.uv_layers.new(name="UVMap")
-    u = np.concatenate([[0.0], np.cumsum(4.0 * H * GROWTH ** np.arange(N - 1))])
-    uv = np.stack([u[np.tile(np.arange(N), N)], H * np.repeat(np.arange(N), N)], axis=1)
-    cv = np.empty(len(me.loops), np.int64)
-    me.loops.foreach_get("vertex_index", cv)
-    me.attributes[layer.name].data.foreach_set("vector", uv[cv].astype(np.float32).ravel())
-    if pins:
-        if hasattr(layer, "pin_ensure"):
-            layer.pin_ensure()
-        layer.pin.foreach_set("value", np.isin(cv, [j * N + i for i, j in pins]))
-    obj = bpy.data.objects.new("Clean", me)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    obj.select_set(True)
+    """``graded_uv_grid`` of N vertices a side without its fold (cells 4:1 to 8.6:1), the UV
+    vertices (i, j) of ``pins`` pinned. The object, in Edit Mode; its UVs."""
+    obj, uv = graded_uv_grid(bpy, N, fold=False, pins=pins, name="Clean")
     bpy.ops.object.mode_set(mode="EDIT")
     return obj, uv
 

@@ -7,41 +7,56 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bench import uv_assets
+
 from .uvtools import uv_values
 
 pytestmark = pytest.mark.blender
 
 N = 10  # vertices per side
 GROWTH = 1.08  # each column of cells this much wider than the one before
+H = 0.02  # cell height; column i is 4 * H * GROWTH**i wide
 
 
 def ops_uv(ext):
     return ext.operators.uv.ops_uv
 
 
-def graded_grid(bpy):
-    """(N-1) x (N-1) unit quads in 3D; UVs anisotropic and graded (cells 0.02 tall, column i
-    4 * 0.02 * GROWTH**i wide), the UV of vertex (4, 4) dragged across its right neighbour:
-    faces fold. The object, active and selected."""
-    me = bpy.data.meshes.new("Graded")
-    verts = [(float(i), float(j), 0.0) for j in range(N) for i in range(N)]
-    faces = [(j * N + i, j * N + i + 1, (j + 1) * N + i + 1, (j + 1) * N + i)
-             for j in range(N - 1) for i in range(N - 1)]
+def graded_uv_grid(bpy, n: int = N, fold: bool = True, pins: tuple[tuple[int, int], ...] = (),
+                   name: str = "Graded"):
+    """(n-1) x (n-1) unit quads in 3D; UVs anisotropic and graded (cells 0.02 tall, column i
+    4 * 0.02 * GROWTH**i wide); with ``fold`` the UV of vertex (4, 4) dragged across its
+    right neighbour (faces fold); the UV vertices (i, j) of ``pins`` pinned. (the object,
+    active and selected; its UVs per vertex)."""
+    me = bpy.data.meshes.new(name)
+    verts = [(float(i), float(j), 0.0) for j in range(n) for i in range(n)]
+    faces = [(j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i)
+             for j in range(n - 1) for i in range(n - 1)]
     me.from_pydata(verts, [], faces)
     layer = me.uv_layers.new(name="UVMap")
-    h = 0.02
-    width = 4.0 * h * GROWTH ** np.arange(N - 1)
+    h = H
+    width = 4.0 * h * GROWTH ** np.arange(n - 1)
     u = np.concatenate([[0.0], np.cumsum(width)])
-    uv = np.stack([u[np.tile(np.arange(N), N)], h * np.repeat(np.arange(N), N)], axis=1)
-    uv[4 * N + 4] = (u[5] + 0.5 * width[5], 4.3 * h)
+    uv = np.stack([u[np.tile(np.arange(n), n)], h * np.repeat(np.arange(n), n)], axis=1)
+    if fold:
+        uv[4 * n + 4] = (u[5] + 0.5 * width[5], 4.3 * h)
     cv = np.empty(len(me.loops), np.int64)
     me.loops.foreach_get("vertex_index", cv)
     me.attributes[layer.name].data.foreach_set("vector", uv[cv].astype(np.float32).ravel())
-    obj = bpy.data.objects.new("Graded", me)
+    if pins:
+        if hasattr(layer, "pin_ensure"):
+            layer.pin_ensure()
+        layer.pin.foreach_set("value", np.isin(cv, [j * n + i for i, j in pins]))
+    obj = bpy.data.objects.new(name, me)
     bpy.context.scene.collection.objects.link(obj)
     bpy.context.view_layer.objects.active = obj
     obj.select_set(True)
-    return obj
+    return obj, uv
+
+
+def graded_grid(bpy):
+    """``graded_uv_grid`` with its fold: the object."""
+    return graded_uv_grid(bpy)[0]
 
 
 def counts(ext, obj) -> dict:
@@ -53,14 +68,7 @@ def margin_loops(ext, obj, uv: np.ndarray) -> np.ndarray:
     """(L,) bool: loops of UV vertices of the tangled faces grown by two rings of faces (the
     repair's first margin); every other loop must keep its bits."""
     core = ext.core
-    me = obj.data
-    ls = np.empty(len(me.polygons), np.int64)
-    lt = np.empty(len(me.polygons), np.int64)
-    cv = np.empty(len(me.loops), np.int64)
-    me.polygons.foreach_get("loop_start", ls)
-    me.polygons.foreach_get("loop_total", lt)
-    me.loops.foreach_get("vertex_index", cv)
-    lay = core.uv.weld_uv(ls, lt, cv, uv)
+    lay = core.uv.weld_uv(*uv_assets.mesh_csr(obj), uv)
     every = np.ones(lay.faces.n_faces, bool)
     tangled = core.uv.tangled_faces(lay, lay.points, every)
     assert tangled.sum() == 6
