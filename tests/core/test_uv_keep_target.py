@@ -6,6 +6,7 @@ fold) towards a same-arity neighbour's, else its 3D face's; with scope "tangles"
 from __future__ import annotations
 
 import numpy as np
+from uvdata import grid_uv
 
 from core import boundary_nodes
 from core.mesh.faces import faces_from_csr
@@ -31,21 +32,15 @@ def graded_grid(drag: bool = True, mirror: bool = False):
     ``drag`` the UV vertex (5, 5) is dragged across its right neighbour (to the middle of
     column 6, 0.3 up): two faces fold (a crossed corner), four more overlap. ``mirror``:
     u -> -u (exact)."""
-    g = np.arange(N, dtype=np.float64)
-    x, y = np.meshgrid(g, g)
-    co = np.stack([x.ravel(), y.ravel(), np.zeros(N * N)], axis=1)
-    i = (np.arange(N - 1)[None, :] + N * np.arange(N - 1)[:, None]).ravel()
-    quads = np.stack([i, i + 1, i + N + 1, i + N], axis=1)
-    cv = quads.ravel().astype(np.int64)
+    grid = grid_uv(N)  # the mesh; its UVs are set here
+    co, ls, lt, cv = grid.co, grid.loop_start, grid.loop_total, grid.corner_verts
     width = 4.0 * GROWTH ** np.arange(N - 1)
     u = np.concatenate([[0.0], np.cumsum(width)])
-    uv = np.stack([u[np.tile(np.arange(N), N)], y.ravel()], axis=1)
+    uv = np.stack([u[np.tile(np.arange(N), N)], co[:, 1]], axis=1)
     if drag:
         uv[DRAGGED] = (u[6] + 0.5 * width[6], 5.3)
     if mirror:
         uv[:, 0] = -uv[:, 0]
-    ls = np.arange(quads.shape[0], dtype=np.int64) * 4
-    lt = np.full(quads.shape[0], 4, dtype=np.int64)
     lay = weld_uv(ls, lt, cv, uv[cv].astype(np.float32))
     shapes3d = face_shapes_2d(co, faces_from_csr(ls, lt, cv, co.shape[0]))
     column = np.tile(np.arange(N - 1), N - 1)  # of each face
