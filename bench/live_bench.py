@@ -13,8 +13,10 @@ Blender's own Smart UV Project and Unwrap (``UNWRAPS``: Suzanne subdivided twice
 of the largest island dragged across 20-50 % of the island's width in 40 frames, then the
 cursor still until the frames stop (at most ``REST`` s). Prints markdown tables with medians
 over the seeds: updates per second during the drag, the time from the cursor's stop until
-no face is inverted and the grabbed vertex is at the cursor ("open"), and the inverted faces
-at the end (an independent count: ``inverted_faces``).
+no face is inverted ("open"), the inverted faces at the end (an independent count:
+``inverted_faces``) and how far the layout holds the grabbed vertex back from the cursor at
+the end (``LiveFrame.held_back``, as a share of the drag's length: 0 when it is on the
+cursor).
 
 Run: ``python -m bench.live_bench [--faces 5000 50000] [--frames 40] [--seeds 3]
 [--part grid drags]``.
@@ -239,7 +241,7 @@ def run_drag(ext, drag, path, budget, rest: float = REST) -> dict:
         frames += 1
         if opened is None and frame.status != "tangled":
             opened = time.perf_counter() - t0
-        if opened is not None and frame.smooth_iterations <= 1:
+        if opened is not None and frame.smooth_iterations <= 1 and not frame.pull_iterations:
             break
     return {"rate": len(path) / sum(walls), "median": statistics.median(walls),
             "worst": max(walls), "open": opened, "rest_frames": frames, "frame": drag.frame}
@@ -284,6 +286,8 @@ def drags(bpy, ext, name: str, seeds: int, escalate: bool = True) -> dict:
         faces = [reg.faces.indices[a:b] for a, b in zip(reg.faces.offsets[:-1],
                                                          reg.faces.offsets[1:])]
         r["inverted"] = int(inverted_faces(r["frame"].points, faces).sum())
+        way = float(np.hypot(*(np.asarray(path[-1]) - path[0]))) * len(path) / (len(path) - 1)
+        r["held"] = r["frame"].held_back / way  # the share of the drag the layout held back
         r["faces"], r["share"] = reg.faces.n_faces, share
         r["mesh"] = len(obj.data.polygons)
         drag.restore()
@@ -295,7 +299,9 @@ def drags(bpy, ext, name: str, seeds: int, escalate: bool = True) -> dict:
             "worst": max(r["worst"] for r in rows),
             "open": statistics.median(opened) if len(opened) == len(rows) else None,
             "open_max": max(opened) if opened else None,
-            "inverted": max(r["inverted"] for r in rows), "seeds": len(rows)}
+            "inverted": max(r["inverted"] for r in rows), "seeds": len(rows),
+            "held": statistics.median(r["held"] for r in rows),
+            "held_max": max(r["held"] for r in rows)}
 
 
 def main() -> None:
@@ -321,13 +327,15 @@ def main() -> None:
                   f"{r['inverted']} |")
     if "drags" in args.part:
         print("\n| unwrap | mesh faces | island faces | seeds | updates/s (median) | worst "
-              "frame s | open after s (median, worst) | inverted at end (worst) |")
-        print("|---|---:|---:|---:|---:|---:|---:|---:|")
+              "frame s | open after s (median, worst) | inverted at end (worst) | "
+              "held back (share of the drag: median, worst) |")
+        print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
         for name in args.unwraps:
             r = drags(bpy, ext, name, args.seeds, escalate=not args.eegt_only)
             op = "never" if r["open"] is None else f"{r['open']:.2f}, {r['open_max']:.2f}"
             print(f"| {r['name']} | {r['mesh']} | {r['faces']} | {r['seeds']} | "
-                  f"{r['rate']:.1f} | {r['worst']:.3f} | {op} | {r['inverted']} |", flush=True)
+                  f"{r['rate']:.1f} | {r['worst']:.3f} | {op} | {r['inverted']} | "
+                  f"{r['held']:.2f}, {r['held_max']:.2f} |", flush=True)
 
 
 if __name__ == "__main__":

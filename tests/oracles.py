@@ -1,5 +1,5 @@
-"""The tests' one boundary oracle: which edges, nodes and loops of a polygon mesh are on its
-boundary, computed here from the faces alone (NumPy and Python only).
+"""The tests' oracles: which edges, nodes and loops of a polygon mesh are on its boundary,
+computed here from the faces alone, and which faces are inverted (NumPy and Python only).
 
 It deliberately imports nothing of the project (not core.mesh.topology, not core.eegt.boundary)
 so the tests check the extension's boundary handling against a second implementation. It runs
@@ -81,3 +81,15 @@ def boundary_loops(faces) -> list[np.ndarray]:
             v = nxt[v]
         loops.append(np.array(loop))
     return loops
+
+
+def inverted_faces(points: np.ndarray, faces) -> np.ndarray:
+    """(F,) bool, counted face by face: a face with a corner whose cross product of its
+    edges (to the next and to the previous node) is not positive."""
+    rings = _faces(faces)
+    out = np.zeros(len(rings), dtype=bool)
+    for f, nodes in enumerate(rings):
+        ring = np.asarray(points, dtype=np.float64)[nodes, :2]
+        e_next, e_prev = np.roll(ring, -1, axis=0) - ring, np.roll(ring, 1, axis=0) - ring
+        out[f] = bool(np.any(e_next[:, 0] * e_prev[:, 1] - e_next[:, 1] * e_prev[:, 0] <= 0.0))
+    return out

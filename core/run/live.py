@@ -42,6 +42,7 @@ from ..params import EEGTParams
 from ..uv.uv_layout import UVLayout, island_faces
 from .acceptance import accept
 from .algorithm1 import Deadline, smooth_loop, untangle_loop
+from .live_pull import PULL_AFTER, GrabPull
 from .live_repair import RegionRepair, RepairStep, carried
 from .live_reuse import AnchorSearch, GivenQuality, StillDistances
 from .pipeline import as_given, frozen_faces, normalisation, untangle_and_smooth
@@ -115,6 +116,8 @@ class LiveFrame:
     seconds: float
     n_tangled: int = 0  # inverted faces a move can change (the rest are frozen)
     repair: RepairStep | None = None  # the escalation's region solves, if they ran
+    pull_iterations: int = 0  # the pull's iterations (``core.run.live_pull``), if it ran
+    held_back: float = 0.0  # how far the layout holds the grabbed nodes from the cursor
 
 
 class LiveSession:
@@ -123,11 +126,14 @@ class LiveSession:
     ``points`` (N, 2) and ``faces`` a counterclockwise planar mesh; ``fixed`` (N,) bool pins
     that stay; ``grab`` the node ids that follow the cursor (pins too); ``targets`` per-corner
     target shapes as in ``untangle_and_smooth``. When every node of the faces is grabbed,
-    frames translate them (nothing to optimize: ``rigid``). ValueError (one line) for bad
+    frames translate them (nothing to optimize: ``rigid``). ``escalate``: the foldover-free
+    stage on a tangled region and the rest's pull (``pull_after`` seconds of a tangled rest;
+    None: never) as ``frame`` describes; False: EEGT only. ValueError (one line) for bad
     input or when nothing but some grabbed nodes can move."""
 
     def __init__(self, points, faces, grab, fixed=None, params: EEGTParams | None = None,
-                 targets=None, escalate: bool = True, keep_as_given: bool = True):
+                 targets=None, escalate: bool = True, keep_as_given: bool = True,
+                 pull_after: float | None = PULL_AFTER):
         p = np.array(points, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != 2 or not np.isfinite(p).all():
             raise ValueError("points must be a finite (N, 2) array")
@@ -181,6 +187,13 @@ class LiveSession:
         self._valid: np.ndarray | None = None  # the last positions with no movable face
         #                                        inverted (a carried start's base) ...
         self._start: np.ndarray | None = None  # ... and the drag's start, when valid
+        self._asked: np.ndarray | None = None  # where the cursor put the grabbed nodes last
+        self._still_since: float | None = None  # when the cursor stopped there
+        self._pull: GrabPull | None = None  # the rest's pull (``core.run.live_pull``) ...
+        self._pull_at: tuple | None = None  # ... its base, centre, scale and the cursor's place
+        self._pull_tried = False  # ... tried at this rest (its base had no room)
+        self.pull_after = pull_after if escalate else None  # seconds of a tangled rest
+        #                                                     before the pull (None: never)
         if not self.rigid:
             if escalate:
                 self.repair = RegionRepair(self.fs, self.free, self.targets)
@@ -236,12 +249,17 @@ class LiveSession:
     def finishing(self, frame: LiveFrame | None) -> str:
         """What a release (or Enter) after ``frame`` does (``FINISH_*``): keep the result
         (no face a move can change is inverted), go on with frames (the escalation still has
-        a fold to open) or give up (only folds it held are left: kept when no more faces
-        are inverted than at the drag's start, else every value goes back)."""
+        a fold to open, or the rest's pull has yet to run) or give up (only folds it held
+        are left: kept when no more faces are inverted than at the drag's start, else every
+        value goes back)."""
         if frame is None or frame.status != "tangled":
             return FINISH_KEEP
         if self.repair is not None and frame.n_tangled > self.held:
             return FINISH_GO_ON
+        if frame.n_tangled and self.pull_after is not None and self._pull is None and \
+                not self._pull_tried and self.grab.size and \
+                (self._valid is not None or self._start is not None):
+            return FINISH_GO_ON  # the rest's pull has not run yet
         return FINISH_KEEP if frame.stats.n_inverted <= self.start_inverted else FINISH_RESTORE
 
     def released(self, points: np.ndarray) -> np.ndarray | None:
@@ -291,8 +309,80 @@ class LiveSession:
         (``RegionRepair.solve``); while the frames start tangled, each gives EEGT its half
         again (a fold it opens ends the escalation) and the region's solve the rest, resuming
         the last one's; once a frame ends with no such face, EEGT smooths on and the
-        escalation ends."""
+        escalation ends.
+
+        A rest that yields (``core.run.live_pull``): when the cursor has stayed put for
+        ``pull_after`` seconds (``PULL_AFTER``; None: never) and the frames still end with a
+        movable face inverted, the next frames go back to the last layout with none (or the
+        drag's start) and pull the grabbed nodes towards the cursor through valid layouts
+        only, as far as the layout lets them (``LiveFrame.held_back``); a move of the
+        cursor ends the pull."""
         t0 = time.perf_counter()
+        if grab_to is not None:
+            asked = np.asarray(grab_to, dtype=np.float64).reshape(-1, 2)
+            if self._asked is None or not np.array_equal(asked, self._asked):
+                self._asked, self._still_since = asked.copy(), t0  # the cursor moved
+                self._pull, self._pull_tried = None, False
+        if self._still_since is None:
+            self._still_since = t0
+        if self._pull is not None:
+            return self._pulled(t0, budget)
+        out = self._frame(grab_to, iterations, budget, t0)
+        if out.n_tangled and self.pull_after is not None and \
+                t0 - self._still_since >= self.pull_after:
+            self._start_pull()
+        return out
+
+    def _start_pull(self) -> None:
+        """The rest's pull from the last layout with no movable face inverted (else the
+        drag's start) towards where the cursor holds the grabbed nodes; none when there is
+        no such layout or no room in it (tried once a rest)."""
+        base = self._valid if self._valid is not None else self._start
+        if base is None or self._pull_tried or not self.grab.size:
+            return
+        self._pull_tried = True
+        center, scale = normalisation(self.points, self.fs)
+        try:
+            self._pull = GrabPull((base - center) / scale, self.fs, self.free, self.grab,
+                                  (self.points[self.grab] - center) / scale, self.targets)
+        except ValueError:
+            return
+        self._pull_at = (base, center, scale, self.points[self.grab].copy())
+
+    def _pulled(self, t0: float, budget: float | None) -> LiveFrame:
+        """A frame of the rest's pull: its solves for the frame's time, the moved nodes
+        written over the base (every other node keeps the base's bits); the grabbed nodes
+        exactly where the cursor put them once the pull got them there (the pull ends and
+        the frames smooth on from there)."""
+        pull = self._pull
+        base, center, scale, asked = self._pull_at
+        step = pull.advance(None if budget is None else t0 + budget - self._tail)
+        t_tail = time.perf_counter()
+        out = base.copy()
+        out[pull.moved] = step.positions * scale + center
+        if step.snapped:
+            out[self.grab] = asked
+            self._pull = None
+        given = as_given(out, self.fs, center, scale)
+        after = self._stats(given)
+        n_tangled = max(after.n_inverted - int(frozen_faces(given, self.fs, self.free).sum()),
+                        0)
+        if n_tangled == 0:
+            self._valid = out
+            if self.repair is not None:
+                self.repair.reset()
+        dx, dy = out[self.grab, 0] - asked[:, 0], out[self.grab, 1] - asked[:, 1]
+        held = np.sqrt(dx * dx + dy * dy)
+        self.points = out
+        status = "tangled" if after.n_inverted else "untangled"
+        t1 = time.perf_counter()
+        self._tail = t1 - t_tail
+        return LiveFrame(out, after, status, 0, 0, t1 - t0, n_tangled,
+                         pull_iterations=0 if step.done and not step.iterations
+                         else step.iterations, held_back=float(held.max()))
+
+    def _frame(self, grab_to, iterations: int, budget: float | None, t0: float) -> LiveFrame:
+        """``frame`` without the rest's pull."""
         p = self.points.copy()
         if grab_to is not None:
             p[self.grab] = np.asarray(grab_to, dtype=np.float64).reshape(-1, 2)

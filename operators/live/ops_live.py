@@ -52,8 +52,9 @@ def status_text(frame: Any, finishing: float | None = None) -> str:
     if finishing is not None:
         return (f"Live Untangle: finishing, {s.n_inverted} faces still inverted, "
                 f"{finishing:.1f} s  |  Esc: cancel the drag")
+    held = "  |  the layout holds the vertex back from the cursor" if frame.held_back else ""
     return (f"Live Untangle: inverted {s.n_inverted}, worst {s.q_min:.3f}, mean "
-            f"{s.q_avg:.3f}  |  release / Enter: apply, Esc / right button: cancel")
+            f"{s.q_avg:.3f}{held}  |  release / Enter: apply, Esc / right button: cancel")
 
 
 class _LiveModal:
@@ -158,9 +159,9 @@ class _LiveModal:
     def _busy(self) -> bool:
         """Whether the mesh may still change with the cursor still."""
         f = self._drag.frame
-        if f is None or f.untangle_iterations + f.smooth_iterations == 0:
+        if f is None or f.untangle_iterations + f.smooth_iterations + f.pull_iterations == 0:
             return False  # no frame yet, or one that ran nothing (a selection moved whole)
-        if f.status == "tangled":
+        if f.status == "tangled" or f.pull_iterations:
             return self._settle < UNTANGLE_FRAMES
         return self._settle < SETTLE_FRAMES and f.smooth_iterations > 1
 

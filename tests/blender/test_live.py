@@ -292,13 +292,14 @@ def test_live_tools_registered_with_menus_and_panels(bpy, ext):
 
 
 def test_uv_drag_release_that_cannot_open_the_fold_lets_the_grabbed_vertex_go(bpy, ext):
-    """A UV vertex dragged out of its island: with it held at the cursor the fold cannot
-    open (a release would put every value back); the session's one-shot repair with the
-    vertex let go, written by the drag, leaves no face of the map inverted (signed areas
-    of the written loops) and every border loop bit-identical."""
+    """A UV vertex dragged out of its island, the rest's pull off: with it held at the
+    cursor the fold cannot open (a release would put every value back); the session's
+    one-shot repair with the vertex let go, written by the drag, leaves no face of the map
+    inverted (signed areas of the written loops) and every border loop bit-identical."""
     obj = _grid(bpy)
     before = _edit_uv(bpy, obj)
     drag = _live(ext).drag.UVDrag(obj, (0.5, 0.9), ext.core.EEGTParams(), radius=0.05)
+    drag.session.pull_after = None
     frame = drag.step((0.5, 1.12), budget=None)
     for _ in range(100):
         if drag.session.finishing(frame) != "go on":
@@ -309,14 +310,43 @@ def test_uv_drag_release_that_cannot_open_the_fold_lets_the_grabbed_vertex_go(bp
     assert kept is not None
     drag.write_points(kept)
     after = _edit_uv(bpy, obj).astype(np.float64)
-    face = loop_faces(obj)  # a face's loops are consecutive, in its order
-    nxt = np.arange(1, face.size + 1)
-    last = np.flatnonzero(np.append(face[1:] != face[:-1], True))
-    nxt[last] = np.append(0, last[:-1] + 1)
-    cross = after[:, 0] * after[nxt, 1] - after[nxt, 0] * after[:, 1]
-    assert (np.bincount(face, cross) > 0.0).all()
+    assert _no_face_inverted(after, loop_faces(obj))
     lay = drag.layout
     on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
     assert np.array_equal(after[on_border], before[on_border])
     grabbed = lay.loop_node == drag.region.nodes[drag.region.grab][0]
     assert (after[grabbed, 1] < 1.0).all()  # back inside the island (the cursor was at 1.12)
+
+
+def _no_face_inverted(after: np.ndarray, face: np.ndarray) -> bool:
+    """Every face's signed area (its loops' UVs, consecutive in its order) positive."""
+    nxt = np.arange(1, face.size + 1)
+    last = np.flatnonzero(np.append(face[1:] != face[:-1], True))
+    nxt[last] = np.append(0, last[:-1] + 1)
+    cross = after[:, 0] * after[nxt, 1] - after[nxt, 0] * after[:, 1]
+    return bool((np.bincount(face, cross) > 0.0).all())
+
+
+def test_uv_drag_resting_out_of_its_island_is_pulled_back_valid(bpy, ext):
+    """The same drag out of the island with the rest's pull (the default): the frames at
+    rest (a release's finishing frames) end with the vertex held inside the island, the
+    header's ``held_back`` its distance from the cursor; the written map has no face
+    inverted and every border loop bit-identical, and a release keeps it."""
+    obj = _grid(bpy)
+    before = _edit_uv(bpy, obj)
+    drag = _live(ext).drag.UVDrag(obj, (0.5, 0.9), ext.core.EEGTParams(), radius=0.05)
+    drag.session.pull_after = 0.0
+    frame = drag.step((0.5, 1.12), budget=None)
+    for _ in range(400):
+        if frame.status != "tangled" and not frame.pull_iterations:
+            break
+        frame = drag.step(None, budget=None)
+    assert drag.session.finishing(frame) == "keep"
+    assert frame.held_back > 0.1
+    after = _edit_uv(bpy, obj).astype(np.float64)
+    assert _no_face_inverted(after, loop_faces(obj))
+    lay = drag.layout
+    on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
+    assert np.array_equal(after[on_border], before[on_border])
+    grabbed = lay.loop_node == drag.region.nodes[drag.region.grab][0]
+    assert (after[grabbed, 1] < 1.0).all()

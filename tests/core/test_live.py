@@ -81,7 +81,7 @@ def test_drag_across_untangles_and_keeps_border_and_pins_bits():
     path = [p[grab] + t * (end - p[grab][0]) for t in np.linspace(0.1, 1.0, 10)]
     eegt = LiveSession(p, fs, grab, escalate=False)
     assert max(eegt.frame(at, budget=None).stats.n_inverted for at in path) > 0
-    live = LiveSession(p, fs, grab)
+    live = LiveSession(p, fs, grab, pull_after=None)  # the escalation alone
     for at in path:
         frame = live.frame(at, budget=None)
     for _ in range(30):
