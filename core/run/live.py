@@ -342,9 +342,10 @@ class LiveSession:
             return
         self._pull_tried = True
         center, scale = normalisation(self.points, self.fs)
+        target = (self.points[self.grab] - center) / scale
         try:
             self._pull = GrabPull((base - center) / scale, self.fs, self.free, self.grab,
-                                  (self.points[self.grab] - center) / scale, self.targets)
+                                  target, self.targets)
         except ValueError:
             return
         self._pull_at = (base, center, scale, self.points[self.grab].copy())

@@ -11,7 +11,8 @@ rejected, so each iterate is as valid as the base) plus ``weight`` |x_grab - cur
 the weight rising while the frames run. A node the layout lets through reaches the cursor
 (and is put exactly there once its corners stay positive); one the layout blocks stops
 where the barrier holds it, with the layout valid all the way. The pull runs on the faces
-near the drag's remaining way (``PULL_REACH``), the rest of the mesh keeps the base's bits.
+near the drag's remaining way (``PULL_REACH``, ``PULL_NODES``), the rest of the mesh keeps
+the base's bits.
 docs/live.md describes what a drag does with it.
 """
 
@@ -29,8 +30,8 @@ from ..optimize.stages import EPS_MIN
 from ..optimize.state import State
 from ..optimize.submesh import Neighbourhood
 
-__all__ = ["PULL_AFTER", "PULL_CHUNK", "PULL_GROWTH", "PULL_REACH", "PULL_WEIGHT",
-           "PULL_WEIGHT_MAX", "GrabPull", "PullEnergy", "PullStep"]
+__all__ = ["PULL_AFTER", "PULL_CHUNK", "PULL_GROWTH", "PULL_NODES",
+           "PULL_REACH", "PULL_WEIGHT", "PULL_WEIGHT_MAX", "GrabPull", "PullEnergy", "PullStep"]
 
 PULL_AFTER = 0.25  # seconds of rest with a fold the frames have not opened: then the pull
 PULL_WEIGHT = 10.0  # the pull's first weight, per squared mean edge of the region
@@ -38,7 +39,10 @@ PULL_GROWTH = 1.5  # the weight grows by this factor after PULL_CHUNK iterations
 PULL_WEIGHT_MAX = 1e6  # ... up to this (per squared mean edge)
 PULL_CHUNK = 100  # L-BFGS iterations of one solve (fewer when a frame's time is short)
 PULL_REACH = 1.5  # the faces with a node within this x the way left (and 3 mean edges)
-#                   of the grabbed nodes' way to the cursor move; the rest stays
+#                   of the grabbed nodes' way to the cursor move; the rest stays ...
+PULL_NODES = 4000  # ... nearer when more nodes than this are that near (an iteration on a
+#                    larger region does not fit a frame)
+FIRST_ITERATIONS = 2  # a timed solve's iterations before its time per iteration is known
 SNAP = 1e-3  # within this x the mean edge of the cursor, a grabbed node is put on it when
 #              its corners stay positive there
 STILL = 1e-3  # a solve at the top weight that gets the nodes less than this x the mean
@@ -126,7 +130,8 @@ class GrabPull:
 
     def _seed(self, base: np.ndarray, fs: FaceSet, n_elem: int) -> np.ndarray:
         """(E,) bool, ``Neighbourhood`` order: the elements with a node within reach of a
-        grabbed node's way from the base to the cursor (``PULL_REACH``)."""
+        grabbed node's way from the base to the cursor (``PULL_REACH``; the ``PULL_NODES``
+        nearest nodes when more are that near)."""
         a, b = base[self.grab], self.target
         ab = b - a
         way = float(np.max(np.sqrt(ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1])))
@@ -134,14 +139,18 @@ class GrabPull:
         mean = float(np.mean(np.concatenate([np.sqrt(e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1])
                                              .ravel() for e in edges])))
         reach = max(PULL_REACH * way, 3.0 * mean)
-        close = np.zeros(base.shape[0], dtype=bool)
-        for i in range(a.shape[0]):  # the distance of every node to each grabbed way
+        near = np.full(base.shape[0], np.inf)  # squared distance to the nearest way
+        for i in range(a.shape[0]):
             ln = float(ab[i, 0] * ab[i, 0] + ab[i, 1] * ab[i, 1])
             r = base - a[i]
             t = np.zeros(base.shape[0]) if ln == 0.0 else \
                 np.clip((r[:, 0] * ab[i, 0] + r[:, 1] * ab[i, 1]) / ln, 0.0, 1.0)
             d = r - t[:, None] * ab[i]
-            close |= d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= reach * reach
+            np.minimum(near, d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1], near)
+        top = reach * reach
+        if near.size > PULL_NODES:
+            top = min(top, float(np.partition(near, PULL_NODES)[PULL_NODES]))
+        close = near <= top
         seed = np.zeros(n_elem, dtype=bool)
         start = 0
         for g in fs.groups:
@@ -169,8 +178,9 @@ class GrabPull:
             if left is not None and left <= 0.0 and its:
                 break
             n = PULL_CHUNK
-            if left is not None and self.per_iteration > 0.0:
-                n = int(np.clip(left / self.per_iteration, 1, PULL_CHUNK))
+            if left is not None:
+                n = FIRST_ITERATIONS if self.per_iteration <= 0.0 else \
+                    int(np.clip(left / self.per_iteration, 1, PULL_CHUNK))
             t0 = time.perf_counter()
             self.v, done = lbfgs(PullEnergy(self.en, self.k, self.target, self.weight),
                                  self.st, self.v, EPS_MIN, max_it=n, guard=True)
