@@ -24,7 +24,7 @@ from .state import (
 if TYPE_CHECKING:
     from .energy import FoldoverEnergy
 
-__all__ = ["lbfgs"]
+__all__ = ["ResumableLBFGS", "lbfgs"]
 
 
 def lbfgs(
@@ -57,25 +57,61 @@ def lbfgs(
     float or a 0-d array).
     """
     run = _Run(en, st, v0, eps, guard)
+    it, _ = _iterate(run, max_it, guard, rel_tol, tick, en.tick_every)
+    return run.v, it
+
+
+def _iterate(run: _Run, max_it: int, guard: bool, rel_tol: float, tick: Tick | None,
+             tick_every: int) -> tuple[int, bool]:
+    """At most max_it iterations of `run` (lbfgs's loop); (iterations, whether a stop rule
+    ended them before max_it)."""
     it = 0
     while it < max_it:
         it += 1
         found = run.direction()
         if found is None:  # no descent direction, not even the preconditioned gradient
-            break
+            return it, True
         if not run.line_search(*found):
             if run.mem:  # drop the memory and retry once from plain descent
                 run.mem = []
                 continue
-            break
+            return it, True
         valid = run.accept()
         if not guard and valid:  # just became valid: hand over to the guarded polish
-            break
+            return it, True
         if run.stalled(rel_tol):
-            break
-        if tick is not None and it % en.tick_every == 0 and stops(tick(it, run.v.copy)):
-            break
-    return run.v, it
+            return it, True
+        if tick is not None and it % tick_every == 0 and stops(tick(it, run.v.copy)):
+            return it, True
+    return it, False
+
+
+class ResumableLBFGS:
+    """`lbfgs` (guarded) split across calls: the point and the memory of pairs carry from
+    one `run` to the next, as in one long solve (Live Untangle's rest pull runs a frame's
+    share at a time). `energy_changed` measures the point again after the energy's own
+    parameters changed (the pull's weight); the memory stays."""
+
+    def __init__(self, en: FoldoverEnergy, st: State, v0: np.ndarray, eps: float):
+        self._run = _Run(en, st, v0, eps, True)
+
+    @property
+    def v(self) -> np.ndarray:
+        """The last accepted point."""
+        return self._run.v
+
+    def run(self, max_it: int, rel_tol: float = REL_TOL) -> tuple[int, bool]:
+        """At most max_it more iterations; (iterations, whether a stop rule ended them)."""
+        return _iterate(self._run, max_it, True, rel_tol, None, 1)
+
+    def energy_changed(self) -> None:
+        """The energy at the point and its gradient again (the stall rule starts afresh)."""
+        r = self._run
+        r.zv[:] = r.v
+        r.e, _, ok = r.evaluate(r.z, r.layout, r.eps)
+        r.g = r.gradient(r.layout)[: r.n2] if ok else np.zeros(r.n2)
+        r.at_v = True
+        r.e_hist = [r.e]
 
 
 class _Run:

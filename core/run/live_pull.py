@@ -25,7 +25,7 @@ import numpy as np
 from ..mesh.faces import FaceSet
 from ..metrics.targets import Targets, corner_factors
 from ..optimize.energy import FoldoverEnergy
-from ..optimize.solver import lbfgs
+from ..optimize.solver import ResumableLBFGS
 from ..optimize.stages import EPS_MIN
 from ..optimize.state import State
 from ..optimize.submesh import Neighbourhood
@@ -37,7 +37,7 @@ PULL_AFTER = 0.25  # seconds of rest with a fold the frames have not opened: the
 PULL_WEIGHT = 10.0  # the pull's first weight, per squared mean edge of the region
 PULL_GROWTH = 1.5  # the weight grows by this factor after PULL_CHUNK iterations at it ...
 PULL_WEIGHT_MAX = 1e6  # ... up to this (per squared mean edge)
-PULL_CHUNK = 100  # L-BFGS iterations of one solve (fewer when a frame's time is short)
+PULL_CHUNK = 100  # L-BFGS iterations at one weight (and at most in one go)
 PULL_REACH = 1.5  # the faces with a node within this x the way left (and 3 mean edges)
 #                   of the grabbed nodes' way to the cursor move; the rest stays ...
 PULL_NODES = 4000  # ... nearer when more nodes than this are that near (an iteration on a
@@ -123,6 +123,8 @@ class GrabPull:
         self.h = float(self.en.h_mean)
         self.weight = PULL_WEIGHT / (self.h * self.h)
         self.v = self.st.pack(self.st.x, self.st.y)
+        self.energy = PullEnergy(self.en, self.k, self.target, self.weight)
+        self.solve = ResumableLBFGS(self.energy, self.st, self.v, EPS_MIN)
         self.per_iteration = 0.0
         self._at_weight = 0  # iterations at the current weight
         self.distance = self._distance(self.v)
@@ -169,10 +171,13 @@ class GrabPull:
         return np.column_stack([self.v[:nf], self.v[nf:]])
 
     def advance(self, until: float | None) -> PullStep:
-        """Solves until the time ``until`` (a ``time.perf_counter`` value; None: one solve
-        of ``PULL_CHUNK`` iterations), the weight rising after each; the grabbed nodes go
-        exactly to the cursor once near it with their corners positive there."""
+        """Iterations until the time ``until`` (a ``time.perf_counter`` value; None:
+        ``PULL_CHUNK`` of them), one solve resumed from frame to frame (its L-BFGS memory
+        too), the weight rising after every ``PULL_CHUNK`` iterations at it (or when the
+        solve stops at one); the grabbed nodes go exactly to the cursor once near it with
+        their corners positive there."""
         its = 0
+        top = PULL_WEIGHT_MAX / (self.h * self.h)
         while not self.done:
             left = None if until is None else until - time.perf_counter()
             if left is not None and left <= 0.0 and its:
@@ -182,21 +187,21 @@ class GrabPull:
                 n = FIRST_ITERATIONS if self.per_iteration <= 0.0 else \
                     int(np.clip(left / self.per_iteration, 1, PULL_CHUNK))
             t0 = time.perf_counter()
-            self.v, done = lbfgs(PullEnergy(self.en, self.k, self.target, self.weight),
-                                 self.st, self.v, EPS_MIN, max_it=n, guard=True)
+            done, stopped = self.solve.run(n)
+            self.v = self.solve.v
             if done:
                 self.per_iteration = (time.perf_counter() - t0) / done
             its += done
             before, self.distance = self.distance, self._distance(self.v)
-            top = PULL_WEIGHT_MAX / (self.h * self.h)
             if self.distance <= SNAP * self.h and self._snap():
                 self.done = self.snapped = True
             elif self.weight >= top and before - self.distance < STILL * self.h:
                 self.done = True
             self._at_weight += max(done, 1)
-            if self._at_weight >= PULL_CHUNK or done < n:  # the next weight (or the solve
-                # stopped before its iterations: converged at this one)
+            if (self._at_weight >= PULL_CHUNK or stopped) and self.weight < top:
                 self.weight, self._at_weight = min(self.weight * PULL_GROWTH, top), 0
+                self.energy.weight = self.weight  # the next weight (the memory stays)
+                self.solve.energy_changed()
             if until is None:
                 break
         return PullStep(self.positions(), its, self.distance, self.done, self.snapped)
