@@ -1,13 +1,16 @@
 """Live Untangle on drags as people make them (issue 39, bench/live_bench.py's
 ``human_drag`` on Blender's own unwraps): the pinned UVs and the island border keep their
-bits through an escalated drag, and restore is exact. (That every fold opens at rest is
-not held here yet: see docs/live.md, "Status".)"""
+bits through an escalated drag, restore is exact, and at rest (the rest's pull) no face
+of the map is left inverted."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from bench.live_bench import island_drag, monkey
+
+from .uvtools import loop_faces
 
 
 def _uv(bpy, obj) -> np.ndarray:
@@ -54,3 +57,50 @@ def test_drag_keeps_pins_bits_and_ends_valid(bpy, ext):
     assert np.array_equal(after[border], before[border])
     drag.restore()
     assert _uv(bpy, obj).tobytes() == before.tobytes()
+
+
+def _signed_areas(uv: np.ndarray, face: np.ndarray) -> np.ndarray:
+    """Each face's signed UV area (its loops are consecutive, in its order)."""
+    uv = uv.astype(np.float64)
+    nxt = np.arange(1, face.size + 1)
+    last = np.flatnonzero(np.append(face[1:] != face[:-1], True))
+    nxt[last] = np.append(0, last[:-1] + 1)
+    return np.bincount(face, uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1])
+
+
+@pytest.mark.parametrize(("how", "levels", "seed"), [("smart", 2, 1), ("smart", 2, 2),
+                                                    ("unwrap", 1, 1), ("unwrap", 1, 2)])
+def test_drag_then_rest_leaves_no_face_flipped(bpy, ext, how, levels, seed):
+    """A human drag on Suzanne's Smart UV / Unwrap, then the cursor still (the rest's pull
+    without its wait, frames without a time budget): no face of the map has its UV area's
+    sign changed from the unwrap's (signed areas of the written loops, counted here), the
+    island border keeps its bits, and the grabbed vertex is at the cursor or held back
+    (``held_back``) as far as the written UV shows."""
+    obj = monkey(bpy, how, levels=levels)
+    live = ext.operators.live.drag
+    drag, path, _ = island_drag(ext, live, obj, seed)
+    drag.session.pull_after = 0.0
+    before = _uv(bpy, obj)
+    face = loop_faces(obj)
+    area0 = _signed_areas(before, face)
+    for at in path:
+        frame = drag.step(tuple(at), budget=None)
+    for _ in range(300):
+        frame = drag.step(None, budget=None)
+        if frame.status != "tangled" and not frame.pull_iterations and \
+                frame.smooth_iterations <= 1:
+            break
+    after = _uv(bpy, obj)
+    area1 = _signed_areas(after, face)
+    assert (area0 != 0.0).all()
+    assert not (np.sign(area1) != np.sign(area0)).any()
+    lay = drag.layout
+    border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
+    assert np.array_equal(after[border], before[border])
+    g = drag.region.nodes[drag.region.grab[0]]
+    cursor = drag.targets_for(tuple(path[-1]))[0]  # region coordinates: UV unless mirrored
+    if drag.region.mirrored[drag.region.grab[0]]:
+        cursor[0] = -cursor[0]
+    got = after[lay.loop_node == g].astype(np.float64)
+    assert np.allclose(np.hypot(*(got - cursor).T), frame.held_back, rtol=0, atol=1e-6)
+    drag.restore()
