@@ -27,7 +27,10 @@ class GlobalOptions:
     that many iterations with fresh L-BFGS memory; each later lift round moves only the free
     nodes within lift_rings rings of the elements under its floor, a floor at most lift_grow
     times the q_min before it; solver runs each L-BFGS
-    solve (None: NumPy).
+    solve (None: NumPy); give_up_early: the run gives up after its second untangling round
+    when that round neither halved the inverted count nor the worst corner det's distance
+    below 0 of the first (`TIGHT_SHARE`): a repair's region too tight for its fold, which the
+    repair grows (core.run.repair), instead of spending its budget there twice.
     """
 
     max_iter: int = 3000
@@ -42,6 +45,7 @@ class GlobalOptions:
     lift_rings: int = 6
     lift_grow: float = LIFT_GROW
     solver: Solver | None = None
+    give_up_early: bool = False
 
     def __post_init__(self) -> None:
         if not self.polish_power > 0.0:

@@ -39,6 +39,9 @@ STALL_ROUNDS = 12  # untangling rounds in a row that neither lower the inverted 
 # raise the worst corner det end the run: a fold no move opens (`_stalled`; solvable meshes
 # of the corpus take at most 4 untangling rounds in all: docs/global_untangle.md, "Giving up")
 STALL_RISE = 1e-6  # a rise of the worst det by less than this x |det| is no progress
+TIGHT_SHARE = 0.5  # give_up_early: the second untangling round kept more than this share of
+# the first's inverted elements and of its worst det (below 0): a region too tight for the
+# fold (its attempts end like this; one that opens later halves the worst det by then)
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -187,7 +190,8 @@ def untangle_global(
     was reached, the iterate with the fewest inverted elements is returned.
     info: iterations, rounds, n_inverted_in, n_inverted_out, min_det (smallest normalised corner
     det), eps_history, seconds, seconds_per_iter, status ("untangled" / "failed" / "cancelled" /
-    "nothing to do"), gave_up (the run ended early: STALL_ROUNDS rounds without progress).
+    "nothing to do"), gave_up (the run ended early: STALL_ROUNDS rounds without progress, or
+    options.give_up_early), too_tight (options.give_up_early ended it).
 
     resume: a `Resume` to go on from (and updated in place for the next call): the eps
     continuation of the last call on this sub-mesh continues from its eps and open round
@@ -214,6 +218,7 @@ def untangle_global(
         "seconds_per_iter": 0.0,
         "status": "nothing to do",
         "gave_up": False,
+        "too_tight": False,
     }
     if en.i0.size == 0 or st.size == 0:
         info["seconds"] = time.perf_counter() - t_start
@@ -238,6 +243,7 @@ def untangle_global(
         seconds_per_iter=secs / max(run.total, 1),
         status=run.status or ("untangled" if n_out == 0 else "failed"),
         gave_up=run.gave_up,
+        too_tight=run.too_tight,
     )
     return out, info
 
@@ -286,6 +292,9 @@ class _Continuation:
         self.dmins = [dmin]  # the min det at the start and after each untangling round
         self.top_det, self.top_inv = dmin, n_inv  # the best worst det and inverted count
         self.stall = 0  # untangling rounds in a row without progress (`_stalled`)
+        self.firsts: list[tuple[int, float]] = []  # (inverted, min det) after the first
+        #                                            two untangling rounds (`_too_tight`)
+        self.too_tight = False  # give_up_early ended the run (`_too_tight`)
         self.granted = 0  # iterations `_extend` added to max_iter
         self.rounds = 0
         self.cancel = False
@@ -394,6 +403,9 @@ class _Continuation:
         core/run/hopeless.py finds the common ones). Such a run ends as 'failed' after a few
         dozen iterations instead of the whole budget (tens of thousands of rounds of one
         iteration each at the eps floor)."""
+        if self._too_tight(dmin, n_inv):
+            self.gave_up = self.too_tight = True
+            return True
         progress = False
         if dmin > self.top_det + STALL_RISE * abs(self.top_det):
             self.top_det, progress = dmin, True
@@ -402,6 +414,19 @@ class _Continuation:
         self.stall = 0 if progress else self.stall + 1
         self.gave_up = self.stall >= STALL_ROUNDS
         return self.gave_up
+
+    def _too_tight(self, dmin: float, n_inv: int) -> bool:
+        """options.give_up_early: after the second untangling round, whether it kept more
+        than TIGHT_SHARE of the first round's inverted elements and of its worst det (still
+        below 0). The region's fold does not open there (a repair then grows the region);
+        cold runs and resumed calls go on."""
+        if not self.opt.give_up_early or self.resume is not None or len(self.firsts) >= 2:
+            return False
+        self.firsts.append((n_inv, dmin))
+        if len(self.firsts) < 2:
+            return False
+        (inv1, det1), (inv2, det2) = self.firsts
+        return inv2 > TIGHT_SHARE * inv1 and det2 < 0.0 and det2 < TIGHT_SHARE * det1
 
     def _cap(self, guard: bool) -> int:
         """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one

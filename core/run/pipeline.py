@@ -121,6 +121,7 @@ def untangle_and_smooth(
     reference_points=None,
     edges: EdgeInfo | None = None,
     keep_as_given: bool = True,
+    give_up_early: bool = False,
 ) -> EEGTResult:
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
@@ -157,6 +158,11 @@ def untangle_and_smooth(
     `keep_as_given`: straight or concave corners of fixed vertices only in simple faces are
     kept as given (core.metrics.kept: valid, measured without those vertices, `n_kept`);
     False, or the paper's mode (`untangle="eegt"`), counts them inverted and frozen.
+
+    `give_up_early`: a region "folds" repair's attempt on a region smaller than the mesh
+    (core.run.repair sets it): its global stage gives up after two untangling rounds that
+    opened too little of the fold (`GlobalOptions.give_up_early`), with no second start; the
+    repair then grows the region.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
@@ -170,7 +176,7 @@ def untangle_and_smooth(
     with pages_for_run(n_faces), keep_freed_memory(n_faces):
         mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges,
                         keep_as_given)
-        run, order = _start(mesh, params, backend, progress)
+        run, order = _start(mesh, params, backend, progress, give_up_early)
         try:
             status, message = run.execute()
         except _CancelRun:
@@ -432,8 +438,8 @@ def _renumbers(fs: FaceSet, n_nodes: int) -> bool:
     return fs.n_faces >= REORDER_MIN_FACES and scattered(fs, n_nodes)
 
 
-def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | None
-           ) -> tuple[_Run, Renumbering | None]:
+def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | None,
+           give_up_early: bool = False) -> tuple[_Run, Renumbering | None]:
     """The run over the normalised points, in the renumbering of `_prepare` if it made one
     (returned with it; None: as given)."""
     fs, free, frozen = mesh.fs, mesh.free, mesh.frozen
@@ -442,10 +448,12 @@ def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | N
         work = mesh.work[order.nodes]  # the run's numbering from here on (one copy, not two)
         run = _Run(work, run_fs, free[order.nodes], params, backend, progress,
                    frozen[order.faces], frozen_ids=np.flatnonzero(frozen))
-        return run, order
-    run = _Run(mesh.work, fs, free, params, backend, progress, frozen, mesh.targets,
-               mesh.motion)
-    return run, None
+    else:
+        order = None
+        run = _Run(mesh.work, fs, free, params, backend, progress, frozen, mesh.targets,
+                   mesh.motion)
+    run.give_up_early = give_up_early
+    return run, order
 
 
 def _never_worse(mesh: _Mesh, run: _Run, order: Renumbering | None, status: str,
@@ -635,6 +643,8 @@ class _Run:
         self.polished = False  # the global stage's polish (or the lift stage) has run
         self.lifted = 0  # lift rounds the last lift kept
         self.gave_up = False  # a global stage ended for want of progress (stages.STALL_ROUNDS)
+        self.give_up_early = False  # a repair's attempt (`untangle_and_smooth`) ...
+        self.too_tight = False  # ... whose global stage gave up early (no second start)
         self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
         self._near: Neighbourhood | None = None  # made by the local untangle, if it runs
         self.lbfgs = None  # the global stage's solver (None: the host's), made when it runs
@@ -712,7 +722,7 @@ class _Run:
         than the input (`_harmonic_folds_less`)."""
         harmonic_first = self.mode == "eegt+local" and self._harmonic_folds_less()
         current = self._whole_from(harmonic=harmonic_first)
-        if self.tangled(self.best) and self._restart_may_help():
+        if self.tangled(self.best) and not self.too_tight and self._restart_may_help():
             current = self._whole_from(harmonic=not harmonic_first)
         return current
 
@@ -816,6 +826,7 @@ class _Run:
             )
             self.n_global += int(info["iterations"])
             self.gave_up |= bool(info.get("gave_up"))
+            self.too_tight |= bool(info.get("too_tight"))
             if info.get("status") == "cancelled":
                 raise _CancelRun
             pts = start.copy()
@@ -900,6 +911,7 @@ class _Run:
             polish_iter=polish,
             lift_rounds=self.params.lift_rounds,
             solver=self.lbfgs,
+            give_up_early=self.give_up_early,
         )
         try:
             pts, info = untangle_global(
@@ -913,6 +925,7 @@ class _Run:
             )
             self.n_global += int(info["iterations"])
             self.gave_up |= bool(info.get("gave_up"))
+            self.too_tight |= bool(info.get("too_tight"))
             if info.get("status") == "cancelled":
                 raise _CancelRun
             if info.get("status") == "untangled" and self.params.lift_rounds > 0:

@@ -6,8 +6,10 @@ region's rim (its nodes on faces outside it) is held, so every node outside keep
 and the cost follows the region, not the mesh. When the fold cannot be opened inside the
 region, the margin doubles (`rings` 2, 4, 8, ...) and the run starts again from the input,
 until the region is the whole mesh; an attempt on a region smaller than the mesh gets a
-budget proportional to its size (`attempt_budget`), so a margin too tight for the fold costs
-little.
+budget proportional to its size (`attempt_budget`) and gives up after two untangling rounds
+that open too little of the fold (`untangle_and_smooth(give_up_early=True)`: neither the
+inverted count nor the worst det halved), with no second start, so a margin too tight for
+the fold costs little.
 
 Target "keep" (`keep_targets`): every face is pulled towards its own shape as given, so that
 the grading, the anisotropy and the sizes the user built survive; a folded face has no shape
@@ -219,7 +221,8 @@ def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParam
             tg = None if targets is None else targets[rows]
         prm = replace(sub_params, max_untangle_iterations=attempt_budget(params, ids.size,
                                                                           whole))
-        res = run(p[nodes], sub, fixed=held, params=prm, targets=tg, **run_args)
+        res = run(p[nodes], sub, fixed=held, params=prm, targets=tg, give_up_early=not whole,
+                  **run_args)
         if whole or res.status in ("valid", "untangled", "cancelled"):
             out = p.copy()
             if res.status != "cancelled":

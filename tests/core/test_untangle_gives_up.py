@@ -8,7 +8,7 @@ import numpy as np
 import core.run.pipeline as pipeline
 from core import untangle_and_smooth
 from core.mesh import read_obj
-from core.optimize import STALL_ROUNDS, untangle_global
+from core.optimize import STALL_ROUNDS, GlobalOptions, untangle_global
 from core.run.hopeless import Hopeless
 from core.run.hopeless_groups import HopelessGroups
 
@@ -62,3 +62,41 @@ def test_run_without_certificates_says_it_gave_up_in_well_under_a_second_of_iter
     assert res.global_iterations < 4 * 50 * STALL_ROUNDS
     assert (f"the optimizer gave up after {STALL_ROUNDS} rounds in a row without progress"
             in res.message), res.message
+
+
+def _node_out_of_a_square(dy: float):
+    """A regular triangulated square (boundary fixed) whose node nearest (0.5, 0.9) is
+    pinned ``dy`` higher: (points, groups, free)."""
+    from bench.meshgen import jittered_square
+    from core import boundary_nodes
+
+    p, fs = jittered_square(800, jitter=0.0)
+    g = int(np.argmin(np.hypot(p[:, 0] - 0.5, p[:, 1] - 0.9)))
+    p[g, 1] += dy
+    free = ~boundary_nodes(p.shape[0], fs)
+    free[g] = False
+    return p, fs.by_arity(), free
+
+
+def test_give_up_early_ends_a_region_too_tight_after_two_rounds():
+    """A node pinned above the square's fixed top edge (no position of the others opens its
+    fan): with ``give_up_early`` the run ends after its second untangling round, 'failed',
+    too_tight and gave_up set; without, it goes on (more rounds, too_tight False)."""
+    p, groups, free = _node_out_of_a_square(0.2)
+    _, early = untangle_global(p, groups, free, GlobalOptions(give_up_early=True))
+    assert early["status"] == "failed" and early["too_tight"] is True
+    assert early["gave_up"] is True and early["rounds"] == 2
+    _, plain = untangle_global(p, groups, free)
+    assert plain["too_tight"] is False and plain["rounds"] > 2
+    assert plain["iterations"] > early["iterations"]
+
+
+def test_give_up_early_leaves_a_fold_that_opens_bit_identical():
+    """A node pinned 0.05 up inside the square (its fan folds, the others can open it):
+    the same points, bit for bit, with and without ``give_up_early``."""
+    p, groups, free = _node_out_of_a_square(0.05)
+    a, ia = untangle_global(p, groups, free, GlobalOptions(give_up_early=True))
+    b, ib = untangle_global(p, groups, free)
+    assert ia["n_inverted_in"] > 0 and ia["status"] == ib["status"] == "untangled"
+    assert ia["too_tight"] is False
+    assert np.array_equal(a, b)
