@@ -19,6 +19,7 @@ docs/live.md describes what a drag does with it.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -61,7 +62,7 @@ class PullEnergy:
         self._z: np.ndarray | None = None
         self._nf = 0
 
-    def packed(self, st: State):
+    def packed(self, st: State) -> tuple[tuple[np.ndarray, int], np.ndarray]:
         self._nf = st.nf
         return self.en.packed(st)
 
@@ -82,16 +83,15 @@ class PullEnergy:
         return g
 
 
+@dataclass(frozen=True)
 class PullStep:
     """One frame's pull: where the moved nodes are and what it did."""
 
-    def __init__(self, positions: np.ndarray, iterations: int, distance: float, done: bool,
-                 snapped: bool):
-        self.positions = positions  # (len(GrabPull.moved), 2), normalised
-        self.iterations = iterations
-        self.distance = distance  # the grabbed nodes' largest distance from the cursor
-        self.done = done  # nothing more to gain (at the cursor, or held by the layout)
-        self.snapped = snapped  # the grabbed nodes are exactly at the cursor
+    positions: np.ndarray  # (len(GrabPull.moved), 2), normalised
+    iterations: int
+    distance: float  # the grabbed nodes' largest distance from the cursor (normalised)
+    done: bool  # nothing more to gain (at the cursor, or held by the layout)
+    snapped: bool  # the grabbed nodes are exactly at the cursor
 
 
 class GrabPull:

@@ -9,7 +9,14 @@ import numpy as np
 import pytest
 
 from .conftest import positions
-from .uvtools import corner_verts, loop_faces, one_ulp_apart, set_mesh_selection, uv_values
+from .uvtools import (
+    corner_verts,
+    face_signed_areas,
+    loop_faces,
+    one_ulp_apart,
+    set_mesh_selection,
+    uv_values,
+)
 
 pytestmark = pytest.mark.blender
 
@@ -310,21 +317,12 @@ def test_uv_drag_release_that_cannot_open_the_fold_lets_the_grabbed_vertex_go(bp
     assert kept is not None
     drag.write_points(kept)
     after = _edit_uv(bpy, obj).astype(np.float64)
-    assert _no_face_inverted(after, loop_faces(obj))
+    assert (face_signed_areas(after, loop_faces(obj)) > 0.0).all()
     lay = drag.layout
     on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
     assert np.array_equal(after[on_border], before[on_border])
     grabbed = lay.loop_node == drag.region.nodes[drag.region.grab][0]
     assert (after[grabbed, 1] < 1.0).all()  # back inside the island (the cursor was at 1.12)
-
-
-def _no_face_inverted(after: np.ndarray, face: np.ndarray) -> bool:
-    """Every face's signed area (its loops' UVs, consecutive in its order) positive."""
-    nxt = np.arange(1, face.size + 1)
-    last = np.flatnonzero(np.append(face[1:] != face[:-1], True))
-    nxt[last] = np.append(0, last[:-1] + 1)
-    cross = after[:, 0] * after[nxt, 1] - after[nxt, 0] * after[:, 1]
-    return bool((np.bincount(face, cross) > 0.0).all())
 
 
 def test_uv_drag_resting_out_of_its_island_is_pulled_back_valid(bpy, ext):
@@ -344,7 +342,7 @@ def test_uv_drag_resting_out_of_its_island_is_pulled_back_valid(bpy, ext):
     assert drag.session.finishing(frame) == "keep"
     assert frame.held_back > 0.1
     after = _edit_uv(bpy, obj).astype(np.float64)
-    assert _no_face_inverted(after, loop_faces(obj))
+    assert (face_signed_areas(after, loop_faces(obj)) > 0.0).all()
     lay = drag.layout
     on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
     assert np.array_equal(after[on_border], before[on_border])

@@ -10,7 +10,7 @@ import pytest
 
 from bench.live_bench import island_drag, monkey
 
-from .uvtools import loop_faces
+from .uvtools import face_signed_areas, loop_faces
 
 
 def _uv(bpy, obj) -> np.ndarray:
@@ -59,15 +59,6 @@ def test_drag_keeps_pins_bits_and_ends_valid(bpy, ext):
     assert _uv(bpy, obj).tobytes() == before.tobytes()
 
 
-def _signed_areas(uv: np.ndarray, face: np.ndarray) -> np.ndarray:
-    """Each face's signed UV area (its loops are consecutive, in its order)."""
-    uv = uv.astype(np.float64)
-    nxt = np.arange(1, face.size + 1)
-    last = np.flatnonzero(np.append(face[1:] != face[:-1], True))
-    nxt[last] = np.append(0, last[:-1] + 1)
-    return np.bincount(face, uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1])
-
-
 @pytest.mark.parametrize(("how", "levels", "seed"), [("smart", 2, 1), ("smart", 2, 2),
                                                     ("unwrap", 1, 1), ("unwrap", 1, 2)])
 def test_drag_then_rest_leaves_no_face_flipped(bpy, ext, how, levels, seed):
@@ -82,7 +73,7 @@ def test_drag_then_rest_leaves_no_face_flipped(bpy, ext, how, levels, seed):
     drag.session.pull_after = 0.0
     before = _uv(bpy, obj)
     face = loop_faces(obj)
-    area0 = _signed_areas(before, face)
+    area0 = face_signed_areas(before, face)
     for at in path:
         frame = drag.step(tuple(at), budget=None)
     for _ in range(300):
@@ -91,7 +82,7 @@ def test_drag_then_rest_leaves_no_face_flipped(bpy, ext, how, levels, seed):
                 frame.smooth_iterations <= 1:
             break
     after = _uv(bpy, obj)
-    area1 = _signed_areas(after, face)
+    area1 = face_signed_areas(after, face)
     assert (area0 != 0.0).all()
     assert not (np.sign(area1) != np.sign(area0)).any()
     lay = drag.layout

@@ -16,6 +16,17 @@ def uv_values(obj, name: str | None = None) -> np.ndarray:
     return buf.reshape(-1, 2)
 
 
+def face_signed_areas(uv: np.ndarray, face: np.ndarray) -> np.ndarray:
+    """Each face's signed UV area (twice it: the shoelace sum), from ``uv`` (L, 2) and
+    ``face`` (L,) the face of every loop (``loop_faces``: a face's loops are consecutive, in
+    its order). Counted here, loop by loop, independently of the extension."""
+    uv = np.asarray(uv, dtype=np.float64)
+    nxt = np.arange(1, face.size + 1)
+    last = np.flatnonzero(np.append(face[1:] != face[:-1], True))
+    nxt[last] = np.append(0, last[:-1] + 1)
+    return np.bincount(face, uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1])
+
+
 def corner_verts(obj) -> np.ndarray:
     me = obj.data
     cv = np.empty(len(me.loops), np.int64)
