@@ -256,9 +256,7 @@ class LiveSession:
             return FINISH_KEEP
         if self.repair is not None and frame.n_tangled > self.held:
             return FINISH_GO_ON
-        if frame.n_tangled and self.pull_after is not None and self._pull is None and \
-                not self._pull_tried and self.grab.size and \
-                (self._valid is not None or self._start is not None):
+        if frame.n_tangled and self._pull is None and self._pull_base() is not None:
             return FINISH_GO_ON  # the rest's pull has not run yet
         return FINISH_KEEP if frame.stats.n_inverted <= self.start_inverted else FINISH_RESTORE
 
@@ -337,8 +335,8 @@ class LiveSession:
         """The rest's pull from the last layout with no movable face inverted (else the
         drag's start) towards where the cursor holds the grabbed nodes; none when there is
         no such layout or no room in it (tried once a rest)."""
-        base = self._valid if self._valid is not None else self._start
-        if base is None or self._pull_tried or not self.grab.size:
+        base = self._pull_base()
+        if base is None:
             return
         self._pull_tried = True
         center, scale = normalisation(self.points, self.fs)
@@ -349,6 +347,14 @@ class LiveSession:
         except ValueError:
             return
         self._pull_at = (base, center, scale, self.points[self.grab].copy())
+
+    def _pull_base(self) -> np.ndarray | None:
+        """Where a pull would start (the last layout with no movable face inverted, else
+        the drag's start); None when no pull may start at this rest (off, tried already, no
+        grabbed node or no such layout)."""
+        if self.pull_after is None or self._pull_tried or not self.grab.size:
+            return None
+        return self._valid if self._valid is not None else self._start
 
     def _pulled(self, t0: float, budget: float | None) -> LiveFrame:
         """A frame of the rest's pull: its solves for the frame's time, the moved nodes

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..eegt.engine_numpy import edge_lengths
 from ..mesh.faces import FaceSet
 from ..metrics.targets import Targets, corner_factors
 from ..optimize.energy import FoldoverEnergy
@@ -30,6 +31,7 @@ from ..optimize.solver import ResumableLBFGS
 from ..optimize.stages import EPS_MIN
 from ..optimize.state import State
 from ..optimize.submesh import Neighbourhood
+from .repair import touching
 
 __all__ = ["PULL_AFTER", "PULL_CHUNK", "PULL_GROWTH", "PULL_NODES",
            "PULL_REACH", "PULL_WEIGHT", "PULL_WEIGHT_MAX", "GrabPull", "PullEnergy", "PullStep"]
@@ -109,7 +111,7 @@ class GrabPull:
         movable[grab] = True
         factors = None if targets is None else corner_factors(targets, fs)
         near = Neighbourhood(fs.by_arity(), movable, factors)
-        seed = self._seed(base, fs, near.n_elem)
+        seed = self._seed(base, fs)
         (groups, nodes, sub_free, sub_factors), _ = near.submesh(seed, 1)
         self.nodes, self.sub_free = nodes, sub_free
         self.moved = nodes[sub_free]  # the mesh's nodes the pull moves
@@ -130,16 +132,14 @@ class GrabPull:
         self.distance = self._distance(self.v)
         self.done = self.snapped = False
 
-    def _seed(self, base: np.ndarray, fs: FaceSet, n_elem: int) -> np.ndarray:
+    def _seed(self, base: np.ndarray, fs: FaceSet) -> np.ndarray:
         """(E,) bool, ``Neighbourhood`` order: the elements with a node within reach of a
         grabbed node's way from the base to the cursor (``PULL_REACH``; the ``PULL_NODES``
         nearest nodes when more are that near)."""
         a, b = base[self.grab], self.target
         ab = b - a
         way = float(np.max(np.sqrt(ab[:, 0] * ab[:, 0] + ab[:, 1] * ab[:, 1])))
-        edges = [base[g.nodes] - base[np.roll(g.nodes, 1, axis=0)] for g in fs.groups]
-        mean = float(np.mean(np.concatenate([np.sqrt(e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1])
-                                             .ravel() for e in edges])))
+        mean, _ = edge_lengths(base[:, 0], base[:, 1], fs.groups)
         reach = max(PULL_REACH * way, 3.0 * mean)
         near = np.full(base.shape[0], np.inf)  # squared distance to the nearest way
         for i in range(a.shape[0]):
@@ -152,13 +152,7 @@ class GrabPull:
         top = reach * reach
         if near.size > PULL_NODES:
             top = min(top, float(np.partition(near, PULL_NODES)[PULL_NODES]))
-        close = near <= top
-        seed = np.zeros(n_elem, dtype=bool)
-        start = 0
-        for g in fs.groups:
-            seed[start:start + g.ids.size] = close[g.nodes].any(axis=0)
-            start += g.ids.size
-        return seed
+        return touching(fs, near <= top)[np.concatenate([g.ids for g in fs.groups])]
 
     def _distance(self, v: np.ndarray) -> float:
         nf = self.st.nf

@@ -298,6 +298,19 @@ def test_live_tools_registered_with_menus_and_panels(bpy, ext):
     assert _live(ext).ops_live.status_text(None).startswith("Live Untangle")
 
 
+def _check_valid_border_kept_grab_inside(bpy, ext, obj, drag, before: np.ndarray) -> None:
+    """The drag out of the grid's island written back: no face of the map inverted (signed
+    areas of the written loops), every border loop bit-identical, the grabbed UV vertex
+    back inside the island (the cursor was at v 1.12)."""
+    after = _edit_uv(bpy, obj).astype(np.float64)
+    assert (face_signed_areas(after, loop_faces(obj)) > 0.0).all()
+    lay = drag.layout
+    on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
+    assert np.array_equal(after[on_border], before[on_border])
+    grabbed = lay.loop_node == drag.region.nodes[drag.region.grab][0]
+    assert (after[grabbed, 1] < 1.0).all()
+
+
 def test_uv_drag_release_that_cannot_open_the_fold_lets_the_grabbed_vertex_go(bpy, ext):
     """A UV vertex dragged out of its island, the rest's pull off: with it held at the
     cursor the fold cannot open (a release would put every value back); the session's
@@ -316,13 +329,7 @@ def test_uv_drag_release_that_cannot_open_the_fold_lets_the_grabbed_vertex_go(bp
     kept = drag.session.released(frame.points)
     assert kept is not None
     drag.write_points(kept)
-    after = _edit_uv(bpy, obj).astype(np.float64)
-    assert (face_signed_areas(after, loop_faces(obj)) > 0.0).all()
-    lay = drag.layout
-    on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
-    assert np.array_equal(after[on_border], before[on_border])
-    grabbed = lay.loop_node == drag.region.nodes[drag.region.grab][0]
-    assert (after[grabbed, 1] < 1.0).all()  # back inside the island (the cursor was at 1.12)
+    _check_valid_border_kept_grab_inside(bpy, ext, obj, drag, before)
 
 
 def test_uv_drag_resting_out_of_its_island_is_pulled_back_valid(bpy, ext):
@@ -341,10 +348,4 @@ def test_uv_drag_resting_out_of_its_island_is_pulled_back_valid(bpy, ext):
         frame = drag.step(None, budget=None)
     assert drag.session.finishing(frame) == "keep"
     assert frame.held_back > 0.1
-    after = _edit_uv(bpy, obj).astype(np.float64)
-    assert (face_signed_areas(after, loop_faces(obj)) > 0.0).all()
-    lay = drag.layout
-    on_border = ext.core.boundary_nodes(lay.n_nodes, lay.faces)[lay.loop_node]
-    assert np.array_equal(after[on_border], before[on_border])
-    grabbed = lay.loop_node == drag.region.nodes[drag.region.grab][0]
-    assert (after[grabbed, 1] < 1.0).all()
+    _check_valid_border_kept_grab_inside(bpy, ext, obj, drag, before)
