@@ -30,7 +30,9 @@ class GlobalOptions:
     solve (None: NumPy); give_up_early: the run gives up after its second untangling round
     when that round neither halved the inverted count nor the worst corner det's distance
     below 0 of the first (`TIGHT_SHARE`): a repair's region too tight for its fold, which the
-    repair grows (core.run.repair), instead of spending its budget there twice.
+    repair grows (core.run.repair), instead of spending its budget there twice; and its
+    lift's settle stops after `SETTLE_WATCH` iterations whose q_min never reached the climb's
+    (such a settle is not kept).
     """
 
     max_iter: int = 3000

@@ -62,6 +62,9 @@ SETTLE_TOL = 1e-7  # less than this (relative): the climb's runs stop far from t
 # q_avg (300 iterations at 1e-5), and a converged run raises it by 0.003-0.02 at no q_min
 SETTLE_MAX_FREE = 10_000  # meshes with more free nodes skip it (its cost grows with the
 # mesh: the 'eegt+local' runs of large meshes keep their time)
+SETTLE_WATCH = 300  # give_up_early: the settle stops after this many iterations when its
+SETTLE_WATCH_EVERY = 20  # q_min, measured every this many, never reached the climb's (then
+# it is not kept: on the repair table such runs ended below it; kept ones reached it by 120)
 
 
 def _checked_input(points, free) -> tuple[np.ndarray, np.ndarray]:
@@ -709,6 +712,8 @@ class _Lift:
         en.qc = SETTLE_FLOOR * self.best_m
         r = self.opt.lift_rounds + 1
         tick = self._tick(r, lambda v: _numbers(en.element_quality(*st.unpack(v))))
+        if self.opt.give_up_early:
+            tick = self._watched(tick)
         opt = replace(self.opt, lift_first_iter=SETTLE_ITER, lift_rel_tol=SETTLE_TOL,
                       lift_chunk=0)
         vt, its, qt = _runs(self.run_lbfgs, en, st, self.best_v, opt, tick, self._show)
@@ -722,6 +727,25 @@ class _Lift:
             self.v, self.q, self.cur_m, self.cur_a = vt, qt, qm, qa
             self.info["settled"] = True
         return True
+
+    def _watched(self, tick: Tick | None) -> Tick:
+        """The settle's tick for options.give_up_early (a repair's attempt): `tick`, and a
+        stop once SETTLE_WATCH iterations have passed without the run's q_min reaching the
+        climb's best (measured every SETTLE_WATCH_EVERY iterations): such a settle is not
+        kept, and it costs a repair's attempt as much as its climb."""
+        en, st, best = self.en, self.st, self.best_m
+        seen = {"reached": False, "at": 0}
+
+        def watched(it: int, point: Callable[[], np.ndarray]) -> bool:
+            if tick is not None and stops(tick(it, point)):
+                return False
+            if seen["reached"] or it - seen["at"] < SETTLE_WATCH_EVERY:
+                return True
+            seen["at"] = it
+            seen["reached"] = float(en.element_quality(*st.unpack(point())).min()) >= best
+            return seen["reached"] or it < SETTLE_WATCH
+
+        return watched
 
     def _retries(self, qm: float) -> bool:
         """Whether a round that was not kept is tried again at LIFT_RETRY of its floor step

@@ -100,3 +100,44 @@ def test_give_up_early_leaves_a_fold_that_opens_bit_identical():
     assert ia["n_inverted_in"] > 0 and ia["status"] == ib["status"] == "untangled"
     assert ia["too_tight"] is False
     assert np.array_equal(a, b)
+
+
+def _folds_run(p, faces, fixed, watch: int, monkeypatch):
+    """A region "folds" run with target "keep" and the settle's watch at `watch` iterations."""
+    from core import EEGTParams
+    from core.optimize import stages
+
+    monkeypatch.setattr(stages, "SETTLE_WATCH", watch)
+    return untangle_and_smooth(p, faces, fixed=fixed,
+                               params=EEGTParams(region="folds", target="keep"))
+
+
+def test_repair_attempt_stops_a_settle_that_never_reaches_the_climbs_q_min(monkeypatch):
+    """An O-grid of triangles with its cylinder slid 0.1 chords: the repair's region settles
+    at a floor its q_min never reaches (so the settle is not kept); the attempt stops it after
+    SETTLE_WATCH iterations instead of SETTLE_ITER: the same points, bit for bit, and
+    SETTLE_ITER - SETTLE_WATCH fewer iterations."""
+    from bench.repair_meshes import Spec, make
+    from core.optimize.stages import SETTLE_ITER, SETTLE_WATCH
+
+    c = make(Spec("ogridtri", 2000, "slide", {"dx": 0.1, "reach": 0.1}))
+    watched = _folds_run(c.points, c.faces, c.fixed, SETTLE_WATCH, monkeypatch)
+    full = _folds_run(c.points, c.faces, c.fixed, SETTLE_ITER, monkeypatch)
+    assert watched.status == full.status == "untangled"
+    assert np.array_equal(watched.points, full.points)
+    assert watched.global_iterations == full.global_iterations - (SETTLE_ITER - SETTLE_WATCH)
+
+
+def test_repair_attempt_leaves_a_settle_that_reaches_the_climbs_q_min(monkeypatch):
+    """An O-grid of quads with its cylinder slid 0.1 chords: the region's settle reaches the
+    climb's q_min within the watch and runs its full length: the same points and iterations
+    with and without the watch."""
+    from bench.repair_meshes import Spec, make
+    from core.optimize.stages import SETTLE_ITER, SETTLE_WATCH
+
+    c = make(Spec("ogrid", 2000, "slide", {"dx": 0.1, "reach": 0.1}))
+    watched = _folds_run(c.points, c.faces, c.fixed, SETTLE_WATCH, monkeypatch)
+    full = _folds_run(c.points, c.faces, c.fixed, SETTLE_ITER, monkeypatch)
+    assert watched.status == full.status == "untangled"
+    assert np.array_equal(watched.points, full.points)
+    assert watched.global_iterations == full.global_iterations
