@@ -29,8 +29,9 @@ class GlobalOptions:
     times the q_min before it; solver runs each L-BFGS
     solve (None: NumPy); give_up_early: the run gives up after its second untangling round
     when that round neither halved the inverted count nor the worst corner det's distance
-    below 0 of the first (`TIGHT_SHARE`): a repair's region too tight for its fold, which the
-    repair grows (core.run.repair), instead of spending its budget there twice; and its
+    below 0 of the first (`TIGHT_SHARE`; judged already `TIGHT_CHECK` iterations into the
+    round): a repair's region too tight for its fold, which the repair grows
+    (core.run.repair), instead of spending its budget there twice; and its
     lift's settle stops after `SETTLE_WATCH` iterations whose q_min never reached the climb's
     (such a settle is not kept).
     """

@@ -42,6 +42,8 @@ STALL_RISE = 1e-6  # a rise of the worst det by less than this x |det| is no pro
 TIGHT_SHARE = 0.5  # give_up_early: the second untangling round kept more than this share of
 # the first's inverted elements and of its worst det (below 0): a region too tight for the
 # fold (its attempts end like this; one that opens later halves the worst det by then)
+TIGHT_CHECK = 300  # ... judged already this many iterations into the round: the shares
+# level off within 100-300 (failing attempts' rounds run on to 1 000-2 800 iterations)
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -426,10 +428,31 @@ class _Continuation:
         if not self.opt.give_up_early or self.resume is not None or len(self.firsts) >= 2:
             return False
         self.firsts.append((n_inv, dmin))
-        if len(self.firsts) < 2:
-            return False
-        (inv1, det1), (inv2, det2) = self.firsts
-        return inv2 > TIGHT_SHARE * inv1 and det2 < 0.0 and det2 < TIGHT_SHARE * det1
+        return len(self.firsts) == 2 and self._tight_after_first(n_inv, dmin)
+
+    def _tight_after_first(self, n_inv: int, dmin: float) -> bool:
+        """Whether (n_inv, dmin) of the second untangling round keep more than TIGHT_SHARE of
+        the first round's inverted elements and of its worst det (still below 0)."""
+        inv1, det1 = self.firsts[0]
+        return n_inv > TIGHT_SHARE * inv1 and dmin < 0.0 and dmin < TIGHT_SHARE * det1
+
+    def _tight_watch(self, tick: Tick | None) -> Tick:
+        """The second untangling round's tick under give_up_early: `tick`, and a stop at
+        the first tick TIGHT_CHECK iterations in when the round is already too tight there
+        (`_too_tight` then ends the run on that point); else the round runs on as it would."""
+        en, st = self.en, self.st
+        checked = [False]
+
+        def watched(it: int, point: Callable[[], np.ndarray]) -> bool:
+            if tick is not None and stops(tick(it, point)):
+                return False
+            if checked[0] or it < TIGHT_CHECK:
+                return True
+            checked[0] = True
+            x, y = st.unpack(point())
+            return not self._tight_after_first(en.n_inverted(x, y), float(np.min(en.dets(x, y))))
+
+        return watched
 
     def _cap(self, guard: bool) -> int:
         """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one
@@ -479,8 +502,12 @@ class _Continuation:
     def _round(self, cap: int, guard: bool) -> int:
         """One L-BFGS run from v; the iterations it took."""
         st = self.st
+        tick = self._tick()
+        if (not guard and self.opt.give_up_early and self.resume is None
+                and len(self.firsts) == 1):  # the second untangling round
+            tick = self._tight_watch(tick)
         self.v, its = self.run_lbfgs(st.view(self.en), st, self.v, self.eps, max_it=cap,
-                                     guard=guard, tick=self._tick())
+                                     guard=guard, tick=tick)
         self.total += its
         if guard:
             self.polish_used += its

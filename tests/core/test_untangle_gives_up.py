@@ -91,6 +91,21 @@ def test_give_up_early_ends_a_region_too_tight_after_two_rounds():
     assert plain["iterations"] > early["iterations"]
 
 
+def test_give_up_early_judges_the_second_round_tight_check_iterations_in(monkeypatch):
+    """The node pinned 0.2 above the top edge: the second round is already too tight
+    TIGHT_CHECK iterations in, and the run gives up there (888 iterations in all, measured)
+    instead of at the round's end (1 375): the same points, too_tight either way."""
+    from core.optimize import stages
+
+    p, groups, free = _node_out_of_a_square(0.2)
+    checked, ic = untangle_global(p, groups, free, GlobalOptions(give_up_early=True))
+    monkeypatch.setattr(stages, "TIGHT_CHECK", 10**9)  # judged at the round's end only
+    at_end, ie = untangle_global(p, groups, free, GlobalOptions(give_up_early=True))
+    assert ic["too_tight"] is ie["too_tight"] is True and ic["rounds"] == ie["rounds"] == 2
+    assert ic["iterations"] == 888 and ie["iterations"] == 1375
+    assert np.array_equal(checked, at_end)
+
+
 def test_give_up_early_leaves_a_fold_that_opens_bit_identical():
     """A node pinned 0.05 up inside the square (its fan folds, the others can open it):
     the same points, bit for bit, with and without ``give_up_early``."""
