@@ -298,7 +298,10 @@ def _ours(case: rm.Case, col: str, timeout: float):
 
 
 def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
-             timeout: float = 600.0) -> list[Row]:
+             timeout: float = 600.0, repeat: int = 1) -> list[Row]:
+    """The input row and one row per column; a column's seconds are the median of `repeat`
+    runs (a run past `timeout` is not repeated), its measures the first run's (a note says
+    when another run's points differ)."""
     geo = geometry(case)
     base = dict(case=case.name, family=case.family, cells=case.n_faces, folded=geo.folded,
                 held_out=case.held_out)
@@ -309,11 +312,14 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
             continue
         if col == "peer":
             try:
-                t0 = time.perf_counter()
-                res = run_peer(case.points, case.faces, case.reference, timeout=timeout)
-                row.seconds = time.perf_counter() - t0
-                pts = res.points
-                row.note = "" if res.success else "peer: no SUCCESS"
+                runs = []
+                for _ in range(repeat):
+                    t0 = time.perf_counter()
+                    res = run_peer(case.points, case.faces, case.reference, timeout=timeout)
+                    runs.append((time.perf_counter() - t0, res.points))
+                row.seconds = float(np.median([t for t, _ in runs]))
+                pts = runs[0][1]
+                row.note = ("" if res.success else "peer: no SUCCESS") + _differ(runs)
             except PeerMissing as exc:
                 print(f"<!-- {exc} -->", file=sys.stderr)
                 continue
@@ -329,7 +335,11 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
                 row.seconds = float("nan") if got else timeout
                 rows.append(row)
                 continue
-            pts, moved, status, message, row.seconds, backend = got
+            pts, moved, status, message, first, backend = got
+            runs = [(first, pts)] + [(again[4], again[0]) for again in
+                                     (_ours(case, col, timeout) for _ in range(repeat - 1))
+                                     if again not in (None, "error")]
+            row.seconds = float(np.median([t for t, _ in runs]))
             if col in BACKENDS and not global_stage_on_device(backend):
                 print(f"<!-- {col}: no OpenCL device ({backend}) -->", file=sys.stderr)
                 continue
@@ -338,8 +348,15 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
             row.note = "" if status in ("untangled", "valid") else f"{status}: {message[:160]}"
             if not np.array_equal(pts[~moved], case.points[~moved]):
                 row.note += " nodes flagged unmoved changed!"
+            row.note += _differ(runs)
         rows.append(measure(case, geo, np.asarray(pts, dtype=np.float64)[:, :2], row))
     return rows
+
+
+def _differ(runs: list[tuple[float, np.ndarray]]) -> str:
+    """A note when a repeated run's points differ from the first run's ("" when alike)."""
+    same = all(np.array_equal(p, runs[0][1]) for _, p in runs[1:])
+    return "" if same else f" {len(runs)} runs gave different points!"
 
 
 # ------------------------------------------------------------------------------ tables
@@ -464,6 +481,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="today's whole-mesh default only up to this many cells")
     ap.add_argument("--timeout", type=float, default=300.0,
                     help="a column still running after this many seconds is stopped")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="run each column this many times: its seconds are the median")
     ap.add_argument("--mirror", type=Path, default=None,
                     help="bare snapshots (OWNER+NAME/repo) for the public meshes not in "
                          "build/public_meshes (default /work/.mirror)")
@@ -490,7 +509,7 @@ def main(argv: list[str] | None = None) -> int:
         except (FileNotFoundError, ValueError) as exc:
             print(f"<!-- {spec.name} skipped: {exc} -->", flush=True)
             continue
-        got = run_case(case, columns, args.whole_max, args.timeout)
+        got = run_case(case, columns, args.whole_max, args.timeout, max(args.repeat, 1))
         rows += got
         for line in table(got)[2:]:
             print(line, flush=True)

@@ -81,3 +81,25 @@ def test_measures_of_a_rectangle_and_a_triangle():
     assert f.tolist() == [0] and {a[0], b[0]} == {0, 1}
     assert rb.abs_log_ratio(np.array([-1.0, 2.0]), np.array([1.0, 2.0])).tolist() == [np.inf,
                                                                                       0.0]
+
+
+def test_repeated_runs_report_the_median_seconds_and_say_when_points_differ(monkeypatch):
+    """--repeat 3: the row's seconds are the median of the three runs' (3, 1, 2 -> 2), its
+    measures the first run's; a run whose points differ is named in the note."""
+    case = rm.load(TINY)
+    real = rb._ours
+    first = real(case, "keep", 120.0)
+    secs = iter([3.0, 1.0, 2.0, 3.0, 1.0, 2.0])
+    shift = iter([0.0, 0.0, 0.0, 0.0, 1e-9, 0.0])
+
+    def timed(_case, _col, _timeout):
+        pts, moved, status, message, _, backend = first
+        return pts + next(shift), moved, status, message, next(secs), backend
+
+    monkeypatch.setattr(rb, "_ours", timed)
+    alike = {r.column: r for r in rb.run_case(case, ("keep",), timeout=120.0, repeat=3)}
+    assert alike["keep"].seconds == 2.0 and alike["keep"].note == ""
+    assert alike["keep"].inverted == 0
+    differ = {r.column: r for r in rb.run_case(case, ("keep",), timeout=120.0, repeat=3)}
+    assert differ["keep"].seconds == 2.0
+    assert differ["keep"].note == " 3 runs gave different points!"
