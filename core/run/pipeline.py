@@ -16,7 +16,7 @@ from ..fpmath import add_reduce
 from ..host.heap import keep_freed_memory
 from ..host.page_advice import pages_for_run
 from ..host.side_by_side import side_by_side
-from ..mesh.faces import FaceSet, as_faceset, face_subset
+from ..mesh.faces import FaceSet, as_faceset, corner_rows, face_subset
 from ..mesh.points import check_points
 from ..mesh.reorder import REORDER_MIN_FACES, Renumbering, scattered, z_order
 from ..mesh.topology import EdgeInfo, checked_edges, free_nodes, pinched_faces
@@ -395,8 +395,8 @@ def _folds_targets(p: np.ndarray, fs: FaceSet, done: Repaired, whole: np.ndarray
     from its run; else the caller's or the reference's (None: regular polygons)."""
     if not keep:
         return whole
-    out = p[fs.indices, :2].copy()
-    out[np.repeat(done.region, fs.counts)] = done.targets
+    out = np.take(p if p.shape[1] == 2 else p[:, :2], fs.indices, axis=0)
+    out[corner_rows(fs, np.flatnonzero(done.region))] = done.targets
     return out
 
 

@@ -201,16 +201,16 @@ def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParam
     n = p.shape[0]
     seed = folded_faces(p, fs, free) if seed is None else seed
     sub_params = replace(params, region="mesh", target="regular")
+    uses = np.bincount(fs.indices, minlength=n)  # corners at each node: the rim's test
     rings = FIRST_RINGS
     while True:
         region = grow_region(fs, n, seed, rings)
         whole = bool(region.all())
         ids = np.flatnonzero(region)
         sub, nodes, rows = face_subset(fs, ids)
-        rim = np.zeros(n, dtype=bool)
-        for g in fs.groups:
-            rim[g.nodes[:, ~region[g.ids]]] = True
-        held = ~free[nodes] | rim[nodes]
+        # the rim: the region's nodes with a corner outside it (in a face not in the region)
+        rim = uses[nodes] > np.bincount(sub.indices, minlength=nodes.size)
+        held = ~free[nodes] | rim
         if not whole and not _encloses(p[nodes], sub):
             rings *= 2  # its faces' areas add up to the area its rim encloses: not > 0, no
             continue  # positions inside make them all valid (core/run/hopeless_groups.py)

@@ -194,3 +194,38 @@ def test_folds_run_stored_as_float32_is_measured_against_the_runs_own_targets():
     assert abs(r32.after.q_avg - r64.after.q_avg) < 1e-6
     assert abs(r32.after.q_min - r64.after.q_min) < 1e-5
     assert r32.targets.shape == (sum(len(f) for f in faces), 2)
+
+
+def test_corner_rows_list_the_faces_corners_face_after_face_in_the_order_asked():
+    """Mixed arities, faces asked out of order: each face's corner rows of ``fs.indices``,
+    face after face, as the offsets say (what ``face_subset`` and the folds run's targets
+    index with)."""
+    from core.mesh.faces import corner_rows
+
+    fs = as_faceset([[0, 1, 2], [1, 3, 4, 2], [2, 4, 5], [3, 6, 7, 8, 4]], 9)
+    assert corner_rows(fs, np.array([3, 0, 2])).tolist() == [10, 11, 12, 13, 14, 0, 1, 2, 7, 8, 9]
+    assert corner_rows(fs, np.array([], dtype=np.int64)).tolist() == []
+
+
+def test_region_rim_holds_exactly_the_region_nodes_shared_with_faces_outside():
+    """A pinned handle dragged across a 12 x 12 grid: the region that opens the fold holds
+    its rim (the nodes it shares with faces outside it) and the fixed nodes, and lets every
+    other node of its faces move."""
+    from core.run import repair
+
+    p, faces = _grid(12)
+    c = 6 * 13 + 6
+    q = p.copy()
+    q[c] += [1.3, 0.2]
+    fs = as_faceset(faces, len(p))
+    border = np.isin(np.arange(len(p)) % 13, (0, 12)) | np.isin(np.arange(len(p)) // 13, (0, 12))
+    free = ~border
+    free[c] = False
+    done = repair.repair_folds(q, fs, free, EEGTParams(region="folds", target="keep"), None,
+                               untangle_and_smooth)
+    assert done.result.status == "untangled" and not done.region.all()
+    outside = np.zeros(len(p), dtype=bool)
+    outside[np.asarray(faces)[~done.region].ravel()] = True
+    rim = outside[done.nodes]
+    assert rim.any() and (~rim & free[done.nodes]).any()
+    assert np.array_equal(done.held, ~free[done.nodes] | rim)
