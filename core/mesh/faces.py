@@ -118,6 +118,11 @@ class FaceSet:
         """arity -> (F_n, n) node array, a face per row: the global stage's mesh format."""
         return {g.n: np.ascontiguousarray(g.nodes.T) for g in self.groups}
 
+    def arity_order(self) -> np.ndarray:
+        """(F,) the face id of each element in `by_arity`'s order (the arity groups in turn,
+        each group's faces in order): the global stage's element -> face map."""
+        return np.concatenate([g.ids for g in self.groups])
+
     def to_lists(self) -> list[list[int]]:
         return [self.indices[a:b].tolist() for a, b in zip(self.offsets[:-1], self.offsets[1:])]
 

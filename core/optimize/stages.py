@@ -441,18 +441,17 @@ class _Continuation:
         the first tick TIGHT_CHECK iterations in when the round is already too tight there
         (`_too_tight` then ends the run on that point); else the round runs on as it would."""
         en, st = self.en, self.st
-        checked = [False]
+        checked = False
 
-        def watched(it: int, point: Callable[[], np.ndarray]) -> bool:
-            if tick is not None and stops(tick(it, point)):
-                return False
-            if checked[0] or it < TIGHT_CHECK:
+        def watch(it: int, point: Callable[[], np.ndarray]) -> bool:
+            nonlocal checked
+            if checked or it < TIGHT_CHECK:
                 return True
-            checked[0] = True
+            checked = True
             x, y = st.unpack(point())
             return not self._tight_after_first(en.n_inverted(x, y), float(np.min(en.dets(x, y))))
 
-        return watched
+        return _chained(tick, watch)
 
     def _cap(self, guard: bool) -> int:
         """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one
@@ -549,6 +548,17 @@ class _Continuation:
         sigma = max(decrease, SIGMA_MIN)
         mu = (1.0 - sigma) * chi_scalar(dmin, self.eps)
         return max(2.0 * float(np.sqrt(mu * (mu - dmin))) if dmin < mu else EPS_MIN, EPS_MIN)
+
+
+def _chained(tick: Tick | None, watch: Tick) -> Tick:
+    """A tick that asks `tick` (a progress report, None: none) and then `watch`: the run
+    stops when either says so (`state.stops`)."""
+    def chained(it: int, point: Callable[[], np.ndarray]) -> bool:
+        if tick is not None and stops(tick(it, point)):
+            return False
+        return watch(it, point)
+
+    return chained
 
 
 def _runs(run_lbfgs: Solver, en: LiftEnergy, st: State, v: np.ndarray, opt: GlobalOptions,
@@ -761,18 +771,17 @@ class _Lift:
         climb's best (measured every SETTLE_WATCH_EVERY iterations): such a settle is not
         kept, and it costs a repair's attempt as much as its climb."""
         en, st, best = self.en, self.st, self.best_m
-        seen = {"reached": False, "at": 0}
+        reached, measured_at = False, 0
 
-        def watched(it: int, point: Callable[[], np.ndarray]) -> bool:
-            if tick is not None and stops(tick(it, point)):
-                return False
-            if seen["reached"] or it - seen["at"] < SETTLE_WATCH_EVERY:
+        def watch(it: int, point: Callable[[], np.ndarray]) -> bool:
+            nonlocal reached, measured_at
+            if reached or it - measured_at < SETTLE_WATCH_EVERY:
                 return True
-            seen["at"] = it
-            seen["reached"] = float(en.element_quality(*st.unpack(point())).min()) >= best
-            return seen["reached"] or it < SETTLE_WATCH
+            measured_at = it
+            reached = float(en.element_quality(*st.unpack(point())).min()) >= best
+            return reached or it < SETTLE_WATCH
 
-        return watched
+        return _chained(tick, watch)
 
     def _retries(self, qm: float) -> bool:
         """Whether a round that was not kept is tried again at LIFT_RETRY of its floor step

@@ -152,7 +152,7 @@ class GrabPull:
         top = reach * reach
         if near.size > PULL_NODES:
             top = min(top, float(np.partition(near, PULL_NODES)[PULL_NODES]))
-        return touching(fs, near <= top)[np.concatenate([g.ids for g in fs.groups])]
+        return touching(fs, near <= top)[fs.arity_order()]
 
     def _distance(self, v: np.ndarray) -> float:
         nf = self.st.nf

@@ -147,7 +147,7 @@ class RegionRepair:
         self.fs, self.free = fs, free
         factors = None if targets is None else corner_factors(targets, fs)
         self.near = Neighbourhood(fs.by_arity(), free, factors)
-        self.elem_face = np.concatenate([g.ids for g in fs.groups])  # element -> face id
+        self.elem_face = fs.arity_order()  # element -> face id
         self.held = np.zeros(self.elem_face.size, dtype=bool)  # folds given up on
         self.per_element = 0.0  # seconds per iteration and sub-mesh element (last solve)
         self.active = False  # escalated
