@@ -241,7 +241,7 @@ def run_drag(ext, drag, path, budget, rest: float = REST) -> dict:
         frames += 1
         if opened is None and frame.status != "tangled":
             opened = time.perf_counter() - t0
-        if opened is not None and frame.smooth_iterations <= 1 and not frame.pull_iterations:
+        if opened is not None and frame.settled:
             break
     return {"rate": len(path) / sum(walls), "median": statistics.median(walls),
             "worst": max(walls), "open": opened, "rest_frames": frames, "frame": drag.frame}

@@ -119,6 +119,14 @@ class LiveFrame:
     pull_iterations: int = 0  # the pull's iterations (``core.run.live_pull``), if it ran
     held_back: float = 0.0  # how far the layout holds the grabbed nodes from the cursor
 
+    @property
+    def settled(self) -> bool:
+        """Nothing left for frames with the cursor still: no movable face inverted, no pull
+        under way (a pull's frames are valid while the grabbed nodes still travel) and the
+        smoothing converged (at most one iteration)."""
+        return self.status != "tangled" and not self.pull_iterations and \
+            self.smooth_iterations <= 1
+
 
 class LiveSession:
     """One drag: set up once, then ``frame`` per cursor position.

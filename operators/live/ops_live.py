@@ -161,9 +161,10 @@ class _LiveModal:
         f = self._drag.frame
         if f is None or f.untangle_iterations + f.smooth_iterations + f.pull_iterations == 0:
             return False  # no frame yet, or one that ran nothing (a selection moved whole)
-        if f.status == "tangled" or f.pull_iterations:
-            return self._settle < UNTANGLE_FRAMES
-        return self._settle < SETTLE_FRAMES and f.smooth_iterations > 1
+        if f.settled:
+            return False
+        tangled = f.status == "tangled" or f.pull_iterations
+        return self._settle < (UNTANGLE_FRAMES if tangled else SETTLE_FRAMES)
 
     def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
         kind, value = event.type, event.value

@@ -78,8 +78,7 @@ def test_drag_then_rest_leaves_no_face_flipped(bpy, ext, how, levels, seed):
         frame = drag.step(tuple(at), budget=None)
     for _ in range(300):
         frame = drag.step(None, budget=None)
-        if frame.status != "tangled" and not frame.pull_iterations and \
-                frame.smooth_iterations <= 1:
+        if frame.settled:
             break
     after = _uv(bpy, obj)
     area1 = face_signed_areas(after, face)

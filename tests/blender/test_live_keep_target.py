@@ -136,7 +136,7 @@ def _drag_and_rest(bpy, ext, target: str):
         frame = drag.step(tuple(start + move * k / 8), budget=None)
     for _ in range(60):
         frame = drag.step(None, budget=None)
-        if frame.status != "tangled" and frame.smooth_iterations <= 1:
+        if frame.settled:
             break
     assert frame.stats.n_inverted == 0
     return uv0, _edit_uv(bpy, obj), drag, pins

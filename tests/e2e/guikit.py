@@ -36,9 +36,10 @@ def live_frames():
 
 
 def live_settled(count):
-    """More than ``count`` live frames ran and the last one is untangled and smoothed."""
+    """More than ``count`` live frames ran and the last one is settled (``LiveFrame.settled``:
+    untangled, no pull under way, smoothed)."""
     f = live_frames()
-    return len(f) > count and f[-1][0].status != "tangled" and f[-1][0].smooth_iterations <= 1
+    return len(f) > count and f[-1][0].settled
 
 
 def n_ops():
