@@ -41,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "build" / "corpus"
 VERSION = 3  # part of every cache name: bump when a generator changes its output
 
-__all__ = ["CACHE", "Case", "CaseSpec", "default_specs", "load", "scale_specs", "specs"]
+__all__ = ["CACHE", "Case", "CaseSpec", "compact_mesh", "default_specs", "load", "scale_specs", "specs"]
 
 
 @dataclass(frozen=True)
@@ -254,7 +254,7 @@ MESHERS: dict[str, tuple[Callable, dict]] = {
 }
 
 
-def _compact(pts: np.ndarray, groups: list[np.ndarray]) -> tuple[np.ndarray, FaceSet]:
+def compact_mesh(pts: np.ndarray, groups: list[np.ndarray]) -> tuple[np.ndarray, FaceSet]:
     """Drop unused nodes, orient faces counterclockwise, build the FaceSet."""
     used = np.zeros(pts.shape[0], dtype=bool)
     for g in groups:
@@ -288,7 +288,7 @@ def base_mesh(domain: str, mesher: str, n: int) -> tuple[np.ndarray, FaceSet]:
         if abs(got - n) < 0.06 * n:
             break
         h *= float(np.sqrt(got / n))
-    return _compact(pts, groups)
+    return compact_mesh(pts, groups)
 
 
 # ---------------------------------------------------------------------------- tangles

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from bench import libm
-from bench.corpus import _compact, naca0012
+from bench.corpus import compact_mesh, naca0012
 from bench.meshgen import boundary_layer_annulus
 from core import FaceSet, faces_from_csr, mesh_stats
 from core.mesh.topology import boundary_nodes
@@ -268,7 +268,7 @@ def cgrid(n: int, first: float = 1e-5, quads: bool = True
     wall_pts = np.zeros(pts.shape[0], dtype=bool)
     wall_pts[idx[0, nw:n_in - nw]] = True
     rows = [q] if quads else [_split(q)]
-    p2, fs = _compact(pts, rows)
+    p2, fs = compact_mesh(pts, rows)
     used = np.zeros(pts.shape[0], dtype=bool)
     used[q.ravel()] = True
     wall = wall_pts[used]
@@ -304,7 +304,7 @@ def gmsh_bl(body: str, n: int, first: float = 1e-4, quads: bool = True
         if abs(got - n) < 0.12 * n:
             break
         h *= float(np.sqrt(got / n))
-    p, fs = _compact(pts, groups)
+    p, fs = compact_mesh(pts, groups)
     used = np.zeros(pts.shape[0], dtype=bool)
     for g in groups:
         used[g.ravel()] = True
@@ -316,7 +316,11 @@ def fresh_gmsh_bl(body: str, n: int, first: float = 1e-4, quads: bool = True
                   ) -> tuple[np.ndarray, FaceSet, np.ndarray, float]:
     """`gmsh_bl` in a new process: gmsh keeps state from one mesh to the next inside a
     process (the same call made twice in one process gives another mesh), so each case is
-    made from a fresh gmsh and is the same mesh whatever was made before it."""
+    made from a fresh gmsh and is the same mesh whatever this process made before it. Not
+    bit for bit across processes in general: gmsh orders some of its sets by memory
+    address, and the same call from another checkout path (or in a first run that writes
+    the bytecode cache) placed and numbered the nodes of the 10k cylinder differently, with
+    the same counts; the case cache keeps the mesh first made (docs/repair.md)."""
     ctx = mp.get_context("spawn")
     with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
         return pool.submit(gmsh_bl, body, n, first, quads).result()
