@@ -44,6 +44,10 @@ TIGHT_SHARE = 0.5  # give_up_early: the second untangling round kept more than t
 # fold (its attempts end like this; one that opens later halves the worst det by then)
 TIGHT_CHECK = 300  # ... judged already this many iterations into the round: the shares
 # level off within 100-300 (failing attempts' rounds run on to 1 000-2 800 iterations)
+SLOW_RISE = 0.25  # give_up_early: a later untangling round (the third on) that keeps every
+# inverted element and raises the worst det (below 0) by less than this x |det|: the region
+# is too tight (failing attempts creep by 4-7 %; the rounds of attempts that opened their
+# fold, when they kept every inverted element, rose by 56 % and more)
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -297,8 +301,8 @@ class _Continuation:
         self.dmins = [dmin]  # the min det at the start and after each untangling round
         self.top_det, self.top_inv = dmin, n_inv  # the best worst det and inverted count
         self.stall = 0  # untangling rounds in a row without progress (`_stalled`)
-        self.firsts: list[tuple[int, float]] = []  # (inverted, min det) after the first
-        #                                            two untangling rounds (`_too_tight`)
+        self.marks: list[tuple[int, float]] = []  # (inverted, min det) after each
+        #                                           untangling round (`_too_tight`)
         self.too_tight = False  # give_up_early ended the run (`_too_tight`)
         self.granted = 0  # iterations `_extend` added to max_iter
         self.rounds = 0
@@ -423,17 +427,28 @@ class _Continuation:
     def _too_tight(self, dmin: float, n_inv: int) -> bool:
         """options.give_up_early: after the second untangling round, whether it kept more
         than TIGHT_SHARE of the first round's inverted elements and of its worst det (still
-        below 0). The region's fold does not open there (a repair then grows the region);
-        cold runs and resumed calls go on."""
-        if not self.opt.give_up_early or self.resume is not None or len(self.firsts) >= 2:
+        below 0); after a later one, whether it was slow (`_slow_after`). The region's fold
+        does not open there (a repair then grows the region); cold runs and resumed calls go
+        on."""
+        if not self.opt.give_up_early or self.resume is not None:
             return False
-        self.firsts.append((n_inv, dmin))
-        return len(self.firsts) == 2 and self._tight_after_first(n_inv, dmin)
+        self.marks.append((n_inv, dmin))
+        if len(self.marks) == 2:
+            return self._tight_after_first(n_inv, dmin)
+        return len(self.marks) > 2 and self._slow_after(*self.marks[-2], n_inv, dmin)
+
+    @staticmethod
+    def _slow_after(inv0: int, det0: float, n_inv: int, dmin: float) -> bool:
+        """Whether an untangling round that ended at (n_inv, dmin) from (inv0, det0) kept
+        every inverted element and raised the worst det, still below 0, by less than
+        SLOW_RISE x |det0|."""
+        return 0 < n_inv and inv0 <= n_inv and dmin < 0.0 and \
+            dmin - det0 < SLOW_RISE * abs(det0)
 
     def _tight_after_first(self, n_inv: int, dmin: float) -> bool:
         """Whether (n_inv, dmin) of the second untangling round keep more than TIGHT_SHARE of
         the first round's inverted elements and of its worst det (still below 0)."""
-        inv1, det1 = self.firsts[0]
+        inv1, det1 = self.marks[0]
         return n_inv > TIGHT_SHARE * inv1 and dmin < 0.0 and dmin < TIGHT_SHARE * det1
 
     def _tight_watch(self, tick: Tick | None) -> Tick:
@@ -503,7 +518,7 @@ class _Continuation:
         st = self.st
         tick = self._tick()
         if (not guard and self.opt.give_up_early and self.resume is None
-                and len(self.firsts) == 1):  # the second untangling round
+                and len(self.marks) == 1):  # the second untangling round
             tick = self._tight_watch(tick)
         self.v, its = self.run_lbfgs(st.view(self.en), st, self.v, self.eps, max_it=cap,
                                      guard=guard, tick=tick)

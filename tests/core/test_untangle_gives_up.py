@@ -106,6 +106,21 @@ def test_give_up_early_judges_the_second_round_tight_check_iterations_in(monkeyp
     assert np.array_equal(checked, at_end)
 
 
+def test_give_up_early_ends_a_later_round_that_creeps():
+    """A node pinned 0.1 up onto the square's fixed top edge (its fan cannot open; the
+    first two rounds halve the worst det, so the two-round rule lets them pass): the third
+    untangling round keeps every inverted element and raises the worst det by less than
+    SLOW_RISE of it, and ``give_up_early`` ends the run there, 'failed', too_tight; without
+    it the run creeps on to its whole budget (48 rounds, measured)."""
+    p, groups, free = _node_out_of_a_square(0.1)
+    _, early = untangle_global(p, groups, free, GlobalOptions(give_up_early=True))
+    assert early["status"] == "failed" and early["too_tight"] is True
+    assert early["gave_up"] is True and early["rounds"] == 3
+    _, plain = untangle_global(p, groups, free)
+    assert plain["status"] == "failed" and plain["too_tight"] is False
+    assert plain["rounds"] > 20 and plain["iterations"] > 5 * early["iterations"]
+
+
 def test_give_up_early_leaves_a_fold_that_opens_bit_identical():
     """A node pinned 0.05 up inside the square (its fan folds, the others can open it):
     the same points, bit for bit, with and without ``give_up_early``."""
