@@ -37,7 +37,9 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -312,16 +314,9 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
             continue
         if col == "peer":
             try:
-                runs, first = [], None
-                for _ in range(repeat):
-                    t0 = time.perf_counter()
-                    res = run_peer(case.points, case.faces, case.reference, timeout=timeout)
-                    runs.append((time.perf_counter() - t0, res.points))
-                    if first is None:  # the measures and the note are the first run's
-                        first = res
-                row.seconds = float(np.median([t for t, _ in runs]))
-                pts = first.points
-                row.note = ("" if first.success else "peer: no SUCCESS") + _differ(runs)
+                t0 = time.perf_counter()
+                first = run_peer(case.points, case.faces, case.reference, timeout=timeout)
+                t_first = time.perf_counter() - t0
             except PeerMissing as exc:
                 print(f"<!-- {exc} -->", file=sys.stderr)
                 continue
@@ -330,6 +325,11 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
                 row.seconds = timeout
                 rows.append(row)
                 continue
+            pts = first.points
+            runs, lost = _repeats((t_first, pts), repeat, partial(_peer_again, case, timeout))
+            row.seconds = float(np.median([t for t, _ in runs]))
+            row.note = ("" if first.success else "peer: no SUCCESS") + _differ(runs) + \
+                _lost(lost, repeat)
         else:
             got = _ours(case, col, timeout)
             if got is None or got == "error":
@@ -338,9 +338,7 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
                 rows.append(row)
                 continue
             pts, moved, status, message, first, backend = got
-            runs = [(first, pts)] + [(again[4], again[0]) for again in
-                                     (_ours(case, col, timeout) for _ in range(repeat - 1))
-                                     if again not in (None, "error")]
+            runs, lost = _repeats((first, pts), repeat, partial(_ours_again, case, col, timeout))
             row.seconds = float(np.median([t for t, _ in runs]))
             if col in BACKENDS and not global_stage_on_device(backend):
                 print(f"<!-- {col}: no OpenCL device ({backend}) -->", file=sys.stderr)
@@ -350,9 +348,39 @@ def run_case(case: rm.Case, columns: tuple[str, ...], whole_max: int = 20_000,
             row.note = "" if status in ("untangled", "valid") else f"{status}: {message[:160]}"
             if not np.array_equal(pts[~moved], case.points[~moved]):
                 row.note += " nodes flagged unmoved changed!"
-            row.note += _differ(runs)
+            row.note += _differ(runs) + _lost(lost, repeat)
         rows.append(measure(case, geo, np.asarray(pts, dtype=np.float64)[:, :2], row))
     return rows
+
+
+Run = tuple[float, np.ndarray]  # (seconds, points) of one run
+
+
+def _repeats(first: Run, repeat: int, again: Callable[[], Run | None]) -> tuple[list[Run], int]:
+    """The first run and `repeat` - 1 more (`again`: None when a run stopped or raised), and
+    how many of those were lost (left out of the median)."""
+    more = [again() for _ in range(repeat - 1)]
+    kept = [r for r in more if r is not None]
+    return [first, *kept], len(more) - len(kept)
+
+
+def _ours_again(case: rm.Case, col: str, timeout: float) -> Run | None:
+    got = _ours(case, col, timeout)
+    return None if got is None or got == "error" else (got[4], got[0])
+
+
+def _peer_again(case: rm.Case, timeout: float) -> Run | None:
+    t0 = time.perf_counter()
+    try:
+        res = run_peer(case.points, case.faces, case.reference, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None
+    return time.perf_counter() - t0, res.points
+
+
+def _lost(lost: int, repeat: int) -> str:
+    """A note when some repeated runs stopped or raised ("" when none did)."""
+    return f" {lost} of {repeat} runs stopped or raised (not in the median)" if lost else ""
 
 
 def _differ(runs: list[tuple[float, np.ndarray]]) -> str:

@@ -103,3 +103,23 @@ def test_repeated_runs_report_the_median_seconds_and_say_when_points_differ(monk
     differ = {r.column: r for r in rb.run_case(case, ("keep",), timeout=120.0, repeat=3)}
     assert differ["keep"].seconds == 2.0
     assert differ["keep"].note == " 3 runs gave different points!"
+
+
+def test_a_repeated_run_that_stops_is_named_and_left_out_of_the_median(monkeypatch):
+    """--repeat 3 where the second run stops at the timeout: the median of the other two
+    (3, 1 -> 2), the first run's measures, and a note that one of three runs stopped."""
+    case = rm.load(TINY)
+    first = rb._ours(case, "keep", 120.0)
+    got = iter([3.0, None, 1.0])
+
+    def timed(_case, _col, _timeout):
+        secs = next(got)
+        if secs is None:
+            return None
+        pts, moved, status, message, _, backend = first
+        return pts, moved, status, message, secs, backend
+
+    monkeypatch.setattr(rb, "_ours", timed)
+    row = {r.column: r for r in rb.run_case(case, ("keep",), timeout=120.0, repeat=3)}["keep"]
+    assert row.seconds == 2.0 and row.inverted == 0
+    assert row.note == " 1 of 3 runs stopped or raised (not in the median)"
