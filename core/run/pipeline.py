@@ -447,12 +447,12 @@ def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | N
         order, run_fs = mesh.renumbered
         work = mesh.work[order.nodes]  # the run's numbering from here on (one copy, not two)
         run = _Run(work, run_fs, free[order.nodes], params, backend, progress,
-                   frozen[order.faces], frozen_ids=np.flatnonzero(frozen))
+                   frozen[order.faces], frozen_ids=np.flatnonzero(frozen),
+                   give_up_early=give_up_early)
     else:
         order = None
         run = _Run(mesh.work, fs, free, params, backend, progress, frozen, mesh.targets,
-                   mesh.motion)
-    run.give_up_early = give_up_early
+                   mesh.motion, give_up_early=give_up_early)
     return run, order
 
 
@@ -620,7 +620,7 @@ class _Run:
 
     def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress, frozen,
                  targets: Targets | None = None, motion: BoundaryMotion | None = None,
-                 frozen_ids: np.ndarray | None = None):
+                 frozen_ids: np.ndarray | None = None, give_up_early: bool = False):
         self.p, self.fs, self.free, self.params = p, fs, free, params
         # the frozen faces' ids in the caller's face order (the run's may be renumbered)
         self.frozen_ids = np.flatnonzero(frozen) if frozen_ids is None else frozen_ids
@@ -643,7 +643,7 @@ class _Run:
         self.polished = False  # the global stage's polish (or the lift stage) has run
         self.lifted = 0  # lift rounds the last lift kept
         self.gave_up = False  # a global stage ended for want of progress (stages.STALL_ROUNDS)
-        self.give_up_early = False  # a repair's attempt (`untangle_and_smooth`) ...
+        self.give_up_early = give_up_early  # a repair's attempt (`untangle_and_smooth`) ...
         self.too_tight = False  # ... whose global stage gave up early (no second start)
         self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
         self._near: Neighbourhood | None = None  # made by the local untangle, if it runs
