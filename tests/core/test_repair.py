@@ -1,12 +1,22 @@
 """Region "folds" (core/run/repair.py): only the folded faces and a margin grown while needed
 move, every other node keeps its bits; target "keep" pulls faces towards their own shapes."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from core import EEGTParams, mesh_stats, quality, untangle_and_smooth
 from core.mesh.faces import as_faceset
-from core.run.repair import DRAGGED_RINGS, FIRST_RINGS, folded_faces, grow_region, keep_targets
+from core.run.repair import (
+    DRAGGED_RINGS,
+    FIRST_RINGS,
+    ROOM,
+    folded_faces,
+    grow_region,
+    keep_targets,
+    repair_folds,
+)
 
 
 def _grid(n: int) -> tuple[np.ndarray, list[list[int]]]:
@@ -106,6 +116,48 @@ def test_a_pinned_handle_dragged_far_grows_the_margin_until_the_fold_opens():
     assert res.status == "untangled" and res.after.n_inverted == 0, res.message
     assert f"({4 * FIRST_RINGS} rings around the folded ones)" in res.message, res.message
     assert np.array_equal(res.points[~res.moved], q[~res.moved])
+
+
+def _mirrored_disk(radius: float) -> tuple[np.ndarray, object, np.ndarray]:
+    """A 40 x 40 grid whose nodes within `radius` of the centre are mirrored across it and
+    stretched 4 times in x (the disk's cells inverted, 4 times their area): (points, faces,
+    free)."""
+    from core import boundary_nodes
+
+    p, faces = _grid(40)
+    fs = as_faceset(faces, len(p))
+    inside = np.hypot(p[:, 0] - 20.0, p[:, 1] - 20.0) < radius
+    p[inside, 0] = 20.15 - 4.0 * (p[inside, 0] - 20.0)
+    return p, fs, ~boundary_nodes(len(p), fs)
+
+
+def _inverted_share(p, fs, free, rings: int) -> float:
+    """The inverted faces' area over the valid faces' area in the region of `rings`."""
+    from core.mesh.faces import face_subset
+    from core.metrics.face_quality import signed_face_areas
+
+    region = grow_region(fs, len(p), folded_faces(p, fs, free), rings)
+    sub, nodes, _ = face_subset(fs, np.flatnonzero(region))
+    a = signed_face_areas(p[nodes], sub)
+    return float(-a[a < 0].sum() / a[a > 0].sum())
+
+
+@pytest.mark.parametrize(("radius", "rings"), [(3.5, FIRST_RINGS), (6.5, 2 * FIRST_RINGS)])
+def test_the_first_attempt_is_on_a_margin_with_room_for_the_fold(radius, rings):
+    """A region whose inverted area is over ROOM x its valid area is not tried: the margin
+    doubles first. The mirrored disk of radius 6.5 has 0.59 at FIRST_RINGS rings (its one
+    attempt is on twice the rings), that of radius 3.5 has 0.40 (tried there)."""
+    p, fs, free = _mirrored_disk(radius)
+    assert (_inverted_share(p, fs, free, FIRST_RINGS) > ROOM) == (rings > FIRST_RINGS)
+    seen = []
+
+    def run(points, faces, **_):
+        seen.append(faces.n_faces)
+        return SimpleNamespace(status="untangled", points=points)
+
+    got = repair_folds(p, fs, free, EEGTParams(region="folds", target="keep"), None, run)
+    assert got.rings == rings and len(seen) == 1
+    assert seen[0] == int(grow_region(fs, len(p), folded_faces(p, fs, free), rings).sum())
 
 
 def test_folds_only_on_a_valid_mesh_moves_nothing():
