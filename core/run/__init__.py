@@ -13,7 +13,8 @@ stage, on a plane in 2D or 3D, in one go or frame by frame under a cursor.
   `keep_targets`; hopeless folds held before the run: `hopeless`, `hopeless_groups`.
 - live drags, a frame at a time: `live.LiveSession`, `LiveFrame`, the cursor's bound
   (`cursor_bounds`, `clamp_cursor`), what may be written (`storable_float32`); what a
-  frame reuses from the last: `live_reuse`.
+  frame reuses from the last: `live_reuse`; how many frames run with the cursor still:
+  `live_rest.RestFrames`.
 """
 
 from .acceptance import FLOAT32_TIE, accept, tie_tolerance
@@ -35,13 +36,15 @@ from .live import (
     uv_region,
     uv_vertex_corners,
 )
+from .live_rest import SETTLE_FRAMES, UNTANGLE_FRAMES, RestFrames
 from .pipeline import Cancelled, EEGTResult, frozen_note, untangle_and_smooth
 from .pipeline_3d import untangle_and_smooth_3d
 from .repair import folded_faces, keep_targets
 
 __all__ = ["FINISH_BUDGET", "FINISH_GO_ON", "FINISH_KEEP", "FINISH_LIMIT", "FINISH_RESTORE",
-           "FLOAT32_TIE", "FRAME_BUDGET", "FRAME_ITERATIONS", "Cancelled", "EEGTResult",
-           "LiveFrame", "LiveSession", "accept", "clamp_cursor", "cursor_bounds",
-           "folded_faces", "frozen_note", "harmonic_positions", "keep_targets", "live_params",
+           "FLOAT32_TIE", "FRAME_BUDGET", "FRAME_ITERATIONS", "SETTLE_FRAMES",
+           "UNTANGLE_FRAMES", "Cancelled", "EEGTResult", "LiveFrame", "LiveSession",
+           "RestFrames", "accept", "clamp_cursor", "cursor_bounds", "folded_faces",
+           "frozen_note", "harmonic_positions", "keep_targets", "live_params",
            "storable_float32", "tie_tolerance", "untangle_and_smooth", "untangle_and_smooth_3d",
            "uv_region", "uv_vertex_corners"]

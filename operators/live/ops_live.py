@@ -26,6 +26,7 @@ from ...core.run import (
     FINISH_KEEP,
     FINISH_LIMIT,
     FINISH_RESTORE,
+    RestFrames,
 )
 from ..ui import props
 from ..uv import uv_props
@@ -33,8 +34,6 @@ from .drag import MeshDrag, UVDrag
 
 TICK = 1.0 / 60.0  # the timer's period (s): a frame runs on the first tick after a move
 PICK_PIXELS = 12.0  # a vertex within this many pixels of the cursor is grabbed
-SETTLE_FRAMES = 30  # smoothing frames run with the cursor still while the mesh changes
-UNTANGLE_FRAMES = 1200  # untangling frames run with the cursor still (about 20 s at most)
 
 LAST_FRAMES: list[Any] = []  # the frames of the last drag (read by the tests)
 
@@ -79,8 +78,8 @@ class _LiveModal:
         except ValueError as exc:
             self.report({"WARNING"}, str(exc))
             return {"CANCELLED"}
-        self._area, self._drag, self._at, self._pending, self._settle = area, None, None, \
-            False, 0
+        self._area, self._drag, self._at, self._pending = area, None, None, False
+        self._rest = RestFrames()  # the frames run with the cursor still
         self._finish_from: float | None = None  # perf_counter when a release began finishing
         LAST_FRAMES.clear()
         wm = context.window_manager
@@ -112,7 +111,7 @@ class _LiveModal:
         else:
             frame = self._drag.step(self._at if self._pending else None)
         LAST_FRAMES.append((frame, self._drag.times))
-        self._settle = 0 if self._pending else self._settle + 1
+        self._rest.after(frame, moved=self._pending)
         self._pending = False
         since = None if self._finish_from is None else time.perf_counter() - self._finish_from
         self._area.header_text_set(status_text(frame, since))
@@ -157,14 +156,8 @@ class _LiveModal:
         return True
 
     def _busy(self) -> bool:
-        """Whether the mesh may still change with the cursor still."""
-        f = self._drag.frame
-        if f is None or f.untangle_iterations + f.smooth_iterations + f.pull_iterations == 0:
-            return False  # no frame yet, or one that ran nothing (a selection moved whole)
-        if f.settled:
-            return False
-        tangled = f.status == "tangled" or f.pull_iterations
-        return self._settle < (UNTANGLE_FRAMES if tangled else SETTLE_FRAMES)
+        """Whether the mesh may still change with the cursor still (`RestFrames`)."""
+        return self._rest.busy(self._drag.frame)
 
     def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
         kind, value = event.type, event.value
