@@ -58,7 +58,8 @@ FRAME_BUDGET = 0.04  # seconds a frame aims at, its writes into Blender included
 FINISH_KEEP, FINISH_GO_ON, FINISH_RESTORE = "keep", "go on", "restore"  # `finishing`
 FINISH_BUDGET = 0.1  # seconds of a frame while a release finishes the repair (the editor
 # stays responsive to Esc between frames)
-FINISH_LIMIT = 30.0  # seconds a release finishes the repair at most (then as FINISH_RESTORE)
+FINISH_LIMIT = 30.0  # seconds a release finishes the repair at most (then `finishing`'s
+# out_of_time: a fold still open as FINISH_RESTORE, a pull kept where it got to)
 CURSOR_REACH = 1000.0  # a drag's cursor is kept within the dragged mesh's bounding box grown
 # on every side by this many times the box's longer side: farther than any pull on screen,
 # near enough that every place is finite in float32 and the frame's scaling stays sane
@@ -254,19 +255,31 @@ class LiveSession:
             return s
         return stats_of([self.kept.check(given, self._given.q)])
 
-    def finishing(self, frame: LiveFrame | None) -> str:
+    def finishing(self, frame: LiveFrame | None, out_of_time: bool = False) -> str:
         """What a release (or Enter) after ``frame`` does (``FINISH_*``): keep the result
-        (no face a move can change is inverted), go on with frames (the escalation still has
-        a fold to open, or the rest's pull has yet to run) or give up (only folds it held
-        are left: kept when no more faces are inverted than at the drag's start, else every
-        value goes back)."""
-        if frame is None or frame.status != "tangled":
+        (no face a move can change is inverted, and no pull under way), go on with frames
+        (the escalation still has a fold to open, the rest's pull has yet to run, or it is
+        still bringing the grabbed nodes towards the cursor: a release ends where the drag
+        would, however fast the machine got there) or give up (only folds it held are left:
+        kept when no more faces are inverted than at the drag's start, else every value
+        goes back). ``out_of_time``: the release has gone on for FINISH_LIMIT seconds: a
+        pull is kept where it got to, a fold still open gives up."""
+        if frame is None:
             return FINISH_KEEP
+        if frame.status != "tangled":
+            return FINISH_GO_ON if self.pulling and not out_of_time else FINISH_KEEP
+        if out_of_time:
+            return FINISH_RESTORE
         if self.repair is not None and frame.n_tangled > self.held:
             return FINISH_GO_ON
         if frame.n_tangled and self._pull is None and self._pull_base() is not None:
             return FINISH_GO_ON  # the rest's pull has not run yet
         return FINISH_KEEP if frame.stats.n_inverted <= self.start_inverted else FINISH_RESTORE
+
+    @property
+    def pulling(self) -> bool:
+        """Whether the rest's pull is under way (started, not done)."""
+        return self._pull is not None and not self._pull.done
 
     def released(self, points: np.ndarray) -> np.ndarray | None:
         """The drag's end ``points`` ((N, 2), this session's coordinates) repaired with the

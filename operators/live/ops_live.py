@@ -25,7 +25,6 @@ from ...core.run import (
     FINISH_GO_ON,
     FINISH_KEEP,
     FINISH_LIMIT,
-    FINISH_RESTORE,
     RestFrames,
 )
 from ..ui import props
@@ -49,8 +48,9 @@ def status_text(frame: Any, finishing: float | None = None) -> str:
         return "Live Untangle: press the left mouse button on a vertex and drag (Esc: cancel)"
     s = frame.stats
     if finishing is not None:
-        return (f"Live Untangle: finishing, {s.n_inverted} faces still inverted, "
-                f"{finishing:.1f} s  |  Esc: cancel the drag")
+        what = "the vertex on its way to the cursor" if frame.pull_iterations else \
+            f"{s.n_inverted} faces still inverted"
+        return f"Live Untangle: finishing, {what}, {finishing:.1f} s  |  Esc: cancel the drag"
     held = "  |  the layout holds the vertex back from the cursor" if frame.held_back else ""
     return (f"Live Untangle: inverted {s.n_inverted}, worst {s.q_min:.3f}, mean "
             f"{s.q_avg:.3f}{held}  |  release / Enter: apply, Esc / right button: cancel")
@@ -120,13 +120,12 @@ class _LiveModal:
     def _release(self, context: bpy.types.Context) -> set[str]:
         """Release or Enter (and each frame after one that goes on finishing): keep the
         result when nothing is left to open (one undo step), go on with frames while the
-        escalation opens a fold; when it cannot, the one-shot repair with the grabbed
-        vertices let go (``LiveSession.released``), else every value back (warned)."""
-        if self._finish_from is not None and \
-                time.perf_counter() - self._finish_from > FINISH_LIMIT:
-            what = FINISH_RESTORE
-        else:
-            what = self._drag.session.finishing(self._drag.frame)
+        escalation opens a fold or the rest's pull brings the vertex on; when it cannot,
+        the one-shot repair with the grabbed vertices let go (``LiveSession.released``),
+        else every value back (warned)."""
+        late = self._finish_from is not None and \
+            time.perf_counter() - self._finish_from > FINISH_LIMIT
+        what = self._drag.session.finishing(self._drag.frame, out_of_time=late)
         if what == FINISH_KEEP:
             return self._end(context, {"FINISHED"})
         if what == FINISH_GO_ON:
