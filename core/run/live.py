@@ -121,12 +121,16 @@ class LiveFrame:
     held_back: float = 0.0  # how far the layout holds the grabbed nodes from the cursor
 
     @property
+    def opening(self) -> bool:
+        """Whether the frames are still opening a fold (a movable face inverted) or pulling
+        the grabbed nodes (a pull's frames are valid while the nodes still travel)."""
+        return self.status == "tangled" or bool(self.pull_iterations)
+
+    @property
     def settled(self) -> bool:
-        """Nothing left for frames with the cursor still: no movable face inverted, no pull
-        under way (a pull's frames are valid while the grabbed nodes still travel) and the
-        smoothing converged (at most one iteration)."""
-        return self.status != "tangled" and not self.pull_iterations and \
-            self.smooth_iterations <= 1
+        """Nothing left for frames with the cursor still: not `opening`, and the smoothing
+        converged (at most one iteration)."""
+        return not self.opening and self.smooth_iterations <= 1
 
 
 class LiveSession:

@@ -30,8 +30,7 @@ class RestFrames:
     def after(self, frame: LiveFrame, moved: bool) -> None:
         """Count `frame` (`moved`: it put the grabbed nodes at a new cursor place)."""
         self.still = 0 if moved else self.still + 1
-        calm = frame.status != "tangled" and not frame.pull_iterations
-        self.smoothing = self.smoothing + 1 if calm and not moved else 0
+        self.smoothing = 0 if moved or frame.opening else self.smoothing + 1
 
     def busy(self, frame: LiveFrame | None) -> bool:
         """Whether another frame with the cursor still may change the mesh after `frame`
@@ -39,6 +38,6 @@ class RestFrames:
         if frame is None or frame.settled or \
                 frame.untangle_iterations + frame.smooth_iterations + frame.pull_iterations == 0:
             return False  # nothing left, or a frame that ran nothing (a selection moved whole)
-        if frame.status == "tangled" or frame.pull_iterations:
+        if frame.opening:
             return self.still < UNTANGLE_FRAMES
         return self.smoothing < SETTLE_FRAMES
