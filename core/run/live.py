@@ -168,6 +168,8 @@ class LiveSession:
         self.pins = pins
         edges = checked_edges(None, self.fs, n)
         self.free = free_nodes(n, self.fs, pins, edges=edges)
+        self._movable = self.free.copy()  # the free and the grabbed nodes (a pull moves them)
+        self._movable[self.grab] = True
         used = self.fs.used_nodes(n)
         grabbed = np.zeros(n, dtype=bool)
         grabbed[self.grab] = True
@@ -251,6 +253,23 @@ class LiveSession:
         self._engine = self._engine.restarted(work, self._search, keep_quality=True)
         return self._engine
 
+    def _base_ok(self, given: np.ndarray, n_inverted: int) -> bool:
+        """Whether the positions ``given`` (``pipeline.as_given``; ``n_inverted`` faces
+        inverted) may be a pull's or a carried start's base: no inverted face has a node
+        that moves or is grabbed (a face of grabbed and fixed nodes only is frozen while
+        the cursor holds them, not once a pull lets them go)."""
+        return n_inverted == 0 or \
+            n_inverted <= int(frozen_faces(given, self.fs, self._movable).sum())
+
+    def _grab_folded(self, frame: LiveFrame) -> bool:
+        """Whether ``frame`` has an inverted face of grabbed and fixed nodes only (frozen
+        while the cursor holds them there: a fold only a pull, which lets them go, opens)."""
+        if frame.status != "tangled" or not self.grab.size:
+            return False
+        center, scale = normalisation(frame.points, self.fs)
+        return not self._base_ok(as_given(frame.points, self.fs, center, scale),
+                                 frame.stats.n_inverted)
+
     def _stats(self, given: np.ndarray) -> Stats:
         """Stats of the positions as the caller has them (``pipeline.as_given``), the kept
         corners left out as the one-shot run measures them."""
@@ -276,8 +295,9 @@ class LiveSession:
             return FINISH_RESTORE
         if self.repair is not None and frame.n_tangled > self.held:
             return FINISH_GO_ON
-        if frame.n_tangled and self._pull is None and self._pull_base() is not None:
-            return FINISH_GO_ON  # the rest's pull has not run yet
+        if (frame.n_tangled or self._grab_folded(frame)) and (self.pulling or (
+                self._pull is None and self._pull_base() is not None)):
+            return FINISH_GO_ON  # the rest's pull has not run yet, or runs
         return FINISH_KEEP if frame.stats.n_inverted <= self.start_inverted else FINISH_RESTORE
 
     @property
@@ -312,7 +332,7 @@ class LiveSession:
         center, scale = normalisation(self.points, self.fs)
         given = as_given(self.points, self.fs, center, scale)
         self.start_inverted = self._stats(given).n_inverted
-        if self.start_inverted <= int(frozen_faces(given, self.fs, self.free).sum()):
+        if self._base_ok(given, self.start_inverted):
             self._valid = self._start = self.points
         self._engine_at((self.points - center) / scale,
                         (float(center[0]), float(center[1]), float(scale)))
@@ -351,8 +371,8 @@ class LiveSession:
         if self._pull is not None:
             return self._pulled(t0, budget)
         out = self._frame(grab_to, iterations, budget, t0)
-        if out.n_tangled and self.pull_after is not None and \
-                t0 - self._still_since >= self.pull_after:
+        if self.pull_after is not None and t0 - self._still_since >= self.pull_after and \
+                (out.n_tangled or self._grab_folded(out)):
             self._start_pull()
         return out
 
@@ -500,7 +520,8 @@ class LiveSession:
             self.step_seconds = clock.step
         if repair is not None and not failed and after.n_inverted <= n_frozen:
             repair.reset()
-        if not failed and after.n_inverted <= n_frozen:
+        if not failed and after.n_inverted <= n_frozen and \
+                self._base_ok(as_given(out, fs, center, scale), after.n_inverted):
             self._valid = out
         status = "tangled" if after.n_inverted else (
             "untangled" if before.n_inverted else "valid")

@@ -77,6 +77,27 @@ def test_a_pull_the_layout_lets_through_puts_the_node_on_the_cursor():
     assert np.array_equal(frame.points[border], p[border])
 
 
+def test_a_node_dragged_past_the_border_beside_it_is_pulled_back_inside():
+    """A node of the row next to the bottom edge asked 2.5 rows below it: its triangle with
+    two border nodes inverts, a face no move of the free nodes changes (frozen while the
+    cursor holds the node there; no other face is left inverted). At rest that fold still
+    starts the pull, from the drag's start (a layout with such a face inverted is no pull's
+    base): the node stops just inside, 0 inverted faces by an independent count, and a
+    release keeps it."""
+    p, fs = jittered_square(800, jitter=0.0)
+    h = float(np.unique(p[:, 1])[1])
+    g = int(np.argmin(np.hypot(p[:, 0] - 0.5, p[:, 1] - h)))
+    live = LiveSession(p, fs, [g], pull_after=0.0)
+    asked = p[[g]] + [0.0, -2.5 * h]
+    frame = live.frame(asked, budget=None)
+    assert frame.status == "tangled" and frame.n_tangled == 0
+    assert live.finishing(frame) == "go on"
+    frame = _rest(live, frame)
+    assert frame.status == "untangled" and not inverted_faces(frame.points, fs).any()
+    assert 0.0 < frame.points[g, 1] < h and frame.held_back > 1.4 * h  # asked 1.5 h below
+    assert live.finishing(frame) == "keep"
+
+
 def test_a_cursor_move_ends_the_pull():
     """After a pull frame, a new cursor place runs an ordinary frame with the node there."""
     p, fs = jittered_square(800, jitter=0.0)
