@@ -12,6 +12,7 @@ import numpy as np
 
 from ..choices import NUMPY_ENGINE
 from ..fpmath import add_reduce, power
+from ..mesh.csr import bincount_csr, ragged_arange
 from ..mesh.faces import FaceSet
 from ..metrics.face_quality import Stats, stats_of
 from ..metrics.mean_ratio import group_quality
@@ -149,6 +150,7 @@ class NumpyEngine:
         engine._setup(points, self.faces, self.free, self.params, distance or self._distance,
                       self.targets, self.motion, defer_distances=True,  # may never be stepped
                       known=known)
+        engine._node_corners = self._node_corners  # the same faces
         return engine
 
     @classmethod
@@ -188,6 +190,7 @@ class NumpyEngine:
         self.free = np.ascontiguousarray(free, dtype=bool)
         self.groups = faces.groups
         self.corner_nodes = np.concatenate([g.nodes.ravel() for g in self.groups])
+        self._node_corners: tuple[np.ndarray, ...] | None = None  # `_faces_with`'s table
         self.q = self._quality_all() if known is None else self._quality_since(*known)
         self.lbar, min_edge = self._edge_lengths()
         needs_centroids = nearest is None or not (defer_distances or nearest is _UNIFORM)
@@ -254,9 +257,15 @@ class NumpyEngine:
         """`_quality_all`, measuring only the faces with a corner whose bits differ from
         (x, y), where the per-group qualities were `q`."""
         moved = (self.x != x) | (self.y != y)
+        return self._quality_at([np.flatnonzero(moved[g.nodes].any(axis=0))
+                                 for g in self.groups], q)
+
+    def _quality_at(self, columns: list[np.ndarray], q: list[np.ndarray]) -> list[np.ndarray]:
+        """`_quality_all`, measuring only the faces ``columns`` (per group), where the
+        per-group qualities were `q` (a face's quality is its own corners': the same bits
+        as measuring every face)."""
         out = []
-        for g, t, qg in zip(self.groups, self.group_targets, q):
-            cols = np.flatnonzero(moved[g.nodes].any(axis=0))
+        for g, t, qg, cols in zip(self.groups, self.group_targets, q, columns):
             qg = qg.copy()
             if cols.size:
                 nodes = g.nodes[:, cols]
@@ -328,21 +337,47 @@ class NumpyEngine:
         self.y[nodes] = y
 
     def _revert_inverted(self, old_x: np.ndarray, old_y: np.ndarray) -> None:
-        """Move every node of a face that became inverted back, until none is inverted."""
+        """Move every node of a face that became inverted back, until none is inverted.
+        A pass measures again only the faces with a node it moved back (the others keep
+        their qualities): a revert that spreads ring by ring over a large moved region
+        costs passes over those rings, not over the whole mesh each time."""
+        moved = (self.x != old_x) | (self.y != old_y)
+        bad = [np.flatnonzero(q == 0.0) for q in self.q]  # per group: the faces to look at
         while True:
             back = np.zeros(self.n_nodes, dtype=bool)
-            for g, q in zip(self.groups, self.q):
-                back[g.nodes[:, q == 0.0].ravel()] = True
-            back &= (self.x != old_x) | (self.y != old_y)
+            for g, cols in zip(self.groups, bad):
+                back[g.nodes[:, cols].ravel()] = True
+            back &= moved
             if not back.any():
                 return
             self.x[back] = old_x[back]
             self.y[back] = old_y[back]
+            moved &= ~back
             if self.slide is not None:
                 slots = self.slot[back]
                 slots = slots[slots >= 0]
                 self.tau[slots] = self.tau_old[slots]
-            self.q = self._quality_all()
+            # only a face with a node moved back changed: it alone may be inverted now (a
+            # face inverted before has every moved node back, or none to move back)
+            touched = self._faces_with(back)
+            self.q = self._quality_at(touched, self.q)
+            bad = [cols[qg[cols] == 0.0] for qg, cols in zip(self.q, touched)]
+
+    def _faces_with(self, nodes: np.ndarray) -> list[np.ndarray]:
+        """Per group, the faces (sorted columns) with a node in ``nodes`` ((N,) bool), from
+        a node -> corner table built on first use."""
+        if self._node_corners is None:
+            ptr, order = bincount_csr(self.corner_nodes, self.n_nodes)
+            group = np.concatenate([np.full(g.nodes.size, i) for i, g in
+                                    enumerate(self.groups)])
+            column = np.concatenate([np.tile(np.arange(g.size), g.nodes.shape[0])
+                                     for g in self.groups])
+            self._node_corners = (ptr, group[order], column[order])
+        ptr, group, column = self._node_corners
+        ids = np.flatnonzero(nodes)
+        at = ragged_arange(ptr[ids], ptr[ids + 1] - ptr[ids])
+        g_at, c_at = group[at], column[at]
+        return [np.unique(c_at[g_at == i]) for i in range(len(self.groups))]
 
     # -- best iterate --------------------------------------------------------------------
     def save_best(self) -> None:
