@@ -60,6 +60,7 @@ def test_drag_keeps_pins_bits_and_ends_valid(bpy, ext):
 
 
 @pytest.mark.parametrize(("how", "levels", "seed"), [("smart", 2, 1), ("smart", 2, 2),
+                                                    ("smart", 2, 6),  # past the border
                                                     ("unwrap", 1, 1), ("unwrap", 1, 2)])
 def test_drag_then_rest_leaves_no_face_flipped(bpy, ext, how, levels, seed):
     """A human drag on Suzanne's Smart UV / Unwrap, then the cursor still (the rest's pull
