@@ -520,8 +520,8 @@ class LiveSession:
             self.step_seconds = clock.step
         if repair is not None and not failed and after.n_inverted <= n_frozen:
             repair.reset()
-        if not failed and after.n_inverted <= n_frozen and \
-                self._base_ok(as_given(out, fs, center, scale), after.n_inverted):
+        if not failed and after.n_inverted <= n_frozen and (after.n_inverted == 0 or self._base_ok(
+                as_given(out, fs, center, scale), after.n_inverted)):
             self._valid = out
         status = "tangled" if after.n_inverted else (
             "untangled" if before.n_inverted else "valid")
