@@ -511,17 +511,19 @@ class LiveSession:
             reached = engine.points() if failed else engine.best_points()
         changed = np.any(reached != work, axis=1) & free
         out[changed] = reached[changed] * scale + center
+        given_out = given
         if changed.any():
-            after = self._stats(as_given(out, fs, center, scale))
+            given_out = as_given(out, fs, center, scale)
+            after = self._stats(given_out)
             if not failed and not accept(before, after):
-                out, after = p.copy(), before
+                out, after, given_out = p.copy(), before, given
         self.points = out
         if n_untangle + n_smooth:
             self.step_seconds = clock.step
         if repair is not None and not failed and after.n_inverted <= n_frozen:
             repair.reset()
-        if not failed and after.n_inverted <= n_frozen and (after.n_inverted == 0 or self._base_ok(
-                as_given(out, fs, center, scale), after.n_inverted)):
+        if not failed and after.n_inverted <= n_frozen and \
+                self._base_ok(given_out, after.n_inverted):
             self._valid = out
         status = "tangled" if after.n_inverted else (
             "untangled" if before.n_inverted else "valid")
