@@ -94,7 +94,7 @@ def test_a_node_dragged_past_the_border_beside_it_is_pulled_back_inside():
     assert live.finishing(frame) == "go on"
     frame = _rest(live, frame)
     assert frame.status == "untangled" and not inverted_faces(frame.points, fs).any()
-    assert 0.0 < frame.points[g, 1] < h and frame.held_back > 1.4 * h  # asked 1.5 h below
+    assert 0.0 < frame.points[g, 1] < h and frame.held_back > 1.4 * h  # cursor: 1.5 h past border
     assert live.finishing(frame) == "keep"
 
 
