@@ -131,7 +131,11 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                 i += n
             elif key == "NMARK":
                 n_mark = int(value)
-            elif key == "MARKER_TAG":
+            elif key in ("MARKER_TAG", "MARKERTAG"):
+                if key == "MARKERTAG":  # SU2 reads a marker's name by position after
+                    # 11 characters: "MARKERTAG= name" is read as "MARKER_TAG= name" (SU2's
+                    # TestCases deformation/naca4412); written back as spelled
+                    layout["marker_key"] = key
                 marker = value
                 try:
                     tag = int(value)
@@ -145,7 +149,7 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                 marker = None
             else:
                 raise Su2Error(f"line {no}: '{key}' is not kept (single-zone meshes: NDIME, "
-                               "NELEM, NPOIN, NMARK, MARKER_TAG, MARKER_ELEMS)")
+                               "NELEM, NPOIN, NMARK, MARKER_TAG (or MARKERTAG), MARKER_ELEMS)")
         except ValueError as exc:
             if isinstance(exc, Su2Error):
                 raise
@@ -243,7 +247,7 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
         out.append(" ".join(map(repr, row)) + (f" {point_ids[j]}\n" if index else "\n"))
     out.append(f"NMARK= {len(markers)}\n")
     for t, parts in markers.items():
-        out.append(f"MARKER_TAG= {names.get(t, str(t))}\n")
+        out.append(f"{layout.get('marker_key', 'MARKER_TAG')}= {names.get(t, str(t))}\n")
         out.append(f"MARKER_ELEMS= {sum(len(d) for _, d in parts)}\n")
         for kind, data in parts:
             code = MESHIO_TO_SU2[kind]

@@ -110,6 +110,23 @@ def test_su2_row_numbered_index_columns_stay_row_numbers(tmp_path):
     assert out.read_text() == src.read_text()
 
 
+
+def test_su2_markertag_spelling_reads_as_marker_tag_and_is_written_back_as_spelled(tmp_path):
+    """SU2 reads a marker's name by position (SU2's TestCases deformation/naca4412 writes
+    "MARKERTAG= farfield"): the marker is a group of its nodes, and the file comes back with
+    its own spelling."""
+    src = tmp_path / "tag.su2"
+    src.write_text(SU2_NUMBERED_FROM_ONE.replace("MARKER_TAG=", "MARKERTAG="))
+    sm = solver_mesh.read(str(src))
+    assert "wall" in sm.group_names()
+    assert np.flatnonzero(sm.group_nodes("wall")).tolist() == [0, 1, 3]
+    out = tmp_path / "out.su2"
+    solver_mesh.write(sm, str(out))
+    assert out.read_text() == src.read_text()
+    moved = np.array([False, False, True, False])
+    checked_write.write(sm, str(out), sm.points3d() + 0.25, moved)
+    assert "MARKERTAG= wall" in out.read_text().splitlines()
+
 # groups a same-format write would lose ----------------------------------------------------
 
 def test_gmsh41_entity_in_two_physical_groups_is_refused_before_writing(tmp_path):
