@@ -9,8 +9,9 @@ previous tag + 1: meshio's own numbering) and ``field_data[name] = [tag, NDIME -
 A write takes the interior from the cells of dimension NDIME and the markers from the
 cells of dimension NDIME - 1, grouped by tag in the order they come, named from
 ``field_data`` (else the tag). Points are written with Python's shortest exact repr. The
-index columns of the point and interior element records are the file's own (kept in the
-layout when they are not the row numbers 0, 1, 2, ...), else the row numbers.
+index columns of the point, interior element and marker element records are the file's own
+(kept in the layout when they are not the row numbers 0, 1, 2, ...), else the row numbers;
+a marker whose records have none is written without.
 Anything the format has no place for is a `Su2Error` of one line.
 """
 
@@ -67,6 +68,7 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
     n_interior = 0
 
     def elements(count: int, at: int, tag_: int, interior: bool) -> int:
+        own: list[str] = []  # a marker's index column, as written
         for k in range(count):
             if at + k >= len(recs):
                 raise Su2Error(f"{'NELEM' if interior else 'MARKER_ELEMS'} promises {count} "
@@ -85,10 +87,17 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
             if interior and extra:
                 layout["elem_index"] = True
                 ids.append(words[-1])
+            elif extra:
+                own.append(words[-1])
             if k and blocks[-1][0] == kind:
                 blocks[-1][1].append(nodes)
             else:
                 blocks.append((kind, [nodes], tag_))
+        if own:  # SU2 reads a marker element's nodes and skips what follows
+            if len(own) != count:
+                raise Su2Error(f"marker {marker}: some elements have an index column and "
+                               "some do not")
+            layout.setdefault("marker_ids", {})[marker] = _own_numbers(own)
         return at + count
 
     while i < len(recs):
@@ -246,12 +255,20 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
     for j, row in enumerate(pts.tolist()):
         out.append(" ".join(map(repr, row)) + (f" {point_ids[j]}\n" if index else "\n"))
     out.append(f"NMARK= {len(markers)}\n")
+    marker_ids = layout.get("marker_ids", {})
     for t, parts in markers.items():
-        out.append(f"{layout.get('marker_key', 'MARKER_TAG')}= {names.get(t, str(t))}\n")
-        out.append(f"MARKER_ELEMS= {sum(len(d) for _, d in parts)}\n")
+        name = names.get(t, str(t))
+        count = sum(len(d) for _, d in parts)
+        out.append(f"{layout.get('marker_key', 'MARKER_TAG')}= {name}\n")
+        out.append(f"MARKER_ELEMS= {count}\n")
+        own = _ids(marker_ids[name], count, "element") if name in marker_ids else None
+        k = 0
         for kind, data in parts:
             code = MESHIO_TO_SU2[kind]
-            out.extend(" ".join(map(str, [code, *row])) + "\n" for row in data.tolist())
+            for row in data.tolist():
+                out.append(" ".join(map(str, [code, *row] if own is None else
+                                        [code, *row, own[k]])) + "\n")
+                k += 1
     with open(path, "w", encoding="utf-8") as fh:
         fh.writelines(out)
 

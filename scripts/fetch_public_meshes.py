@@ -39,6 +39,7 @@ MESHIO = "meshio==5.3.5"
 MESHIO_TESTS = os.path.join(SDIST, "meshio-5.3.5", "tests", "meshes")
 
 SU2_TUTORIALS = ("su2code/Tutorials", "d7991cb74e9e12a08463c579add6a9bf73713628")
+SU2_TESTCASES = ("su2code/TestCases", "cdb13a34d7cdda7c518ae07e6728091db88a7e07")
 GMSH = ("live-clones/gmsh", "fa207ce84b468654a2153f77c8da039688093736")  # gmsh's mirror
 SKFEM = ("kinnala/scikit-fem", "365167e295a06ca708a5e066bcbe11051b34f3a3")
 SKFEM_VTU = ("kinnala/scikit-fem", "f799d23c7b03ddad1d879a30ba68543fd3f25e49")
@@ -48,7 +49,7 @@ MESHIO_REPO = ("nschloe/meshio", "sdist-5.3.5")  # LFS in git: from the source d
 
 # (repository, commit), path in it, first 16 hex digits of the file's SHA-256
 MESHES: tuple[tuple[tuple[str, str], str, str], ...] = (
-    # SU2: the SU2 tutorials' 2D meshes, meshio's SU2 test meshes
+    # SU2: the SU2 tutorials' 2D meshes, SU2's test cases, meshio's SU2 test meshes
     (SU2_TUTORIALS, "design/Inviscid_2D_Unconstrained_NACA0012/mesh_NACA0012_inv.su2",
      "9094b51c2628d3bb"),
     (SU2_TUTORIALS, "compressible_flow/Laminar_Flat_Plate/mesh_flatplate_65x65.su2",
@@ -61,6 +62,12 @@ MESHES: tuple[tuple[tuple[str, str], str, str], ...] = (
     (SU2_TUTORIALS, "compressible_flow/NICFD_nozzle/NICFD_nozzle.su2", "3c729e4a1af90eab"),
     (SU2_TUTORIALS, "design/Multi_Objective_Shape_Design/mesh_wedge_inv_FFD.su2",
      "92c76e67659d6d9f"),
+    # SU2's regression test meshes (bench.repair_bench --testcases: held out)
+    (SU2_TESTCASES, "aeroelastic/mesh_NACA64A010_hybrid_inv.su2", "697a5eb5ffdec554"),
+    (SU2_TESTCASES, "harmonic_balance/hb_rans_preconditioning/n64a010_turb.su2",
+     "279a08566f5d6f92"),
+    (SU2_TESTCASES, "disc_adj_rans/cylinder/mesh_cylinder.su2", "67769badbccc20a3"),
+    (SU2_TESTCASES, "deformation/naca4412/mesh_NACA4412_turb.su2", "5c2a91605b5d0d9a"),
     (MESHIO_REPO, "tests/meshes/su2/square.su2", "58c56bef6d32ae93"),
     (MESHIO_REPO, "tests/meshes/su2/mixgrid.su2", "762370a2dec30b52"),
     # Gmsh: gmsh's own benchmarks, scikit-fem's and SfePy's example meshes, meshio's

@@ -35,7 +35,7 @@ def parse_su2(path: Path, index: bool = False) -> dict:
             d = out["ndime"]
             out["points"] = [tuple(float(x) for x in ln.split()[:d]) for ln in lines[i:i + n]]
             i += n
-        elif key == "MARKER_TAG":
+        elif key in ("MARKER_TAG", "MARKERTAG"):  # SU2 reads the name by position
             out["markers"].append((val, []))
         elif key == "MARKER_ELEMS":
             n = int(val)

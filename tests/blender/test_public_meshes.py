@@ -69,6 +69,10 @@ REFUSED = {
 CLOCKWISE = {
     "su2code+Tutorials/multiphysics/steady_fsi/mesh_cantilever.su2": 1000,  # all of them
     "su2code+Tutorials/multiphysics/contact_resistance_cht/solid_mesh_1.su2": 1521,  # all
+    "su2code+TestCases/aeroelastic/mesh_NACA64A010_hybrid_inv.su2": 9313,  # all
+    "su2code+TestCases/harmonic_balance/hb_rans_preconditioning/n64a010_turb.su2": 12288,  # all
+    "su2code+TestCases/disc_adj_rans/cylinder/mesh_cylinder.su2": 3061,  # of 3783
+    "su2code+TestCases/deformation/naca4412/mesh_NACA4412_turb.su2": 767,  # of 60398
     "kinnala+scikit-fem/docs/examples/meshes/oriented_squares.msh": 250,  # of 266
     "kinnala+scikit-fem/docs/examples/meshes/backward-facing_step.vtu": 1925,  # of 4218
     "sfepy+sfepy/meshes/2d/helmholtz_apartment.vtk": 524,  # of 752

@@ -1,6 +1,6 @@
 """What a solver mesh write keeps or refuses before any run (docs/engineers.md): Gmsh 2
 elements with more tags than physical and elementary refused at read (meshio would drop
-them), SU2 index columns written as the file numbers them, a Gmsh entity in two physical
+them), SU2 index columns (points, elements, marker elements) written as the file numbers them, a Gmsh entity in two physical
 groups refused on write (meshio's writer keeps one), Abaqus element sets carried to .msh
 as named physical groups (or the conversion refused with one line). Written files are read
 with the independent parsers of tests/solver_parsers.py."""
@@ -126,6 +126,23 @@ def test_su2_markertag_spelling_reads_as_marker_tag_and_is_written_back_as_spell
     moved = np.array([False, False, True, False])
     checked_write.write(sm, str(out), sm.points3d() + 0.25, moved)
     assert "MARKERTAG= wall" in out.read_text().splitlines()
+
+
+def test_su2_marker_records_keep_their_index_column(tmp_path):
+    """Marker element records numbered as in SU2's TestCases naca4412 mesh ("3 1 338 0":
+    SU2 reads the nodes and skips the rest) come back with their numbers; only the moved
+    point's record changes."""
+    src = tmp_path / "marked.su2"
+    src.write_text(SU2_NUMBERED_FROM_ONE.replace("3 0 1\n3 1 3\n", "3 0 1 7\n3 1 3 8\n"))
+    sm = solver_mesh.read(str(src))
+    out = tmp_path / "out.su2"
+    moved = np.array([False, False, True, False])
+    checked_write.write(sm, str(out), sm.points3d() + 0.5, moved)
+    a, b = src.read_text().splitlines(), out.read_text().splitlines()
+    assert [k for k, (x, y) in enumerate(zip(a, b, strict=True)) if x != y] == [7]
+    assert b[7] == "0.5 1.5 3" and b[-2:] == ["3 0 1 7", "3 1 3 8"]
+    assert parse_su2(out)["markers"] == parse_su2(src)["markers"] == [
+        ("wall", [(3, 0, 1, 7), (3, 1, 3, 8)])]
 
 # groups a same-format write would lose ----------------------------------------------------
 
