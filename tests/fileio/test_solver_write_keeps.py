@@ -1,6 +1,7 @@
 """What a solver mesh write keeps or refuses before any run (docs/engineers.md): Gmsh 2
 elements with more tags than physical and elementary refused at read (meshio would drop
-them), SU2 index columns (points, elements, marker elements) written as the file numbers them, a Gmsh entity in two physical
+them), SU2 index columns (points, elements, marker elements) written as the file numbers
+them, SU2's MARKERTAG spelling kept, a Gmsh entity in two physical
 groups refused on write (meshio's writer keeps one), Abaqus element sets carried to .msh
 as named physical groups (or the conversion refused with one line). Written files are read
 with the independent parsers of tests/solver_parsers.py."""
