@@ -25,7 +25,9 @@ inverted or flat cell counts as infinite); the share of nodes moved (any bit); o
 region's margin in rings; seconds (wall clock, single process).
 
 Run: `python -m bench.repair_bench` (the default table, about 10k cells), `--more` (other
-angles, seeds and sizes, 10k-60k), `--scale` (the 200k-1M cases), `--only TEXT`, `--columns keep,ref,whole,peer`, `--json FILE`.
+angles, seeds and sizes, 10k-60k), `--scale` (the 200k-1M cases), `--testcases` (SU2's
+regression test meshes, held out), `--only TEXT`, `--columns keep,ref,whole,peer`,
+`--json FILE`.
 """
 
 from __future__ import annotations
@@ -53,7 +55,7 @@ AWAY = 6  # wall cells this many rings or more from every folded cell: "away fro
 COLUMNS = ("keep", "keep-cl", "ref", "whole", "peer")
 
 __all__ = ["AWAY", "COLUMNS", "Row", "default_specs", "measure", "more_specs", "run_case",
-           "scale_specs"]
+           "scale_specs", "testcases_specs"]
 
 S = rm.Spec
 
@@ -96,6 +98,25 @@ def more_specs() -> list[rm.Spec]:
         S("gmshbltri-naca", 20_000, "flap", {"angle": -15.0, "reach": 0.04}, held_out=True),
         S("public", "n0012c", "flap", {"angle": -20.0, "reach": 0.05}),
         S("public", "rae2822", "flap", {"angle": -20.0, "reach": 0.05}, held_out=True),
+    ]
+
+
+def testcases_specs() -> list[rm.Spec]:
+    """--testcases, all held out: SU2's regression test meshes (su2code/TestCases: a hybrid
+    and a structured RANS NACA 64A010, a cylinder, a 60k-cell RANS NACA 4412), never tuned
+    on. Their deformations follow one rule set before any repair ran on them: the wall
+    turned about its quarter chord (the cylinder: its centre) by the smallest multiple of 5
+    degrees, or slid by the smallest multiple of 0.05 chords (at most 1), that folds at
+    least 1 % of the cells (at least 20), the blend reaching 0.5 chords."""
+    return [
+        S("public", "tc-n64a010hyb", "turn", {"angle": 35.0, "reach": 0.5}, held_out=True),
+        S("public", "tc-n64a010hyb", "slide", {"dx": 0.55, "reach": 0.5}, held_out=True),
+        S("public", "tc-n64a010turb", "turn", {"angle": 30.0, "reach": 0.5}, held_out=True),
+        S("public", "tc-n64a010turb", "slide", {"dx": 0.4, "reach": 0.5}, held_out=True),
+        S("public", "tc-cylinder", "turn", {"angle": 75.0, "reach": 0.5}, held_out=True),
+        S("public", "tc-cylinder", "slide", {"dx": 0.35, "reach": 0.5}, held_out=True),
+        S("public", "tc-naca4412", "turn", {"angle": 35.0, "reach": 0.5}, held_out=True),
+        S("public", "tc-naca4412", "slide", {"dx": 0.4, "reach": 0.5}, held_out=True),
     ]
 
 
@@ -425,7 +446,11 @@ def table(rows: list[Row]) -> list[str]:
 
 
 def family_of(row: Row) -> str:
-    return row.family if row.family != "public" else "public " + row.case.split("-")[1]
+    """The family of a row: the generator, or "public KEY" (the file's key in rm.PUBLIC)."""
+    if row.family != "public":
+        return row.family
+    key = row.case.removeprefix("public-")
+    return "public " + key[:key.rfind("-", 0, key.find("("))]
 
 
 def _med(rows: list[Row], key: str) -> float:
@@ -510,6 +535,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scale", action="store_true", help="the 200k-1M cases instead")
     ap.add_argument("--more", action="store_true", help="the other seeds, angles and sizes")
+    ap.add_argument("--testcases", action="store_true",
+                    help="SU2's regression test meshes instead (held out)")
     ap.add_argument("--only", default="", help="only cases whose name contains this")
     ap.add_argument("--columns", default=",".join(COLUMNS))
     ap.add_argument("--whole-max", type=int, default=20_000,
@@ -533,7 +560,7 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         ap.error(f"unknown column {bad[0]!r} (choose from {', '.join(COLUMNS)})")
     specs = [s for s in (scale_specs() if args.scale else more_specs() if args.more
-                       else default_specs())
+                       else testcases_specs() if args.testcases else default_specs())
              if args.only in s.name]
     rows: list[Row] = []
     print(table([])[0])

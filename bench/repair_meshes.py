@@ -12,7 +12,8 @@ Base meshes (undeformed, valid, graded towards the wall on purpose):
 - `gmshbl`: gmsh 4.15's BoundaryLayer field around a NACA 0012 or a cylinder (quads in the
   layer, Frontal-Delaunay triangles outside: a hybrid mesh), `gmshbltri`: the same field
   with triangles in the layer (anisotropic triangles);
-- `public`: SU2 tutorial meshes (su2code/Tutorials at a pinned commit, checked by SHA-256),
+- `public`: SU2's tutorial meshes (su2code/Tutorials) and regression test meshes
+  (su2code/TestCases, keys `tc-*`), each at a pinned commit and checked by SHA-256,
   fetched, never generated: from build/public_meshes (scripts/fetch_public_meshes.py) or
   from a bare snapshot of the repository (``--mirror``).
 
@@ -400,43 +401,74 @@ def _gmsh_bl_once(gmsh, body: str, h: float, first: float, quads: bool):
     return pts, groups, wall
 
 
-# SU2 tutorial meshes (su2code/Tutorials at this commit): key -> (path, SHA-256's first 16
-# hex digits, wall marker, chord)
-SU2_COMMIT = "d7991cb74e9e12a08463c579add6a9bf73713628"
-PUBLIC: dict[str, tuple[str, str, str, float]] = {
-    "n0012c": ("compressible_flow/UQ_NACA0012/mesh_n0012_225-65.su2", "", "airfoil", 1.0),
-    "n0012tri": ("design/Inviscid_2D_Unconstrained_NACA0012/mesh_NACA0012_inv.su2",
-                 "9094b51c2628d3bb", "airfoil", 1.0),
-    "hydrofoil": ("incompressible_flow/Inc_Inviscid_Hydrofoil/mesh_NACA0012_5deg_6814.su2",
-                  "26d0d1dcfdfb2643", "airfoil", 1.0),
-    "cylinder": ("compressible_flow/Laminar_Cylinder/mesh_cylinder_lam.su2", "", "cylinder",
-                 1.0),
-    "rae2822": ("design/Turbulent_2D_Constrained_RAE2822/mesh_RAE2822_turb.su2", "",
-                "AIRFOIL", 1.0),
+# SU2's public meshes, pinned by repository and commit: the tutorials (su2code/Tutorials)
+# and, held out, the regression test cases (su2code/TestCases)
+SU2_TUTORIALS = ("su2code/Tutorials", "d7991cb74e9e12a08463c579add6a9bf73713628")
+SU2_TESTCASES = ("su2code/TestCases", "cdb13a34d7cdda7c518ae07e6728091db88a7e07")
+
+
+@dataclass(frozen=True)
+class Public:
+    """A public SU2 mesh: its repository and commit, path, SHA-256's first 16 hex digits
+    ("" unchecked), the markers of its moving wall and its chord."""
+
+    repo: tuple[str, str]
+    path: str
+    digest: str
+    wall: tuple[str, ...]
+    chord: float = 1.0
+
+
+PUBLIC: dict[str, Public] = {
+    "n0012c": Public(SU2_TUTORIALS, "compressible_flow/UQ_NACA0012/mesh_n0012_225-65.su2", "",
+                     ("airfoil",)),
+    "n0012tri": Public(SU2_TUTORIALS,
+                       "design/Inviscid_2D_Unconstrained_NACA0012/mesh_NACA0012_inv.su2",
+                       "9094b51c2628d3bb", ("airfoil",)),
+    "hydrofoil": Public(SU2_TUTORIALS,
+                        "incompressible_flow/Inc_Inviscid_Hydrofoil/mesh_NACA0012_5deg_6814.su2",
+                        "26d0d1dcfdfb2643", ("airfoil",)),
+    "cylinder": Public(SU2_TUTORIALS, "compressible_flow/Laminar_Cylinder/mesh_cylinder_lam.su2",
+                       "", ("cylinder",)),
+    "rae2822": Public(SU2_TUTORIALS,
+                      "design/Turbulent_2D_Constrained_RAE2822/mesh_RAE2822_turb.su2", "",
+                      ("AIRFOIL",)),
+    # SU2's regression test cases (`--testcases`, all held out)
+    "tc-n64a010hyb": Public(SU2_TESTCASES, "aeroelastic/mesh_NACA64A010_hybrid_inv.su2",
+                            "697a5eb5ffdec554", ("airfoil",)),
+    "tc-n64a010turb": Public(SU2_TESTCASES,
+                             "harmonic_balance/hb_rans_preconditioning/n64a010_turb.su2",
+                             "279a08566f5d6f92", ("airfoil",)),
+    "tc-cylinder": Public(SU2_TESTCASES, "disc_adj_rans/cylinder/mesh_cylinder.su2",
+                          "67769badbccc20a3", ("Cylinder",)),
+    "tc-naca4412": Public(SU2_TESTCASES, "deformation/naca4412/mesh_NACA4412_turb.su2",
+                          "5c2a91605b5d0d9a", ("pressure", "TE", "suction")),
 }
 
 
 def public_file(key: str, mirror: Path | None = None) -> Path:
-    """The SU2 file of `key`: build/public_meshes/su2code+Tutorials/PATH when there, else
-    taken from a bare snapshot (`mirror`/su2code+Tutorials/repo) with git show at
-    SU2_COMMIT into build/repair_bench/public/; FileNotFoundError when neither has it."""
-    path, digest, _, _ = PUBLIC[key]
-    here = ROOT / "build" / "public_meshes" / "su2code+Tutorials" / path
+    """The SU2 file of `key`: build/public_meshes/OWNER+NAME/PATH when there, else taken
+    from a bare snapshot (`mirror`/OWNER+NAME/repo) with git show at its commit into
+    build/repair_bench/public/; FileNotFoundError when neither has it."""
+    pub = PUBLIC[key]
+    (repo_name, commit), path = pub.repo, pub.path
+    local = repo_name.replace("/", "+")
+    here = ROOT / "build" / "public_meshes" / local / path
     if here.is_file():
         return here
-    out = CACHE / "public" / Path(path).name
+    out = CACHE / "public" / local / path
     if not out.is_file():
-        repo = (mirror or Path("/work/.mirror")) / "su2code+Tutorials" / "repo"
+        repo = (mirror or Path("/work/.mirror")) / local / "repo"
         if not repo.is_dir():
             raise FileNotFoundError(f"{path}: not in build/public_meshes and no snapshot at "
                                     f"{repo} (scripts/fetch_public_meshes.py, --mirror)")
         data = subprocess.run(["git", "--git-dir", str(repo), "show",
-                               f"{SU2_COMMIT}:{path}"], capture_output=True, check=False)
+                               f"{commit}:{path}"], capture_output=True, check=False)
         if data.returncode != 0 or not data.stdout:
             raise FileNotFoundError(f"{path}: not in the snapshot {repo}")
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_bytes(data.stdout)
-    if digest and hashlib.sha256(out.read_bytes()).hexdigest()[:16] != digest:
+    if pub.digest and hashlib.sha256(out.read_bytes()).hexdigest()[:16] != pub.digest:
         raise ValueError(f"{out}: its SHA-256 is not the pinned one")
     return out
 
@@ -458,8 +490,10 @@ def public_mesh(key: str, mirror: Path | None = None
         s, e = sm.offsets[f], sm.offsets[f + 1]
         corners[s:e] = corners[s:e][::-1]
     fs = faces_from_csr(sm.offsets[:-1], counts, corners, pts.shape[0])
-    wall = sm.group_nodes(PUBLIC[key][2])
-    return pts, fs, wall, PUBLIC[key][3]
+    wall = np.zeros(pts.shape[0], dtype=bool)
+    for name in PUBLIC[key].wall:
+        wall |= sm.group_nodes(name)
+    return pts, fs, wall, PUBLIC[key].chord
 
 
 # ------------------------------------------------------------------------------ cases
@@ -485,7 +519,7 @@ def make(spec: Spec, mirror: Path | None = None) -> Case:
     params = {k: v for k, v in spec.params.items() if k != "first"}
     lo, hi = ref[wall].min(axis=0), ref[wall].max(axis=0)
     round_body = spec.mesh.startswith("ogrid") or spec.mesh.endswith("cyl") or \
-        spec.size == "cylinder"
+        str(spec.size).endswith("cylinder")
     # turned about the body's centre (a cylinder) or its quarter chord (an airfoil)
     params.setdefault("centre", (float(lo[0] + (0.5 if round_body else 0.25) * (hi[0] - lo[0])),
                                  float(0.5 * (lo[1] + hi[1]))))
