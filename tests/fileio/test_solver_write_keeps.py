@@ -145,6 +145,17 @@ def test_su2_marker_records_keep_their_index_column(tmp_path):
     assert parse_su2(out)["markers"] == parse_su2(src)["markers"] == [
         ("wall", [(3, 0, 1, 7), (3, 1, 3, 8)])]
 
+
+def test_su2_marker_with_an_index_column_on_some_records_only_is_refused_with_one_line(
+        tmp_path):
+    src = tmp_path / "half.su2"
+    src.write_text(SU2_NUMBERED_FROM_ONE.replace("3 0 1\n3 1 3\n", "3 0 1 7\n3 1 3\n"))
+    with pytest.raises(SolverMeshError) as exc:
+        solver_mesh.read(str(src))
+    msg = str(exc.value)
+    assert "\n" not in msg and f"'{src}'" in msg
+    assert "marker wall: some elements have an index column and some do not" in msg
+
 # groups a same-format write would lose ----------------------------------------------------
 
 def test_gmsh41_entity_in_two_physical_groups_is_refused_before_writing(tmp_path):
