@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from . import su2
+from . import gmsh41_nodes, su2
 from .solver_formats import SOLVER_FORMATS, solver_format
 
 FACE_TYPES = ("triangle", "quad", "polygon")  # the 2D cells the untangler moves
@@ -417,9 +417,16 @@ def write(sm: SolverMesh, path: str, positions: np.ndarray | None = None,
     `positions`, everything else is the file's own. Same format as the source: its own
     version and encoding; another format: `convert`ed. SolverMeshError (one line, naming
     `shown` or `path`) when the writer refuses."""
+    fmt = solver_format(path)
+    if fmt == sm.fmt == "msh" and sm.options.get("fmt_version") == "4.1" and \
+            "gmsh:physical" not in sm.mesh.cell_data:  # meshio's 4.1 writer needs groups
+        try:
+            gmsh41_nodes.write_moved(sm.path, path, positions, moved)
+        except gmsh41_nodes.Gmsh41Error as exc:
+            raise SolverMeshError(f"cannot write '{shown or path}' as msh: {exc}") from None
+        return
     mesh = sm.mesh if positions is None or moved is None else \
         sm.with_positions(positions, moved)
-    fmt = solver_format(path)
     if fmt is not None and fmt != sm.fmt:
         why = _convert_refusal(sm, fmt)
         if why:

@@ -29,10 +29,12 @@ def mesquite_vtk() -> Path:
 
 
 def channel_msh(path: Path | str, version: str = "4.1", binary: bool = False,
-                shift: float = 0.08, size: float = 0.1, quads: bool = False) -> Path:
+                shift: float = 0.08, size: float = 0.1, quads: bool = False,
+                groups: bool = True) -> Path:
     """A 4 x 1 channel around a cylinder meshed by Gmsh, physical groups walls, inlet,
     outlet, cylinder (lines) and fluid (the surface); the cylinder's nodes moved `shift`
-    in x after meshing (the faces next to it fold over)."""
+    in x after meshing (the faces next to it fold over). groups=False: no physical groups
+    (Gmsh then saves every element, untagged)."""
     gmsh = pytest.importorskip("gmsh", reason="the gmsh package is not installed")
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     try:
@@ -50,9 +52,10 @@ def channel_msh(path: Path | str, version: str = "4.1", binary: bool = False,
             name = ("cylinder" if abs(x - CYLINDER[0]) < 1e-6 and abs(y - CYLINDER[1]) < 1e-6
                     else "inlet" if x < 1e-6 else "outlet" if x > 4 - 1e-6 else "walls")
             curves.setdefault(name, []).append(abs(tag))
-        for name in GROUPS[:4]:
-            gmsh.model.addPhysicalGroup(1, curves[name], name=name)
-        gmsh.model.addPhysicalGroup(2, [surface], name="fluid")
+        if groups:
+            for name in GROUPS[:4]:
+                gmsh.model.addPhysicalGroup(1, curves[name], name=name)
+            gmsh.model.addPhysicalGroup(2, [surface], name="fluid")
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
         if quads:
             gmsh.option.setNumber("Mesh.RecombineAll", 1)

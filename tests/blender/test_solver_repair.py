@@ -64,3 +64,27 @@ def test_repair_of_a_valid_solver_mesh_writes_it_unchanged(bpy, ext, tmp_path):
     (o,) = json.loads(rep.read_text())["objects"]
     assert code == 0 and o["status"] == "valid"
     assert not _moved(src, out).any()
+
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_gmsh41_file_without_physical_groups_is_repaired_and_written_back(bpy, ext, tmp_path,
+                                                                         binary):
+    """A folded Gmsh 4.1 file as Gmsh saves it when no physical group is defined: exit 0,
+    no face inverted, the file's bytes but the moved nodes' coordinates (meshio's 4.1
+    writer refused it: 'gmsh:physical')."""
+    src = channel_msh(tmp_path / "p.msh", binary=binary, shift=0.15, groups=False)
+    out, rep = tmp_path / "r.msh", tmp_path / "r.json"
+    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
+                                          "--quiet"])[0]
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert code == 0, o
+    assert o["before"]["n_inverted"] > 0 and o["after"]["n_inverted"] == 0
+    moved = _moved(src, out)
+    assert 0 < moved.sum() < 0.25 * moved.size
+    a, b = src.read_bytes(), out.read_bytes()
+    if binary:
+        assert len(a) == len(b) and sum(x != y for x, y in zip(a, b)) <= 24 * moved.sum()
+    else:
+        la, lb = a.splitlines(), b.splitlines()
+        assert len(la) == len(lb)
+        assert sum(x != y for x, y in zip(la, lb)) == moved.sum()

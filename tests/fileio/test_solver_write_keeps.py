@@ -1,7 +1,8 @@
 """What a solver mesh write keeps or refuses before any run (docs/engineers.md): Gmsh 2
 elements with more tags than physical and elementary refused at read (meshio would drop
 them), SU2 index columns (points, elements, marker elements) written as the file numbers
-them, SU2's MARKERTAG spelling kept, a Gmsh entity in two physical
+them, SU2's MARKERTAG spelling kept, a Gmsh 4.1 file without physical groups written back
+with only the moved coordinates changed, a Gmsh entity in two physical
 groups refused on write (meshio's writer keeps one), Abaqus element sets carried to .msh
 as named physical groups (or the conversion refused with one line). Written files are read
 with the independent parsers of tests/solver_parsers.py."""
@@ -14,6 +15,7 @@ import numpy as np
 import pytest
 from eegt_blender.fileio import checked_write, solver_mesh
 from eegt_blender.fileio.solver_mesh import SolverMeshError
+from solver_meshes import channel_msh
 from solver_parsers import parse_msh22, parse_su2
 
 pytest.importorskip("meshio", reason="meshio is not installed")
@@ -155,6 +157,39 @@ def test_su2_marker_with_an_index_column_on_some_records_only_is_refused_with_on
     msg = str(exc.value)
     assert "\n" not in msg and f"'{src}'" in msg
     assert "marker wall: some elements have an index column and some do not" in msg
+
+
+# (d) Gmsh 4.1 without physical groups ------------------------------------------------------
+
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_gmsh41_without_physical_groups_is_written_back_with_only_moved_coordinates_changed(
+        tmp_path, binary):
+    """What Gmsh saves when no physical group is defined (every element, untagged):
+    meshio's 4.1 writer cannot write it ('gmsh:physical'); it is copied with the moved
+    nodes' coordinates put in, every other byte the file's own."""
+    src = channel_msh(tmp_path / "plain.msh", binary=binary, shift=0.0, groups=False)
+    sm = solver_mesh.read(str(src))
+    assert "gmsh:physical" not in sm.mesh.cell_data and sm.options["fmt_version"] == "4.1"
+    moved = np.zeros(sm.n_points, dtype=bool)
+    moved[[7, sm.n_points - 1]] = True
+    pos = sm.points3d().copy()
+    pos[moved, 0] += 0.125
+    out = tmp_path / "out.msh"
+    checked_write.write(sm, str(out), pos, moved)
+    back = solver_mesh.read(str(out))
+    assert np.array_equal(back.points3d(), pos) and back.options == sm.options
+    assert [len(b.data) for b in back.mesh.cells] == [len(b.data) for b in sm.mesh.cells]
+    a, b = src.read_bytes(), out.read_bytes()
+    if binary:  # the same bytes but the two nodes' x
+        assert len(a) == len(b)
+        assert 0 < sum(x != y for x, y in zip(a, b)) <= 2 * 8
+    else:  # the same lines but the two nodes' coordinate lines
+        la, lb = a.splitlines(), b.splitlines()
+        assert len(la) == len(lb)
+        changed = [k for k, (x, y) in enumerate(zip(la, lb)) if x != y]
+        assert len(changed) == 2
+        assert [tuple(map(float, lb[k].split())) for k in changed] == [
+            tuple(pos[i]) for i in np.flatnonzero(moved)]
 
 # groups a same-format write would lose ----------------------------------------------------
 
