@@ -506,12 +506,27 @@ def _sets_refusal(mesh: Any) -> str | None:
     return None
 
 
+def _abaqus_types() -> Any:
+    """The cell types meshio's Abaqus writer knows (None: this meshio does not say)."""
+    try:
+        from meshio.abaqus import _abaqus
+    except ImportError:
+        return None
+    return getattr(_abaqus, "meshio_to_abaqus_type", None)
+
+
 def _convert_refusal(sm: SolverMesh, fmt: str) -> str | None:
     """Why `sm` cannot go to `fmt` at all (before any writing), or None."""
     if sm.periodic_nodes().size and fmt != "msh":
         return f"its Gmsh $Periodic pairs have no place in .{fmt}"
     if fmt == "su2":
         return su2.plan(sm.mesh)[1]
+    if fmt == "inp":
+        known = _abaqus_types()
+        odd = sorted({b.type for b in sm.mesh.cells
+                      if len(b.data) and known is not None and b.type not in known})
+        if odd:
+            return f"Abaqus (meshio's writer) has no element type for {', '.join(odd)} cells"
     if fmt == "msh" and not any(k in sm.mesh.cell_data for k in TAG_ARRAYS):
         return _sets_refusal(sm.mesh)
     return None

@@ -191,6 +191,19 @@ def test_gmsh41_without_physical_groups_is_written_back_with_only_moved_coordina
         assert [tuple(map(float, lb[k].split())) for k in changed] == [
             tuple(pos[i]) for i in np.flatnonzero(moved)]
 
+
+def test_gmsh_vertex_cells_to_abaqus_are_refused_with_one_line_before_writing(tmp_path):
+    """Gmsh saves its geometry points as vertex cells when no physical group is defined;
+    meshio's Abaqus writer has no element for them (it raised KeyError 'vertex')."""
+    src = channel_msh(tmp_path / "plain.msh", shift=0.0, groups=False)
+    sm = solver_mesh.read(str(src))
+    out = tmp_path / "out.inp"
+    with pytest.raises(checked_write.WriteError) as exc:
+        checked_write.write(sm, str(out))
+    assert exc.value.reason == ("Abaqus (meshio's writer) has no element type for vertex "
+                                "cells")
+    assert sorted(os.listdir(tmp_path)) == ["plain.msh"]
+
 # groups a same-format write would lose ----------------------------------------------------
 
 def test_gmsh41_entity_in_two_physical_groups_is_refused_before_writing(tmp_path):
