@@ -367,7 +367,12 @@ def read(path: str, fmt: str | None = None) -> SolverMesh:
         raise SolverMeshError(f"cannot read '{path}': "
                               f"{(exc.strerror or str(exc)).lower()}") from None
     except (Exception, SystemExit) as exc:  # meshio exits on some files it cannot parse
-        raise SolverMeshError(f"cannot read '{path}' as {fmt}: {_one_line(exc)}") from None
+        why = _one_line(exc)
+        if fmt == "msh" and "Incompatible cell data 'gmsh:physical'" in why:
+            why = (f"some of its elements are in physical groups and some are not (Gmsh's "
+                   f"'save all elements' with groups), which meshio cannot read; save it "
+                   f"with every element in a group, or with no groups ({why})")
+        raise SolverMeshError(f"cannot read '{path}' as {fmt}: {why}") from None
     sm = _checked(path, fmt, mesh, options)
     pairs = sm.periodic_nodes()
     if pairs.size and (pairs.min() < 0 or pairs.max() >= sm.n_points):

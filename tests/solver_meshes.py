@@ -30,11 +30,12 @@ def mesquite_vtk() -> Path:
 
 def channel_msh(path: Path | str, version: str = "4.1", binary: bool = False,
                 shift: float = 0.08, size: float = 0.1, quads: bool = False,
-                groups: bool = True) -> Path:
+                groups: bool = True, save_all: bool = False) -> Path:
     """A 4 x 1 channel around a cylinder meshed by Gmsh, physical groups walls, inlet,
     outlet, cylinder (lines) and fluid (the surface); the cylinder's nodes moved `shift`
     in x after meshing (the faces next to it fold over). groups=False: no physical groups
-    (Gmsh then saves every element, untagged)."""
+    (Gmsh then saves every element, untagged); save_all: Gmsh's Mesh.SaveAll (every
+    element, also those in no group)."""
     gmsh = pytest.importorskip("gmsh", reason="the gmsh package is not installed")
     gmsh.initialize(["-noenv"], readConfigFiles=False)
     try:
@@ -57,6 +58,7 @@ def channel_msh(path: Path | str, version: str = "4.1", binary: bool = False,
                 gmsh.model.addPhysicalGroup(1, curves[name], name=name)
             gmsh.model.addPhysicalGroup(2, [surface], name="fluid")
         gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.SaveAll", int(save_all))
         if quads:
             gmsh.option.setNumber("Mesh.RecombineAll", 1)
         gmsh.model.mesh.generate(2)

@@ -204,6 +204,19 @@ def test_gmsh_vertex_cells_to_abaqus_are_refused_with_one_line_before_writing(tm
                                 "cells")
     assert sorted(os.listdir(tmp_path)) == ["plain.msh"]
 
+
+def test_gmsh41_with_elements_partly_in_groups_is_refused_at_read_with_one_line(tmp_path):
+    """Gmsh's 'save all elements' with physical groups: meshio cannot read the file (its
+    own reason kept at the end of the line)."""
+    src = channel_msh(tmp_path / "all.msh", shift=0.0, save_all=True)
+    with pytest.raises(SolverMeshError) as exc:
+        solver_mesh.read(str(src))
+    msg = str(exc.value)
+    assert "\n" not in msg and msg.startswith(f"cannot read '{src}' as msh: some of its "
+                                              "elements are in physical groups and some "
+                                              "are not")
+    assert "Incompatible cell data 'gmsh:physical'" in msg
+
 # groups a same-format write would lose ----------------------------------------------------
 
 def test_gmsh41_entity_in_two_physical_groups_is_refused_before_writing(tmp_path):
