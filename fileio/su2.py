@@ -80,7 +80,7 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                 kind, n = SU2_TYPES[code]
                 nodes = [int(w) for w in words[1:1 + n]]
             except (ValueError, KeyError):
-                raise Su2Error(f"line {no}: not an SU2 element ('{text[:40]}')") from None
+                raise Su2Error(_not_an_element(no, text)) from None
             extra = len(words) - 1 - n
             if len(nodes) != n or extra not in (0, 1):
                 raise Su2Error(f"line {no}: element type {code} takes {n} nodes")
@@ -178,6 +178,21 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
     mesh = meshio.Mesh(points, cells, cell_data={"su2:tag": tags} if cells else {},
                        field_data=field_data)
     return mesh, layout
+
+
+def _not_an_element(no: int, text: str) -> str:
+    """The one line for a record where an element was expected."""
+    kw = _keyword(text)
+    if kw is not None:
+        extra = (" (a SEND_RECEIVE marker: SU2 itself no longer reads them)"
+                 if kw[0] == "SEND_TO" else "")
+        return f"line {no}: '{kw[0]}' where an element was expected{extra}"
+    head = text.split()[0] if text.split() else ""
+    if head.isdigit() and int(head) not in SU2_TYPES:
+        kinds = ", ".join(f"{c} {k}" for c, (k, _) in SU2_TYPES.items())
+        order = " (a high-order element)" if int(head) >= 100 else ""
+        return f"line {no}: element type {head}{order} is not one this reads ({kinds})"
+    return f"line {no}: not an SU2 element ('{text[:40]}')"
 
 
 def _own_numbers(words: list[str]) -> tuple[str, ...] | None:

@@ -217,6 +217,23 @@ def test_gmsh41_with_elements_partly_in_groups_is_refused_at_read_with_one_line(
                                               "are not")
     assert "Incompatible cell data 'gmsh:physical'" in msg
 
+
+@pytest.mark.parametrize(("element", "says"), [
+    ("209 0 1 2 3 1", "line 3: element type 209 (a high-order element) is not one this "
+                      "reads (3 line, 5 triangle, 9 quad, "),
+    ("SEND_TO= 1", "line 3: 'SEND_TO' where an element was expected (a SEND_RECEIVE "
+                   "marker: SU2 itself no longer reads them)"),
+], ids=["high-order", "send-receive"])
+def test_su2_records_that_are_not_elements_are_refused_with_what_they_are(tmp_path, element,
+                                                                           says):
+    """SU2's TestCases hold DG meshes of high-order elements (nPoly3: type 209) and old
+    periodic SEND_RECEIVE markers: one line says which (was "not an SU2 element")."""
+    src = tmp_path / "odd.su2"
+    src.write_text(SU2_NUMBERED_FROM_ONE.replace("5 0 1 2 1\n", element + "\n"))
+    with pytest.raises(SolverMeshError) as exc:
+        solver_mesh.read(str(src))
+    assert "\n" not in str(exc.value) and says in str(exc.value)
+
 # groups a same-format write would lose ----------------------------------------------------
 
 def test_gmsh41_entity_in_two_physical_groups_is_refused_before_writing(tmp_path):
