@@ -1,12 +1,13 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """A Gmsh 4.1 file written back as it is, with only its moved nodes' coordinates changed.
 
-meshio's 4.1 writer gives every entity that has elements a physical tag: a file without
-physical groups (what Gmsh saves when none are defined: every element, no groups) does not
-go through it. Such a file is copied byte for byte instead, the moved nodes' coordinates
-put into its ``$Nodes`` section: ASCII as Python's shortest exact repr, binary as the
-file's own doubles. The node order is the file's (meshio's points are the nodes in file
-order, block by block); parametric nodes are not read by meshio, so there are none here.
+meshio's 4.1 writer cannot write a file without physical groups (what Gmsh saves when none
+are defined), keeps one physical group per entity, and writes some files it then cannot
+read back (found on Gmsh's own 2D benchmarks). A Gmsh 4.1 file written as Gmsh 4.1 is
+therefore copied byte for byte, the moved nodes' coordinates put into its ``$Nodes``
+section: ASCII as Python's shortest exact repr, binary as the file's own doubles. The node
+order is the file's (meshio's points are the nodes in file order, block by block);
+parametric nodes are not read by meshio, so there are none here.
 """
 
 from __future__ import annotations

@@ -423,8 +423,9 @@ def write(sm: SolverMesh, path: str, positions: np.ndarray | None = None,
     version and encoding; another format: `convert`ed. SolverMeshError (one line, naming
     `shown` or `path`) when the writer refuses."""
     fmt = solver_format(path)
-    if fmt == sm.fmt == "msh" and sm.options.get("fmt_version") == "4.1" and \
-            "gmsh:physical" not in sm.mesh.cell_data:  # meshio's 4.1 writer needs groups
+    if fmt == sm.fmt == "msh" and sm.options.get("fmt_version") == "4.1":  # the file's
+        # own bytes, the moved coordinates put in: meshio's 4.1 writer needs physical groups,
+        # keeps one per entity and writes some files it cannot read back
         try:
             gmsh41_nodes.write_moved(sm.path, path, positions, moved)
         except gmsh41_nodes.Gmsh41Error as exc:

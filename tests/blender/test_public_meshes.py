@@ -47,11 +47,6 @@ REFUSED = {
         "its $InterpolationScheme section would be lost",
     "live-clones+gmsh/benchmarks/misc/adaptive_tri6.msh": "its elements carry 3 tags",
     "live-clones+gmsh/benchmarks/3d/CubeAniso2D.msh": ZERO_AREA,  # a cube's skin, mixed
-    "kinnala+scikit-fem/docs/examples/meshes/mixedtriquad.msh":
-        "Encountered non-unique CellBlock dim_tag",  # meshio's Gmsh 4.1 writer
-    "kinnala+scikit-fem/docs/examples/meshes/tagged_gmsh4.msh":
-        "its group 'test' would change (9 -> 0 nodes; meshio's writer keeps one physical "
-        "group per Gmsh entity)",
     "MmgTools+mmg/libexamples/mmg3d/io_generic_and_get_adja/cube.msh": ZERO_AREA,
     "MmgTools+mmg/libexamples/mmg3d/io_generic_and_get_adja/cube.vtu": ZERO_AREA,
     "nschloe+meshio/tests/meshes/vtu/00_raw_binary.vtu": "volume cells only",

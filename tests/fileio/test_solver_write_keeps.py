@@ -1,11 +1,10 @@
 """What a solver mesh write keeps or refuses before any run (docs/engineers.md): Gmsh 2
 elements with more tags than physical and elementary refused at read (meshio would drop
 them), SU2 index columns (points, elements, marker elements) written as the file numbers
-them, SU2's MARKERTAG spelling kept, a Gmsh 4.1 file without physical groups written back
-with only the moved coordinates changed, a Gmsh entity in two physical
-groups refused on write (meshio's writer keeps one), Abaqus element sets carried to .msh
-as named physical groups (or the conversion refused with one line). Written files are read
-with the independent parsers of tests/solver_parsers.py."""
+them, SU2's MARKERTAG spelling kept, a Gmsh 4.1 file (without physical groups, or with an
+entity in two) written back with only the moved coordinates changed, Abaqus element sets
+carried to .msh as named physical groups (or the conversion refused with one line). Written
+files are read with the independent parsers of tests/solver_parsers.py."""
 
 from __future__ import annotations
 
@@ -236,18 +235,23 @@ def test_su2_records_that_are_not_elements_are_refused_with_what_they_are(tmp_pa
 
 # groups a same-format write would lose ----------------------------------------------------
 
-def test_gmsh41_entity_in_two_physical_groups_is_refused_before_writing(tmp_path):
+def test_gmsh41_entity_in_two_physical_groups_keeps_both_on_write(tmp_path):
+    """meshio's 4.1 writer kept one physical group per entity (the run was refused); the
+    file is now written back as it is, moved coordinates put in: both groups stay."""
     src = _gmsh_rectangle(tmp_path / "two.msh", "4.1", False, curve_in_two_groups=True)
     sm = solver_mesh.read(str(src))
-    assert sm.group_nodes("wall").sum() == sm.group_nodes("bottom").sum() >= 2
+    wall, bottom = sm.group_nodes("wall"), sm.group_nodes("bottom")
+    assert np.array_equal(wall, bottom) and wall.sum() >= 2
+    moved = np.zeros(sm.n_points, dtype=bool)
+    moved[np.flatnonzero(~wall)[-1]] = True
+    pos = sm.points3d() + 0.0625
     out = tmp_path / "out.msh"
-    out.write_bytes(b"earlier")
-    with pytest.raises(checked_write.WriteError) as exc:
-        checked_write.write(sm, str(out))
-    assert "its group 'wall' would change" in exc.value.reason
-    assert "one physical group per Gmsh entity" in exc.value.reason
-    assert out.read_bytes() == b"earlier" and sorted(os.listdir(tmp_path)) == [
-        "out.msh", "two.msh"]
+    checked_write.write(sm, str(out), pos, moved)
+    back = solver_mesh.read(str(out))
+    assert np.array_equal(back.group_nodes("wall"), wall)
+    assert np.array_equal(back.group_nodes("bottom"), bottom)
+    a, b = src.read_bytes().splitlines(), out.read_bytes().splitlines()
+    assert len(a) == len(b) and sum(x != y for x, y in zip(a, b)) == 1
 
 
 # (c) Abaqus element sets to .msh ----------------------------------------------------------
