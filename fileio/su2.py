@@ -11,7 +11,10 @@ cells of dimension NDIME - 1, grouped by tag in the order they come, named from
 ``field_data`` (else the tag). Points are written with Python's shortest exact repr. The
 index columns of the point, interior element and marker element records are the file's own
 (kept in the layout when they are not the row numbers 0, 1, 2, ...), else the row numbers;
-a marker whose records have none is written without.
+a marker whose records have none is written without. The angle offsets after NDIME
+(`HEADER_KEYS`) and the sections after the markers (`TAIL_KEYS`: periodic transformations,
+FFD boxes, to the end of the file) are written back as they are: FFD surface points keep
+their parametric coordinates, those of the input's wall.
 Anything the format has no place for is a `Su2Error` of one line.
 """
 
@@ -29,10 +32,22 @@ MESHIO_TO_SU2 = {name: code for code, (name, _) in SU2_TYPES.items()}
 _DIM = {"line": 1, "triangle": 2, "quad": 2, "tetra": 3, "hexahedron": 3, "wedge": 3,
         "pyramid": 3}
 TAG_NAMES = ("su2:tag", "gmsh:physical", "medit:ref", "CellEntityIds")
+# What SU2 files carry besides the mesh, kept as they are: header lines after NDIME (the
+# angle of attack and of sideslip the solver adds), and the sections after the markers
+# (periodic transformations, FFD boxes), from their first keyword to the end of the file
+HEADER_KEYS = ("AOA_OFFSET", "AOS_OFFSET")
+TAIL_KEYS = ("NPERIODIC", "FFD_NBOX")
 
 
 class Su2Error(ValueError):
     """An SU2 file that cannot be read, or a mesh SU2 cannot hold (one line)."""
+
+
+def _raw_from(path: str, line_no: int) -> str:
+    """The file's text from line `line_no` (1-based) to its end, as it is."""
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        lines = fh.readlines()
+    return "".join(lines[line_no - 1:])
 
 
 def _records(path: str) -> list[tuple[int, str]]:
@@ -156,9 +171,17 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                     raise Su2Error(f"line {no}: MARKER_ELEMS before MARKER_TAG")
                 i = elements(int(value), i, tag, False)
                 marker = None
+            elif key in HEADER_KEYS and points is None and not blocks:
+                layout.setdefault("header", []).append(f"{key}= {value}")
+            elif key in TAIL_KEYS and n_mark is not None and marker is None and \
+                    len(field_data) == n_mark:
+                layout["tail"] = _raw_from(path, no)  # written back after the markers
+                break
             else:
                 raise Su2Error(f"line {no}: '{key}' is not kept (single-zone meshes: NDIME, "
-                               "NELEM, NPOIN, NMARK, MARKER_TAG (or MARKERTAG), MARKER_ELEMS)")
+                               "NELEM, NPOIN, NMARK, MARKER_TAG (or MARKERTAG), MARKER_ELEMS; "
+                               f"{', '.join(HEADER_KEYS)} before the elements; "
+                               f"{', '.join(TAIL_KEYS)} after the markers)")
         except ValueError as exc:
             if isinstance(exc, Su2Error):
                 raise
@@ -256,7 +279,8 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
     n_elem = sum(len(d) for _, d in interior)
     elem_ids = _ids(layout.get("elem_ids"), n_elem, "element")
     point_ids = _ids(layout.get("point_ids"), len(pts), "point")
-    out = [f"NDIME= {ndime}\n", f"NELEM= {n_elem}\n"]
+    out = [f"NDIME= {ndime}\n", *(f"{h}\n" for h in layout.get("header", ())),
+           f"NELEM= {n_elem}\n"]
     k = 0
     for kind, data in interior:
         code = MESHIO_TO_SU2[kind]
@@ -284,6 +308,9 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
                 out.append(" ".join(map(str, [code, *row] if own is None else
                                         [code, *row, own[k]])) + "\n")
                 k += 1
+    tail = layout.get("tail")
+    if tail:
+        out.append(tail)
     with open(path, "w", encoding="utf-8") as fh:
         fh.writelines(out)
 

@@ -37,8 +37,6 @@ finally:
 ZERO_AREA = "mesh has zero total area"  # closed surfaces and volume meshes' skins
 NOTHING_MOVES = "every node is pinned or on the fixed boundary"
 REFUSED = {
-    "su2code+Tutorials/design/Multi_Objective_Shape_Design/mesh_wedge_inv_FFD.su2":
-        "'NPERIODIC' is not kept",
     "nschloe+meshio/tests/meshes/su2/mixgrid.su2": ZERO_AREA,
     "live-clones+gmsh/benchmarks/misc/partitions.msh":
         "its elements carry 3 tags (physical, elementary and 1 more",

@@ -233,6 +233,56 @@ def test_su2_records_that_are_not_elements_are_refused_with_what_they_are(tmp_pa
         solver_mesh.read(str(src))
     assert "\n" not in str(exc.value) and says in str(exc.value)
 
+
+SU2_TAIL = """NPERIODIC= 1
+PERIODIC_INDEX= 0
+0.000000000000000e+00	0.000000000000000e+00	0.000000000000000e+00
+FFD_NBOX= 1
+FFD_TAG= BOX % a comment kept too
+FFD_CORNER_POINTS= 4
+-0.5	-0.5
+1.5	-0.5
+1.5	1.5
+-0.5	1.5
+"""
+
+
+def test_su2_angle_offsets_and_sections_after_the_markers_are_written_back_as_they_are(
+        tmp_path):
+    """SU2's TestCases carry AOA_OFFSET / AOS_OFFSET after NDIME and periodic and FFD
+    sections after the markers (they were refused): read, and written back unchanged
+    around the moved point."""
+    src = tmp_path / "ffd.su2"
+    src.write_text(SU2_NUMBERED_FROM_ONE.replace("NDIME= 2\n", "NDIME= 2\nAOA_OFFSET= 2.5\n"
+                                                 "AOS_OFFSET= 0\n") + SU2_TAIL)
+    sm = solver_mesh.read(str(src))
+    assert "wall" in sm.group_names() and sm.n_faces == 2
+    out = tmp_path / "out.su2"
+    moved = np.array([False, False, False, True])
+    checked_write.write(sm, str(out), sm.points3d() + 0.25, moved)
+    a, b = src.read_text().splitlines(), out.read_text().splitlines()
+    assert len(a) == len(b)
+    assert [k for k, (x, y) in enumerate(zip(a, b)) if x != y] == [10]
+    assert b[:3] == ["NDIME= 2", "AOA_OFFSET= 2.5", "AOS_OFFSET= 0"]
+    assert out.read_text().endswith(SU2_TAIL)
+
+
+@pytest.mark.parametrize("where", ["before the markers", "in the header after elements"])
+def test_su2_section_keywords_out_of_their_place_are_refused_with_one_line(tmp_path, where):
+    src = tmp_path / "odd.su2"
+    text = SU2_NUMBERED_FROM_ONE
+    if where == "before the markers":
+        text = text.replace("NMARK= 1\n", "NPERIODIC= 1\nNMARK= 1\n")
+    else:
+        text = text.replace("NPOIN= 4\n", "AOA_OFFSET= 1\nNPOIN= 4\n")
+    src.write_text(text)
+    with pytest.raises(SolverMeshError) as exc:
+        solver_mesh.read(str(src))
+    msg = str(exc.value)
+    assert "\n" not in msg and "is not kept (single-zone meshes:" in msg
+    assert "AOA_OFFSET, AOS_OFFSET before the elements; NPERIODIC, FFD_NBOX after the " \
+           "markers" in msg
+
 # groups a same-format write would lose ----------------------------------------------------
 
 def test_gmsh41_entity_in_two_physical_groups_keeps_both_on_write(tmp_path):
