@@ -12,8 +12,8 @@ Blender's own Smart UV Project and Unwrap (``UNWRAPS``: Suzanne subdivided twice
 50 176 faces, a subdivided cylinder, a noisy surface), several seeds: an interior UV vertex
 of the largest island dragged across 20-50 % of the island's width in 40 frames, then the
 cursor still until the frames stop (at most ``REST`` s); held out, never in the default run
-(``HELD_OUT_UNWRAPS``): a UV sphere's Unwrap, an ico sphere's Smart UV. Prints markdown tables with medians
-over the seeds: updates per second during the drag, the time from the cursor's stop until
+(``HELD_OUT_UNWRAPS``): a UV sphere's Unwrap, an ico sphere's Smart UV. Prints markdown
+tables with medians over the seeds: updates per second during the drag, the time from the cursor's stop until
 no face is inverted ("open"), the inverted faces at the end (an independent count:
 ``inverted_faces``) and how far the layout holds the grabbed vertex back from the cursor at
 the end (``LiveFrame.held_back``, as a share of the drag's length: 0 when it is on the
@@ -165,6 +165,7 @@ HELD_OUT_UNWRAPS: dict[str, Callable[..., Any]] = {
     "uvsphere-unwrap": lambda bpy: uv_sphere(bpy, "unwrap"),
     "ico-smart": lambda bpy: ico_sphere(bpy, "smart"),
 }
+EVERY_UNWRAP = {**UNWRAPS, **HELD_OUT_UNWRAPS}  # what --unwraps can name
 
 
 def inverted_faces(uv: np.ndarray, faces: list[np.ndarray]) -> np.ndarray:
@@ -304,7 +305,7 @@ def drags(bpy, ext, name: str, seeds: int, escalate: bool = True, first: int = 1
     rows = []
     for seed in range(first, first + seeds):
         bpy.ops.wm.read_homefile(use_empty=True)
-        obj = {**UNWRAPS, **HELD_OUT_UNWRAPS}[name](bpy)
+        obj = EVERY_UNWRAP[name](bpy)
         drag, path, share = island_drag(ext, ext.operators.live.drag, obj, seed)
         if not escalate:
             drag.session.repair = None
@@ -342,7 +343,7 @@ def main() -> None:
                     help="the drags' first seed (1-3 are the table's; later ones held out)")
     ap.add_argument("--part", nargs="+", default=["grid", "drags"])
     ap.add_argument("--unwraps", nargs="+", default=list(UNWRAPS),
-                    choices=[*UNWRAPS, *HELD_OUT_UNWRAPS])
+                    choices=list(EVERY_UNWRAP))
     ap.add_argument("--eegt-only", action="store_true", help="no escalation (as before)")
     args = ap.parse_args()
     bpy, ext = install()

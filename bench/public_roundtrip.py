@@ -30,8 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-SU2_TESTCASES = ("su2code+TestCases", "cdb13a34d7cdda7c518ae07e6728091db88a7e07")
-GMSH = ("live-clones+gmsh", "fa207ce84b468654a2153f77c8da039688093736")
+from bench.repair_meshes import SU2_TESTCASES
+
+GMSH = ("live-clones/gmsh", "fa207ce84b468654a2153f77c8da039688093736")
 MAX_BYTES = 20_000_000
 GMSH_SAVES = (("4.1", 0, "4.1 ascii"), ("4.1", 1, "4.1 binary"), ("2.2", 0, "2.2 ascii"))
 
@@ -88,7 +89,7 @@ def round_trip(path: str) -> str:
 
 def su2_files(mirror: Path, folder: Path) -> list[tuple[str, str]]:
     """(name, local path) of SU2's TestCases .su2 files under MAX_BYTES (not the links)."""
-    repo = mirror / SU2_TESTCASES[0] / "repo"
+    repo = mirror / SU2_TESTCASES[0].replace("/", "+") / "repo"
     out = []
     for line in _git(repo, "ls-tree", "-r", "-l", SU2_TESTCASES[1]).decode().splitlines():
         meta, name = line.split("\t", 1)
@@ -107,7 +108,7 @@ def su2_files(mirror: Path, folder: Path) -> list[tuple[str, str]]:
 def gmsh_files(mirror: Path, folder: Path) -> tuple[list[tuple[str, str]], list[str]]:
     """((name, local path) of every save of every meshed benchmark, the .geo files that
     did not mesh)."""
-    repo = mirror / GMSH[0] / "repo"
+    repo = mirror / GMSH[0].replace("/", "+") / "repo"
     names = [n for n in _git(repo, "ls-tree", "-r", "--name-only", GMSH[1]).decode().split()
              if n.startswith("benchmarks/2d/") and n.endswith(".geo")]
     script = folder / "mesh_one.py"

@@ -43,7 +43,8 @@ def _section(data: bytes) -> tuple[bool, int, int]:
 def _ascii_lines(data: bytes, start: int, n_points: int) -> np.ndarray:
     """(n_points, 2) byte spans [begin, end) of the nodes' coordinate lines (without the
     line break), in file order."""
-    ends = np.flatnonzero(np.frombuffer(data, dtype=np.uint8, offset=start) == 10) + start
+    buf = np.frombuffer(data, dtype=np.uint8)
+    ends = np.flatnonzero(buf[start:] == 10) + start
     begins = np.concatenate([[start], ends[:-1] + 1])
     line = 0
 
@@ -64,7 +65,7 @@ def _ascii_lines(data: bytes, start: int, n_points: int) -> np.ndarray:
         first = line + 1 + count  # the tags come first, then the coordinates
         spans[at:at + count, 0] = begins[first:first + count]
         e = ends[first:first + count]
-        spans[at:at + count, 1] = e - (np.frombuffer(data, np.uint8)[e - 1] == 13)  # CR LF
+        spans[at:at + count, 1] = e - (buf[e - 1] == 13)  # without the CR of a CR LF
         at += count
         line = first + count
     if at != n_points:
@@ -105,21 +106,20 @@ def write_moved(src: str, dst: str, positions: np.ndarray | None,
     if positions is not None and moved is not None and np.any(moved):
         pos = np.asarray(positions, dtype=np.float64)
         ids = np.flatnonzero(np.asarray(moved, dtype=bool))
+        k = min(pos.shape[1], 3)  # x, y (and z when given)
         binary, size_t, start = _section(data)
         if binary:
             offsets = _binary_offsets(data, start, size_t, len(moved))
             out = bytearray(data)
-            for i in ids.tolist():  # the moved nodes only: x, y (and z when given)
-                k = min(pos.shape[1], 3)
+            for i in ids.tolist():  # the moved nodes only
                 out[offsets[i]:offsets[i] + 8 * k] = pos[i, :k].astype("<f8").tobytes()
         else:
             spans = _ascii_lines(data, start, len(moved))
             pieces, last = [], 0
             for i in ids.tolist():
                 b, e = int(spans[i, 0]), int(spans[i, 1])
-                old = data[b:e].split()
-                xyz = [repr(float(v)) for v in pos[i, :min(pos.shape[1], 3)]]
-                xyz += [w.decode() for w in old[len(xyz):3]]
+                xyz = [repr(float(v)) for v in pos[i, :k]]
+                xyz += [w.decode() for w in data[b:e].split()[k:3]]
                 pieces += [data[last:b], " ".join(xyz).encode()]
                 last = e
             pieces.append(data[last:])

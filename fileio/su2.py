@@ -43,21 +43,13 @@ class Su2Error(ValueError):
     """An SU2 file that cannot be read, or a mesh SU2 cannot hold (one line)."""
 
 
-def _raw_from(path: str, line_no: int) -> str:
-    """The file's text from line `line_no` (1-based) to its end, as it is."""
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        lines = fh.readlines()
-    return "".join(lines[line_no - 1:])
-
-
-def _records(path: str) -> list[tuple[int, str]]:
+def _records(lines: list[str]) -> list[tuple[int, str]]:
     """(line number, text) of every line with its ``%`` comment and blanks removed."""
     out = []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for no, line in enumerate(fh, 1):
-            text = line.split("%", 1)[0].strip()
-            if text:
-                out.append((no, text))
+    for no, line in enumerate(lines, 1):
+        text = line.split("%", 1)[0].strip()
+        if text:
+            out.append((no, text))
     return out
 
 
@@ -74,7 +66,9 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
     records carry their index): what `write` needs to give the same records back."""
     import meshio
 
-    recs = _records(path)
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        lines = fh.readlines()
+    recs = _records(lines)
     i, ndime, points, layout = 0, 0, None, {"point_index": False, "elem_index": False}
     blocks: list[tuple[str, list[list[int]], int]] = []  # (type, rows, tag)
     field_data: dict[str, np.ndarray] = {}
@@ -175,7 +169,7 @@ def read(path: str) -> tuple[Any, dict[str, Any]]:
                 layout.setdefault("header", []).append(f"{key}= {value}")
             elif key in TAIL_KEYS and n_mark is not None and marker is None and \
                     len(field_data) == n_mark:
-                layout["tail"] = _raw_from(path, no)  # written back after the markers
+                layout["tail"] = "".join(lines[no - 1:])  # written back after the markers
                 break
             else:
                 raise Su2Error(f"line {no}: '{key}' is not kept (single-zone meshes: NDIME, "
@@ -281,14 +275,7 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
     point_ids = _ids(layout.get("point_ids"), len(pts), "point")
     out = [f"NDIME= {ndime}\n", *(f"{h}\n" for h in layout.get("header", ())),
            f"NELEM= {n_elem}\n"]
-    k = 0
-    for kind, data in interior:
-        code = MESHIO_TO_SU2[kind]
-        for row in data.tolist():
-            out.append(" ".join(map(str, [code, *row, elem_ids[k]]
-                                    if layout.get("elem_index", True) else [code, *row]))
-                       + "\n")
-            k += 1
+    out += _element_lines(interior, elem_ids if layout.get("elem_index", True) else None)
     out.append(f"NPOIN= {len(pts)}\n")
     index = layout.get("point_index", True)
     for j, row in enumerate(pts.tolist()):
@@ -300,19 +287,26 @@ def write(path: str, mesh: Any, layout: dict[str, Any] | None = None) -> None:
         count = sum(len(d) for _, d in parts)
         out.append(f"{layout.get('marker_key', 'MARKER_TAG')}= {name}\n")
         out.append(f"MARKER_ELEMS= {count}\n")
-        own = _ids(marker_ids[name], count, "element") if name in marker_ids else None
-        k = 0
-        for kind, data in parts:
-            code = MESHIO_TO_SU2[kind]
-            for row in data.tolist():
-                out.append(" ".join(map(str, [code, *row] if own is None else
-                                        [code, *row, own[k]])) + "\n")
-                k += 1
+        out += _element_lines(parts, _ids(marker_ids[name], count, "element")
+                              if name in marker_ids else None)
     tail = layout.get("tail")
     if tail:
         out.append(tail)
     with open(path, "w", encoding="utf-8") as fh:
         fh.writelines(out)
+
+
+def _element_lines(parts: list[tuple[str, np.ndarray]], ids: Any) -> list[str]:
+    """The records of the (type, node rows) parts: the SU2 type, the nodes, and the index
+    column `ids` (one per record over all parts) unless it is None."""
+    out, k = [], 0
+    for kind, data in parts:
+        code = MESHIO_TO_SU2[kind]
+        for row in data.tolist():
+            out.append(" ".join(map(str, [code, *row] if ids is None else
+                                    [code, *row, ids[k]])) + "\n")
+            k += 1
+    return out
 
 
 def _ids(own: tuple[str, ...] | None, n: int, what: str) -> Any:
