@@ -47,7 +47,9 @@ WHOLE_SHARE = 0.5  # a region of more than this share of the elements: the whole
 STUCK_AFTER = 12  # solves of the largest region in a row without progress ...
 STUCK_ITERATIONS = 600  # ... of this many iterations together: the fold is given up on
 SPREAD = 3.0  # `carried`: the grabbed node's move reaches this x its length around it
-FRONT = 1.25  # ... and at least this x its length ahead (a box with room for the move)
+FRONT = 2.0  # ... and at least this x its length ahead (a box with room for the move: the
+#              falloff's steepest slope is 1.5 / front, so that ahead keeps 1 - 1.5 / FRONT
+#              of every det)
 SIDES = (3.0, 2.0, 1.0, 0.5, 0.25, 0.125)  # ... across it: the first of these x its length
 #                                            that leaves that room
 MAX_CARRIED = 64  # grabbed nodes `carried` moves one by one at most (more: no carried start)
@@ -70,19 +72,30 @@ def _lengths(a: np.ndarray, c: np.ndarray, length: float) -> tuple[float, float,
     return 0.0, 0.0, 0.0
 
 
+def falloff(t: np.ndarray) -> np.ndarray:
+    """The smooth step 1 - 3 t^2 + 2 t^3 of t clipped to [0, 1]: 1 at 0 and 0 from 1 on,
+    flat at both ends, slope at most 1.5 (at t = 0.5)."""
+    t = np.clip(t, 0.0, 1.0)
+    return 1.0 - t * t * (3.0 - 2.0 * t)
+
+
 def carried(points: np.ndarray, grab: np.ndarray, target: np.ndarray, moving: np.ndarray
             ) -> np.ndarray | None:
     """A fold-free start for a grabbed move: ``points`` (N, 2; valid) with the grabbed
     nodes at ``target`` ((k, 2) in ``grab`` order, one move d for all) and the ``moving``
     nodes ((N,) bool) carried along by d phi. phi is 1 at a grabbed node and falls to 0
-    in a box around it, f(a) h(c) with a, c the place along and across d: f linear from 1
-    to 0 over ``front`` ahead and ``back`` behind, h linear over ``side`` either way
-    (``_lengths``: no node that stays inside the box; the largest of several); several
-    grabbed nodes: the largest phi. On a triangle the linear map's det is the old one times
-    1 + d . grad(phi): only the slope ahead (-f' = 1 / front, times h <= 1) can lower it, and
-    front > |d| keeps it positive, so a valid triangle stays valid and a drag with room
-    ahead starts with no fold. None: no move, more than ``MAX_CARRIED`` grabbed nodes,
-    grabbed nodes moved differently, or no box fits (a node that stays within |d| ahead)."""
+    in a box around it, f(a) h(c) with a, c the place along and across d: f falls from 1
+    to 0 over ``front`` ahead and ``back`` behind, h over ``side`` either way, each along
+    the smooth step `falloff` (``_lengths``: no node that stays inside the box; the largest
+    of several); several grabbed nodes: the largest phi. The map x + phi(x) d has the det
+    1 + d . grad(phi), lowered only by the slope ahead (at most 1.5 / front, times h <= 1),
+    so front >= ``FRONT`` |d| keeps at least 1 - 1.5 / FRONT of it. A corner triangle
+    sees phi at its three nodes only, and the linear phi across a thin triangle can be
+    much steeper than phi itself: a smooth phi, flat at the grabbed node and at the box's
+    edges, keeps that close to its own slope where a peaked one (linear falls, a ridge
+    through the grabbed node) flipped the thin cells of a cylinder's unwrap at the first
+    frames of a drag. None: no move, more than ``MAX_CARRIED`` grabbed nodes, grabbed nodes
+    moved differently, or no box fits (a node that stays within ``FRONT`` |d| ahead)."""
     grab = np.asarray(grab, dtype=np.int64)
     target = np.asarray(target, dtype=np.float64).reshape(-1, 2)
     if grab.size == 0 or grab.size > MAX_CARRIED:
@@ -105,8 +118,8 @@ def carried(points: np.ndarray, grab: np.ndarray, target: np.ndarray, moving: np
             return None
         rx, ry = mx - gx, my - gy
         a, c = rx * ux + ry * uy, np.abs(rx * uy - ry * ux)
-        f = np.where(a > 0.0, 1.0 - a / front, 1.0 + a / back)
-        phi = np.maximum(phi, np.maximum(f, 0.0) * np.maximum(1.0 - c / side, 0.0))
+        f = falloff(np.where(a > 0.0, a / front, -a / back))
+        phi = np.maximum(phi, f * falloff(c / side))
     out = points.copy()
     out[moving, 0] = mx + phi * d[0]
     out[moving, 1] = my + phi * d[1]

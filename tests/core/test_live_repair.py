@@ -90,6 +90,34 @@ def test_carried_start_keeps_a_drag_with_room_valid():
     assert carried(p, g, p[g], free) is None  # no move: nothing to carry
 
 
+def _thin_strip(columns: int = 21, rows: int = 400):
+    """Rectangles 0.0151 x 0.001 (aspect 15), as Blender's Unwrap lays out a subdivided
+    cylinder's side: (points, quads as (F, 4) node ids, free nodes: the border fixed)."""
+    i, j = np.meshgrid(np.arange(columns + 1), np.arange(rows + 1), indexing="ij")
+    p = np.stack([i * 0.0151, j * 0.001], axis=-1).reshape(-1, 2).astype(np.float64)
+    a, b = np.meshgrid(np.arange(columns), np.arange(rows), indexing="ij")
+    n0 = (a * (rows + 1) + b).ravel()
+    quads = np.stack([n0, n0 + rows + 1, n0 + rows + 2, n0 + 1], axis=1)
+    free = ~((i == 0) | (i == columns) | (j == 0) | (j == rows)).ravel()
+    return p, quads, free
+
+
+def test_carried_start_keeps_thin_cells_valid():
+    """A node of a strip of thin cells (aspect 15) moved 3 and 5 cell widths up the strip
+    and aside, its neighbourhood carried along: no face inverted. A fall with a ridge
+    through the node (linear in each direction) flipped 5 and 12 of these cells: the
+    linear phi across a thin cell that straddles the ridge is much steeper than phi."""
+    p, quads, free = _thin_strip()
+    g = np.array([16 * 401 + 200])  # five columns from the border
+    free[g] = False
+    for length in (0.045, 0.08):
+        target = p[g] + length * np.array([-0.48, 0.877])
+        out = carried(p, g, target, free)
+        assert out is not None
+        assert not inverted_faces(out, quads).any()
+        assert np.array_equal(out[g], target)
+
+
 def test_release_goes_on_while_a_fold_is_left_then_keeps():
     """``finishing``: a tangled frame with the escalation on goes on (frames until the fold
     opens), a valid one is kept; EEGT alone (no escalation) with more folds than at the
