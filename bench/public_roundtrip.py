@@ -30,9 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.repair_meshes import SU2_TESTCASES
+from bench.public_pins import GMSH, SU2_TESTCASES
 
-GMSH = ("live-clones/gmsh", "fa207ce84b468654a2153f77c8da039688093736")
 MAX_BYTES = 20_000_000
 GMSH_SAVES = (("4.1", 0, "4.1 ascii"), ("4.1", 1, "4.1 binary"), ("2.2", 0, "2.2 ascii"))
 

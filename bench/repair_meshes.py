@@ -44,6 +44,7 @@ import numpy as np
 from bench import libm
 from bench.corpus import compact_mesh, naca0012
 from bench.meshgen import boundary_layer_annulus
+from bench.public_pins import SU2_TESTCASES, SU2_TUTORIALS
 from core import FaceSet, faces_from_csr, mesh_stats
 from core.mesh.topology import boundary_nodes
 
@@ -401,10 +402,6 @@ def _gmsh_bl_once(gmsh, body: str, h: float, first: float, quads: bool):
     return pts, groups, wall
 
 
-# SU2's public meshes, pinned by repository and commit: the tutorials (su2code/Tutorials)
-# and, held out, the regression test cases (su2code/TestCases)
-SU2_TUTORIALS = ("su2code/Tutorials", "d7991cb74e9e12a08463c579add6a9bf73713628")
-SU2_TESTCASES = ("su2code/TestCases", "cdb13a34d7cdda7c518ae07e6728091db88a7e07")
 
 
 @dataclass(frozen=True)

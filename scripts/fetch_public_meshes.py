@@ -33,19 +33,24 @@ import tarfile
 import urllib.request
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from bench.public_pins import (  # noqa: E402  (the repository's root is on the path first)
+    GMSH,
+    MESHIO_SDIST,
+    MMG,
+    SFEPY,
+    SKFEM,
+    SKFEM_VTU,
+    SU2_TESTCASES,
+    SU2_TUTORIALS,
+)
+
 OUT = os.path.join(ROOT, "build", "public_meshes")
 SDIST = os.path.join(ROOT, "build", "meshio_sdist")
 MESHIO = "meshio==5.3.5"
 MESHIO_TESTS = os.path.join(SDIST, "meshio-5.3.5", "tests", "meshes")
 
-SU2_TUTORIALS = ("su2code/Tutorials", "d7991cb74e9e12a08463c579add6a9bf73713628")
-SU2_TESTCASES = ("su2code/TestCases", "cdb13a34d7cdda7c518ae07e6728091db88a7e07")
-GMSH = ("live-clones/gmsh", "fa207ce84b468654a2153f77c8da039688093736")  # gmsh's mirror
-SKFEM = ("kinnala/scikit-fem", "365167e295a06ca708a5e066bcbe11051b34f3a3")
-SKFEM_VTU = ("kinnala/scikit-fem", "f799d23c7b03ddad1d879a30ba68543fd3f25e49")
-SFEPY = ("sfepy/sfepy", "3f01a19fad86d14c1d54706372fe591f8f7bf46c")
-MMG = ("MmgTools/mmg", "8ed2259164fa4c90be6301d247ecb1db7bd61228")
-MESHIO_REPO = ("nschloe/meshio", "sdist-5.3.5")  # LFS in git: from the source distribution
 
 # (repository, commit), path in it, first 16 hex digits of the file's SHA-256
 MESHES: tuple[tuple[tuple[str, str], str, str], ...] = (
@@ -68,8 +73,8 @@ MESHES: tuple[tuple[tuple[str, str], str, str], ...] = (
      "279a08566f5d6f92"),
     (SU2_TESTCASES, "disc_adj_rans/cylinder/mesh_cylinder.su2", "67769badbccc20a3"),
     (SU2_TESTCASES, "deformation/naca4412/mesh_NACA4412_turb.su2", "5c2a91605b5d0d9a"),
-    (MESHIO_REPO, "tests/meshes/su2/square.su2", "58c56bef6d32ae93"),
-    (MESHIO_REPO, "tests/meshes/su2/mixgrid.su2", "762370a2dec30b52"),
+    (MESHIO_SDIST, "tests/meshes/su2/square.su2", "58c56bef6d32ae93"),
+    (MESHIO_SDIST, "tests/meshes/su2/mixgrid.su2", "762370a2dec30b52"),
     # Gmsh: gmsh's own benchmarks, scikit-fem's and SfePy's example meshes, meshio's
     (GMSH, "benchmarks/2d/hybrid_part.msh", "35acf3337940d9a5"),
     (GMSH, "benchmarks/misc/partitions.msh", "8b1356f1659c7641"),
@@ -85,31 +90,31 @@ MESHES: tuple[tuple[tuple[str, str], str, str], ...] = (
     (SKFEM, "docs/examples/meshes/oriented_squares.msh", "d51c5b6f64f3a48b"),
     (SFEPY, "meshes/various_formats/msh_tri.msh", "03358320d6d26616"),
     (MMG, "libexamples/mmg3d/io_generic_and_get_adja/cube.msh", "06deaf15feb48044"),
-    (MESHIO_REPO, "tests/meshes/msh/insulated-2.2.msh", "e948c04847537cff"),
-    (MESHIO_REPO, "tests/meshes/msh/insulated-4.1.msh", "4cc31fc8b786fbdd"),
+    (MESHIO_SDIST, "tests/meshes/msh/insulated-2.2.msh", "e948c04847537cff"),
+    (MESHIO_SDIST, "tests/meshes/msh/insulated-4.1.msh", "4cc31fc8b786fbdd"),
     # VTU
     (SKFEM_VTU, "docs/examples/meshes/backward-facing_step.vtu", "d81f19133e2a25be"),
     (MMG, "libexamples/mmg3d/io_generic_and_get_adja/cube.vtu", "f5b8d69d2db46d01"),
-    (MESHIO_REPO, "tests/meshes/vtu/00_raw_binary.vtu", "4c49eba5ad1431d7"),
-    (MESHIO_REPO, "tests/meshes/vtu/02_raw_compressed.vtu", "2b6b8e8fabfdf364"),
+    (MESHIO_SDIST, "tests/meshes/vtu/00_raw_binary.vtu", "4c49eba5ad1431d7"),
+    (MESHIO_SDIST, "tests/meshes/vtu/02_raw_compressed.vtu", "2b6b8e8fabfdf364"),
     # VTK legacy
     (SFEPY, "meshes/2d/acoustic_wg_mid.vtk", "72e7072a53c35843"),
     (SFEPY, "meshes/2d/helmholtz_apartment.vtk", "7be1d51cea9d8eb9"),
     (SFEPY, "meshes/2d/special/circles_in_square.vtk", "69b8ad7814edd3e3"),
     (SFEPY, "meshes/various_formats/small2d.vtk", "84fa5d46fafa22c3"),
     (SKFEM, "docs/examples/meshes/troublesome_mesh.vtk", "decdca357c650dda"),
-    (MESHIO_REPO, "tests/meshes/vtk/00_image.vtk", "088c98f2273a967f"),
-    (MESHIO_REPO, "tests/meshes/vtk/04_rectilinear.vtk", "d7b4369b6482f398"),
-    (MESHIO_REPO, "tests/meshes/vtk/gh-935.vtk", "49d09f61cd621a26"),
-    (MESHIO_REPO, "tests/meshes/vtk/rbc_001.vtk", "99194a222a634a6d"),
+    (MESHIO_SDIST, "tests/meshes/vtk/00_image.vtk", "088c98f2273a967f"),
+    (MESHIO_SDIST, "tests/meshes/vtk/04_rectilinear.vtk", "d7b4369b6482f398"),
+    (MESHIO_SDIST, "tests/meshes/vtk/gh-935.vtk", "49d09f61cd621a26"),
+    (MESHIO_SDIST, "tests/meshes/vtk/rbc_001.vtk", "99194a222a634a6d"),
     # Abaqus
     (SFEPY, "meshes/various_formats/abaqus_quad.inp", "aaf8a2b1aceceee7"),
     (SFEPY, "meshes/various_formats/abaqus_quad_tri.inp", "06fdd8a5fde9b677"),
     (SFEPY, "meshes/various_formats/abaqus_tri.inp", "3268f2e08826a188"),
     (SFEPY, "meshes/various_formats/abaqus_hex.inp", "ea75a8eaad613c29"),
-    (MESHIO_REPO, "tests/meshes/abaqus/UUea.inp", "0263bf32e6bd93bb"),
-    (MESHIO_REPO, "tests/meshes/abaqus/element_elset.inp", "f6f96eed6f4ceb11"),
-    (MESHIO_REPO, "tests/meshes/abaqus/nle1xf3c.inp", "2d8bc83d571066e1"),
+    (MESHIO_SDIST, "tests/meshes/abaqus/UUea.inp", "0263bf32e6bd93bb"),
+    (MESHIO_SDIST, "tests/meshes/abaqus/element_elset.inp", "f6f96eed6f4ceb11"),
+    (MESHIO_SDIST, "tests/meshes/abaqus/nle1xf3c.inp", "2d8bc83d571066e1"),
     # Medit
     (SFEPY, "meshes/2d/its2D.mesh", "6c05a46cf4820914"),
     (SFEPY, "meshes/2d/rectangle_tri.mesh", "d261dc6dec5656c1"),
@@ -120,7 +125,7 @@ MESHES: tuple[tuple[tuple[str, str], str, str], ...] = (
     (MMG, "libexamples/mmg2d/IsosurfDiscretization_lsOnly/multi-mat.mesh",
      "dfbb645226a313bb"),
     (MMG, "libexamples/mmg2d/adaptation_example0/example0_a/init.mesh", "214d85b04e459c35"),
-    (MESHIO_REPO, "tests/meshes/medit/cube86.mesh", "3ecbf7b48edc448f"),
+    (MESHIO_SDIST, "tests/meshes/medit/cube86.mesh", "3ecbf7b48edc448f"),
 )
 
 
