@@ -512,13 +512,19 @@ def _sets_refusal(mesh: Any) -> str | None:
     return None
 
 
-def _abaqus_types() -> Any:
-    """The cell types meshio's Abaqus writer knows (None: this meshio does not say)."""
-    try:
-        from meshio.abaqus import _abaqus
-    except ImportError:
-        return None
-    return getattr(_abaqus, "meshio_to_abaqus_type", None)
+def _abaqus_cannot(cell_type: str, nodes: int) -> bool:
+    """Whether meshio's Abaqus writer has no element for `cell_type` (cells of `nodes`
+    nodes): one such cell written through meshio's public `write` into a temporary file
+    (its writer raises KeyError on a type its table lacks)."""
+    import meshio
+
+    one = meshio.Mesh(np.zeros((nodes, 3)), [(cell_type, np.arange(nodes)[None, :])])
+    with tempfile.TemporaryDirectory(prefix="eegt-inp-") as folder:
+        try:
+            meshio.write(os.path.join(folder, "probe.inp"), one, file_format="abaqus")
+        except KeyError:
+            return True
+    return False
 
 
 def _convert_refusal(sm: SolverMesh, fmt: str) -> str | None:
@@ -528,9 +534,8 @@ def _convert_refusal(sm: SolverMesh, fmt: str) -> str | None:
     if fmt == "su2":
         return su2.plan(sm.mesh)[1]
     if fmt == "inp":
-        known = _abaqus_types()
-        odd = sorted({b.type for b in sm.mesh.cells
-                      if len(b.data) and known is not None and b.type not in known})
+        kinds = {b.type: b.data.shape[1] for b in sm.mesh.cells if len(b.data)}
+        odd = sorted(t for t, k in kinds.items() if _abaqus_cannot(t, k))
         if odd:
             return f"Abaqus (meshio's writer) has no element type for {', '.join(odd)} cells"
     if fmt == "msh" and not any(k in sm.mesh.cell_data for k in TAG_ARRAYS):
