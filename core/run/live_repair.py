@@ -92,10 +92,11 @@ def carried(points: np.ndarray, grab: np.ndarray, target: np.ndarray, moving: np
     so front >= ``FRONT`` |d| keeps at least 1 - 1.5 / FRONT of it. A corner triangle
     sees phi at its three nodes only, and the linear phi across a thin triangle can be
     much steeper than phi itself: a smooth phi, flat at the grabbed node and at the box's
-    edges, keeps that close to its own slope where a peaked one (linear falls, a ridge
-    through the grabbed node) flipped the thin cells of a cylinder's unwrap at the first
-    frames of a drag. None: no move, more than ``MAX_CARRIED`` grabbed nodes, grabbed nodes
-    moved differently, or no box fits (a node that stays within ``FRONT`` |d| ahead)."""
+    edges, keeps that close to its own slope, where a peaked one (linear falls, a ridge
+    through the grabbed node) flips thin cells that straddle the ridge (a cylinder's
+    Unwrap: cells of aspect 15). None: no move, more than ``MAX_CARRIED`` grabbed nodes,
+    grabbed nodes moved differently, or no box fits (a node that stays within ``FRONT`` |d|
+    ahead)."""
     grab = np.asarray(grab, dtype=np.int64)
     target = np.asarray(target, dtype=np.float64).reshape(-1, 2)
     if grab.size == 0 or grab.size > MAX_CARRIED:
