@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.public_pins import GMSH, SU2_TESTCASES
+from bench.public_pins import DEFAULT_MIRROR, GMSH, SU2_TESTCASES, from_snapshot, snapshot
 
 MAX_BYTES = 20_000_000
 GMSH_SAVES = (("4.1", 0, "4.1 ascii"), ("4.1", 1, "4.1 binary"), ("2.2", 0, "2.2 ascii"))
@@ -51,9 +51,10 @@ gmsh.finalize()
 """.replace("SAVES_HERE", repr(GMSH_SAVES))
 
 
-def _git(repo: Path, *args: str) -> bytes:
-    return subprocess.run(["git", "--git-dir", str(repo), *args], capture_output=True,
-                          check=True).stdout
+def _ls_tree(mirror: Path, pin: tuple[str, str], *options: str) -> str:
+    """`git ls-tree -r` of the commit of `pin` in its snapshot under `mirror`."""
+    return subprocess.run(["git", "--git-dir", snapshot(mirror, pin[0]), "ls-tree", "-r",
+                           *options, pin[1]], capture_output=True, check=True).stdout.decode()
 
 
 def round_trip(path: str) -> str:
@@ -88,15 +89,14 @@ def round_trip(path: str) -> str:
 
 def su2_files(mirror: Path, folder: Path) -> list[tuple[str, str]]:
     """(name, local path) of SU2's TestCases .su2 files under MAX_BYTES (not the links)."""
-    repo = mirror / SU2_TESTCASES[0].replace("/", "+") / "repo"
     out = []
-    for line in _git(repo, "ls-tree", "-r", "-l", SU2_TESTCASES[1]).decode().splitlines():
+    for line in _ls_tree(mirror, SU2_TESTCASES, "-l").splitlines():
         meta, name = line.split("\t", 1)
         size = meta.split()[3]
         if not name.endswith(".su2") or not size.isdigit() or int(size) > MAX_BYTES:
             continue
-        data = _git(repo, "show", f"{SU2_TESTCASES[1]}:{name}")
-        if b"NDIME" not in data:  # a link to another test's mesh
+        data = from_snapshot(mirror, SU2_TESTCASES, name)
+        if not data or b"NDIME" not in data:  # a link to another test's mesh
             continue
         local = folder / name.replace("/", "+")
         local.write_bytes(data)
@@ -107,15 +107,14 @@ def su2_files(mirror: Path, folder: Path) -> list[tuple[str, str]]:
 def gmsh_files(mirror: Path, folder: Path) -> tuple[list[tuple[str, str]], list[str]]:
     """((name, local path) of every save of every meshed benchmark, the .geo files that
     did not mesh)."""
-    repo = mirror / GMSH[0].replace("/", "+") / "repo"
-    names = [n for n in _git(repo, "ls-tree", "-r", "--name-only", GMSH[1]).decode().split()
+    names = [n for n in _ls_tree(mirror, GMSH, "--name-only").split()
              if n.startswith("benchmarks/2d/") and n.endswith(".geo")]
     script = folder / "mesh_one.py"
     script.write_text(_MESH_ONE)
     out, failed = [], []
     for name in names:
         geo = folder / Path(name).name
-        geo.write_bytes(_git(repo, "show", f"{GMSH[1]}:{name}"))
+        geo.write_bytes(from_snapshot(mirror, GMSH, name) or b"")
         stem = str(folder / Path(name).stem)
         try:
             done = subprocess.run([sys.executable, str(script), geo.name, stem], cwd=folder,
@@ -134,7 +133,7 @@ def gmsh_files(mirror: Path, folder: Path) -> tuple[list[tuple[str, str]], list[
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--set", nargs="+", choices=("su2", "gmsh"), default=["su2", "gmsh"])
-    ap.add_argument("--mirror", type=Path, default=Path("/work/.mirror"))
+    ap.add_argument("--mirror", type=Path, default=Path(DEFAULT_MIRROR))
     ap.add_argument("--list", action="store_true", help="each file's outcome too")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="eegt-public-") as tmp:

@@ -34,7 +34,6 @@ from __future__ import annotations
 import hashlib
 import json
 import multiprocessing as mp
-import subprocess
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +43,13 @@ import numpy as np
 from bench import libm
 from bench.corpus import compact_mesh, naca0012
 from bench.meshgen import boundary_layer_annulus
-from bench.public_pins import SU2_TESTCASES, SU2_TUTORIALS
+from bench.public_pins import (
+    DEFAULT_MIRROR,
+    SU2_TESTCASES,
+    SU2_TUTORIALS,
+    from_snapshot,
+    snapshot,
+)
 from core import FaceSet, faces_from_csr, mesh_stats
 from core.mesh.topology import boundary_nodes
 
@@ -448,23 +453,23 @@ def public_file(key: str, mirror: Path | None = None) -> Path:
     from a bare snapshot (`mirror`/OWNER+NAME/repo) with git show at its commit into
     build/repair_bench/public/; FileNotFoundError when neither has it."""
     pub = PUBLIC[key]
-    (repo_name, commit), path = pub.repo, pub.path
+    repo_name, path = pub.repo[0], pub.path
     local = repo_name.replace("/", "+")
     here = ROOT / "build" / "public_meshes" / local / path
     if here.is_file():
         return here
     out = CACHE / "public" / local / path
     if not out.is_file():
-        repo = (mirror or Path("/work/.mirror")) / local / "repo"
-        if not repo.is_dir():
+        where = mirror or DEFAULT_MIRROR
+        repo = snapshot(where, repo_name)
+        if not Path(repo).is_dir():
             raise FileNotFoundError(f"{path}: not in build/public_meshes and no snapshot at "
                                     f"{repo} (scripts/fetch_public_meshes.py, --mirror)")
-        data = subprocess.run(["git", "--git-dir", str(repo), "show",
-                               f"{commit}:{path}"], capture_output=True, check=False)
-        if data.returncode != 0 or not data.stdout:
+        data = from_snapshot(where, pub.repo, path)
+        if not data:
             raise FileNotFoundError(f"{path}: not in the snapshot {repo}")
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_bytes(data.stdout)
+        out.write_bytes(data)
     if pub.digest and hashlib.sha256(out.read_bytes()).hexdigest()[:16] != pub.digest:
         raise ValueError(f"{out}: its SHA-256 is not the pinned one")
     return out

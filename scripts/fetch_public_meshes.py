@@ -36,6 +36,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
 from bench.public_pins import (  # noqa: E402  (the repository's root is on the path first)
+    DEFAULT_MIRROR,
     GMSH,
     MESHIO_SDIST,
     MMG,
@@ -44,6 +45,7 @@ from bench.public_pins import (  # noqa: E402  (the repository's root is on the 
     SKFEM_VTU,
     SU2_TESTCASES,
     SU2_TUTORIALS,
+    from_snapshot,
 )
 
 OUT = os.path.join(ROOT, "build", "public_meshes")
@@ -139,14 +141,7 @@ def _digest(data: bytes) -> str:
 
 
 def _from_mirror(mirror: str | None, repo: str, commit: str, path: str) -> bytes | None:
-    if not mirror:
-        return None
-    git_dir = os.path.join(mirror, repo.replace("/", "+"), "repo")
-    if not os.path.isdir(git_dir):
-        return None
-    done = subprocess.run(["git", f"--git-dir={git_dir}", "show", f"{commit}:{path}"],
-                          capture_output=True)
-    return done.stdout if done.returncode == 0 else None
+    return from_snapshot(mirror, (repo, commit), path) if mirror else None
 
 
 def _from_github(repo: str, commit: str, path: str) -> bytes | None:
@@ -211,7 +206,7 @@ def fetch(mirror: str | None, offline: bool, out: str = OUT) -> tuple[list[dict]
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--mirror", default=os.environ.get("EEGT_MESH_MIRROR", "/work/.mirror"),
+    ap.add_argument("--mirror", default=os.environ.get("EEGT_MESH_MIRROR", DEFAULT_MIRROR),
                     help="folder of bare repository snapshots (OWNER+NAME/repo)")
     ap.add_argument("--offline", action="store_true", help="no network: mirror and sdist only")
     ap.add_argument("--out", default=OUT)
