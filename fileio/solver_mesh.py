@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import functools
 import hashlib
 import io
 import os
@@ -512,10 +513,12 @@ def _sets_refusal(mesh: Any) -> str | None:
     return None
 
 
+@functools.cache
 def _abaqus_cannot(cell_type: str, nodes: int) -> bool:
     """Whether meshio's Abaqus writer has no element for `cell_type` (cells of `nodes`
     nodes): one such cell written through meshio's public `write` into a temporary file
-    (its writer raises KeyError on a type its table lacks)."""
+    (its writer raises KeyError on a type its table lacks); asked once per type (a
+    conversion's dry write and its write both ask)."""
     import meshio
 
     one = meshio.Mesh(np.zeros((nodes, 3)), [(cell_type, np.arange(nodes)[None, :])])
