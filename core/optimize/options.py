@@ -33,7 +33,9 @@ class GlobalOptions:
     round): a repair's region too tight for its fold, which the repair grows
     (core.run.repair), instead of spending its budget there twice; and its
     lift's settle stops after `SETTLE_WATCH` iterations whose q_min never reached the climb's
-    (such a settle is not kept).
+    (such a settle is not kept); end_round_on_plateau: an untangling round ends once a
+    check finds neither its inverted count nor its worst corner det improved
+    (`stages.PLATEAU_EVERY`; a repair's attempts), instead of running to its cap.
     """
 
     max_iter: int = 3000
@@ -49,6 +51,7 @@ class GlobalOptions:
     lift_grow: float = LIFT_GROW
     solver: Solver | None = None
     give_up_early: bool = False
+    end_round_on_plateau: bool = False
 
     def __post_init__(self) -> None:
         if not self.polish_power > 0.0:

@@ -24,8 +24,8 @@ from .slide import make_state
 from .state import State, Tick, stops
 from .submesh import Neighbourhood
 
-__all__ = ["BUDGET_NODES", "STALL_ROUNDS", "Resume", "lift_min_quality", "untangle_budget",
-           "untangle_global"]
+__all__ = ["BUDGET_NODES", "PLATEAU_EVERY", "PLATEAU_LEFT", "PLATEAU_RISE", "STALL_ROUNDS",
+           "Resume", "lift_min_quality", "untangle_budget", "untangle_global"]
 
 INNER_ITER = 1000  # L-BFGS iterations between two eps updates (60 stalled on spun holes: docs)
 INNER_PER_SQRT_NODE = 40  # ... at least this x sqrt(free nodes): a fold crosses a larger mesh
@@ -48,6 +48,14 @@ SLOW_RISE = 0.25  # give_up_early: a later untangling round (the third on) that 
 # inverted element and raises the worst det (below 0) by less than this x |det|: the region
 # is too tight (failing attempts creep by 4-7 %; the rounds of attempts that opened their
 # fold, when they kept every inverted element, rose by 56 % and more)
+PLATEAU_EVERY = 100  # options.end_round_on_plateau: an untangling round that has left at
+PLATEAU_LEFT = 0.05  # most this share of the run's inverted elements ends at the first check
+PLATEAU_RISE = 0.05  # (every PLATEAU_EVERY iterations, the first sets the marks) that finds
+# neither fewer inverted elements than its fewest nor its worst corner det above its best by
+# this x |det|: at a large eps the round settles near the regularised energy's minimum with
+# a few elements still inverted, and the next, smaller eps opens them in a few iterations
+# (docs/repair.md). A round with more left runs on: ended early it misleads give_up_early's
+# judgement of the region (a fold that opens there was judged too tight)
 EPS_MIN = 1e-9  # floor of eps (J is dimensionless: dets are ~1 at the reference size)
 SIGMA_MIN = 0.1  # the paper's lower bound on sigma
 STOP_REL_DECREASE = 1e-3  # stop polishing when one round lowers F by less than this (relative)
@@ -292,6 +300,7 @@ class _Continuation:
         self.eps = max(0.1 * abs(dmin), 1e-3) if dmin <= 0.0 else EPS_MIN
         self.inner = max(INNER_ITER, int(np.ceil(INNER_PER_SQRT_NODE * np.sqrt(free.sum()))))
         self.best_v, self.best_inv = self.v, n_inv
+        self.n_inv_in = n_inv  # the run's inverted elements at its start
         self.valid = dmin > 0.0  # every corner that can move is positive (others constant)
         self.total = 0
         self.untangle_its = 0  # L-BFGS iterations before the mesh was valid
@@ -468,6 +477,32 @@ class _Continuation:
 
         return _chained(tick, watch)
 
+    def _plateau_watch(self, tick: Tick | None) -> Tick:
+        """An untangling round's tick under options.end_round_on_plateau: `tick`, and every
+        PLATEAU_EVERY iterations the inverted count and worst corner det of the round's point
+        (the first check sets the marks); a check that betters neither (`PLATEAU_RISE`) with
+        at most PLATEAU_LEFT of the run's inverted elements left ends the round, whose point
+        then goes on to the next eps as at the round's cap."""
+        en, st, few = self.en, self.st, PLATEAU_LEFT * self.n_inv_in
+        marks: list[tuple[int, float]] = []  # (fewest inverted, best worst det) so far
+        measured_at = 0
+
+        def watch(it: int, point: Callable[[], np.ndarray]) -> bool:
+            nonlocal measured_at
+            if it - measured_at < PLATEAU_EVERY:
+                return True
+            measured_at = it
+            x, y = st.unpack(point())
+            n, d = en.n_inverted(x, y), float(np.min(en.dets(x, y)))
+            if not marks:
+                marks.append((n, d))
+                return True
+            fewest, top = marks[0]
+            marks[0] = (min(fewest, n), max(top, d))
+            return n > few or n < fewest or d > top + PLATEAU_RISE * abs(top)
+
+        return _chained(tick, watch)
+
     def _cap(self, guard: bool) -> int:
         """The round's L-BFGS iterations: while tangled `inner` per eps; once valid, one
         long run, no memory restarts (the rest of the polish budget)."""
@@ -520,6 +555,8 @@ class _Continuation:
         if (not guard and self.opt.give_up_early and self.resume is None
                 and len(self.marks) == 1):  # the second untangling round
             tick = self._tight_watch(tick)
+        if not guard and self.opt.end_round_on_plateau and self.resume is None:
+            tick = self._plateau_watch(tick)
         self.v, its = self.run_lbfgs(st.view(self.en), st, self.v, self.eps, max_it=cap,
                                      guard=guard, tick=tick)
         self.total += its

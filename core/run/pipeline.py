@@ -50,7 +50,7 @@ from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
 from .hopeless_groups import hopeless_groups, hopeless_groups_note
-from .repair import Repaired, keep_targets, repair_folds, touching
+from .repair import REGION, WHOLE, Repaired, keep_targets, repair_folds, touching
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
            "normalisation", "stats_as_given", "untangle_and_smooth"]
@@ -121,7 +121,7 @@ def untangle_and_smooth(
     reference_points=None,
     edges: EdgeInfo | None = None,
     keep_as_given: bool = True,
-    give_up_early: bool = False,
+    attempt: str | None = None,
 ) -> EEGTResult:
     """Untangle and smooth a planar polygon mesh (counterclockwise faces = valid).
 
@@ -159,15 +159,18 @@ def untangle_and_smooth(
     kept as given (core.metrics.kept: valid, measured without those vertices, `n_kept`);
     False, or the paper's mode (`untangle="eegt"`), counts them inverted and frozen.
 
-    `give_up_early`: a region "folds" repair's attempt on a region smaller than the mesh
-    (core.run.repair sets it): its global stage gives up after two untangling rounds that
-    opened too little of the fold (`GlobalOptions.give_up_early`), with no second start; the
-    repair then grows the region.
+    `attempt`: None, or a region "folds" repair's attempt (core.run.repair sets it): its
+    global stage's untangling rounds end on a plateau (`GlobalOptions.end_round_on_plateau`),
+    and on a region smaller than the mesh (`repair.REGION`) it gives up after two
+    untangling rounds that opened too little of the fold (`GlobalOptions.give_up_early`),
+    with no second start; the repair then grows the region.
     """
     t0 = time.perf_counter()
     params = params if params is not None else EEGTParams()
     if not isinstance(params, EEGTParams):
         raise ValueError(f"params must be an EEGTParams, got {type(params).__name__}")
+    if attempt not in (None, REGION, WHOLE):
+        raise ValueError(f"attempt must be None, {REGION!r} or {WHOLE!r}, got {attempt!r}")
     if params.region == "folds":
         return _untangle_folds(points, faces, fixed, params, backend, progress, targets,
                                reference_points, edges, keep_as_given, t0)
@@ -176,7 +179,7 @@ def untangle_and_smooth(
     with pages_for_run(n_faces), keep_freed_memory(n_faces):
         mesh = _prepare(points, faces, fixed, params, targets, reference_points, edges,
                         keep_as_given)
-        run, order = _start(mesh, params, backend, progress, give_up_early)
+        run, order = _start(mesh, params, backend, progress, attempt)
         try:
             status, message = run.execute()
         except _CancelRun:
@@ -439,7 +442,7 @@ def _renumbers(fs: FaceSet, n_nodes: int) -> bool:
 
 
 def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | None,
-           give_up_early: bool = False) -> tuple[_Run, Renumbering | None]:
+           attempt: str | None = None) -> tuple[_Run, Renumbering | None]:
     """The run over the normalised points, in the renumbering of `_prepare` if it made one
     (returned with it; None: as given)."""
     fs, free, frozen = mesh.fs, mesh.free, mesh.frozen
@@ -448,11 +451,11 @@ def _start(mesh: _Mesh, params: EEGTParams, backend: str, progress: Progress | N
         work = mesh.work[order.nodes]  # the run's numbering from here on (one copy, not two)
         run = _Run(work, run_fs, free[order.nodes], params, backend, progress,
                    frozen[order.faces], frozen_ids=np.flatnonzero(frozen),
-                   give_up_early=give_up_early)
+                   attempt=attempt)
     else:
         order = None
         run = _Run(mesh.work, fs, free, params, backend, progress, frozen, mesh.targets,
-                   mesh.motion, give_up_early=give_up_early)
+                   mesh.motion, attempt=attempt)
     return run, order
 
 
@@ -620,7 +623,7 @@ class _Run:
 
     def __init__(self, p, fs, free, params: EEGTParams, backend: str, progress, frozen,
                  targets: Targets | None = None, motion: BoundaryMotion | None = None,
-                 frozen_ids: np.ndarray | None = None, give_up_early: bool = False):
+                 frozen_ids: np.ndarray | None = None, attempt: str | None = None):
         self.p, self.fs, self.free, self.params = p, fs, free, params
         # the frozen faces' ids in the caller's face order (the run's may be renumbered)
         self.frozen_ids = np.flatnonzero(frozen) if frozen_ids is None else frozen_ids
@@ -643,7 +646,7 @@ class _Run:
         self.polished = False  # the global stage's polish (or the lift stage) has run
         self.lifted = 0  # lift rounds the last lift kept
         self.gave_up = False  # a global stage ended for want of progress (stages.STALL_ROUNDS)
-        self.give_up_early = give_up_early  # a repair's attempt (`untangle_and_smooth`) ...
+        self.attempt = attempt  # a repair's attempt (`untangle_and_smooth`) ...
         self.too_tight = False  # ... whose global stage gave up early (no second start)
         self._groups: tuple[dict[int, np.ndarray], Factors | None] | None = None
         self._near: Neighbourhood | None = None  # made by the local untangle, if it runs
@@ -911,7 +914,8 @@ class _Run:
             polish_iter=polish,
             lift_rounds=self.params.lift_rounds,
             solver=self.lbfgs,
-            give_up_early=self.give_up_early,
+            give_up_early=self.attempt == REGION,
+            end_round_on_plateau=self.attempt is not None,
         )
         try:
             pts, info = untangle_global(

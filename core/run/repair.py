@@ -7,9 +7,10 @@ and the cost follows the region, not the mesh. When the fold cannot be opened in
 region, the margin doubles (`rings` 2, 4, 8, ...) and the run starts again from the input,
 until the region is the whole mesh; an attempt on a region smaller than the mesh gets a
 budget proportional to its size (`attempt_budget`) and gives up after two untangling rounds
-that open too little of the fold (`untangle_and_smooth(give_up_early=True)`: neither the
+that open too little of the fold (`untangle_and_smooth(attempt=REGION)`: neither the
 inverted count nor the worst det halved), with no second start, so a margin too tight for
-the fold costs little.
+the fold costs little. Every attempt's untangling rounds end on a plateau of the inverted
+count and the worst det (`GlobalOptions.end_round_on_plateau`) instead of at their cap.
 
 Target "keep" (`keep_targets`): every face is pulled towards its own shape as given, so that
 the grading, the anisotropy and the sizes the user built survive; a folded face has no shape
@@ -35,8 +36,9 @@ from ..metrics.face_quality import inverted_corners, signed_face_areas
 from ..params import EEGTParams
 from .harmonic import harmonic_positions
 
-__all__ = ["DRAGGED_RINGS", "FIRST_RINGS", "Repaired", "attempt_budget", "folded_faces",
-           "grow_region", "keep_targets", "neighbour_shapes", "repair_folds", "touching"]
+__all__ = ["DRAGGED_RINGS", "FIRST_RINGS", "REGION", "WHOLE", "Repaired", "attempt_budget",
+           "folded_faces", "grow_region", "keep_targets", "neighbour_shapes", "repair_folds",
+           "touching"]
 
 NEIGHBOUR_PASSES = 64  # rings a folded patch takes its shapes across (`neighbour_shapes`)
 FIRST_RINGS = 3  # the first margin around the folded faces, in rings of faces
@@ -44,6 +46,9 @@ DRAGGED_RINGS = 1  # target "keep": faces this near a folded one lose their own 
 BUDGET_PER_FACE = 2  # an attempt on a region below the whole mesh: this many optimizer and
 BUDGET_MIN = 400  # EEGT iterations per face of the region, at least BUDGET_MIN, at most the
 # run's max_untangle_iterations (a margin that is too tight fails in a fraction of a second)
+# a repair's attempts, as `untangle_and_smooth(attempt=...)` takes them: on a region smaller
+# than the mesh (gives up early, `attempt_budget`), on the whole mesh
+REGION, WHOLE = "region", "whole"
 ROOM = 0.5  # a region below the whole mesh is tried only when its inverted faces' area is
 # at most this x its other faces' (`_has_room`); else the margin doubles first
 
@@ -198,9 +203,9 @@ def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParam
                  targets: np.ndarray | None, run: Run, keep_from: np.ndarray | None = None,
                  seed: np.ndarray | None = None, **run_args: Any) -> Repaired:
     """The loop of region "folds": `run(points, faces, fixed=..., params=...,
-    targets=..., **run_args)` (core.run.pipeline.untangle_and_smooth with region "mesh") on
-    the folded faces grown by FIRST_RINGS, 2 x, 4 x ... rings until an attempt leaves no face
-    of the region inverted or the region is the whole mesh.
+    targets=..., attempt=REGION or WHOLE, **run_args)` (core.run.pipeline.untangle_and_smooth
+    with region "mesh") on the folded faces grown by FIRST_RINGS, 2 x, 4 x ... rings until an
+    attempt leaves no face of the region inverted or the region is the whole mesh.
 
     `p` (N, 2) float64, `fs` and `free` (N,) bool: the nodes a move may change; `targets`:
     the whole mesh's (n_corners, 2) targets or None (regular polygons), used unless
@@ -230,8 +235,8 @@ def repair_folds(p: np.ndarray, fs: FaceSet, free: np.ndarray, params: EEGTParam
             tg = None if targets is None else targets[rows]
         prm = replace(sub_params, max_untangle_iterations=attempt_budget(params, ids.size,
                                                                           whole))
-        res = run(p[nodes], sub, fixed=held, params=prm, targets=tg, give_up_early=not whole,
-                  **run_args)
+        res = run(p[nodes], sub, fixed=held, params=prm, targets=tg,
+                  attempt=WHOLE if whole else REGION, **run_args)
         if whole or res.status in ("valid", "untangled", "cancelled"):
             out = p.copy()
             if res.status != "cancelled":
