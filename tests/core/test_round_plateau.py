@@ -22,8 +22,9 @@ def _repair(c):
 def test_repair_rounds_end_on_a_plateau_and_take_fewer_iterations(monkeypatch):
     """With the share left open (PLATEAU_LEFT past every count), the C-grid's untangling
     rounds end at the first check that betters neither the inverted count nor the worst
-    det: 2 784 optimizer iterations instead of 3 948 with rounds run to their cap
-    (measured), also untangled, every node outside the region bit-identical."""
+    det: fewer optimizer iterations than with rounds run to their cap (2 784 against 3 948
+    here; the mesh's last bits, and so the counts, vary with the CPU's float code), also
+    untangled, every node outside the region bit-identical."""
     from core.optimize import stages
 
     c = _cgridtri()
@@ -34,7 +35,7 @@ def test_repair_rounds_end_on_a_plateau_and_take_fewer_iterations(monkeypatch):
     for res in (ended, capped):
         assert res.status == "untangled" and res.after.n_inverted == 0
         assert np.array_equal(np.asarray(res.points)[~res.moved], c.points[~res.moved])
-    assert ended.global_iterations == 2784 and capped.global_iterations == 3948
+    assert ended.global_iterations < 0.8 * capped.global_iterations
 
 
 def test_a_round_with_more_than_a_few_cells_inverted_runs_on(monkeypatch):
@@ -50,7 +51,7 @@ def test_a_round_with_more_than_a_few_cells_inverted_runs_on(monkeypatch):
     capped = _repair(c)
     assert gated.status == capped.status == "untangled"
     assert np.array_equal(gated.points, capped.points)
-    assert gated.global_iterations == capped.global_iterations == 3948
+    assert gated.global_iterations == capped.global_iterations
 
 
 def test_only_a_repairs_attempts_end_rounds_on_a_plateau(monkeypatch):
