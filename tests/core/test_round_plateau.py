@@ -2,6 +2,7 @@
 only a region "folds" run's attempts use it; the rest keep running rounds to their cap."""
 
 import numpy as np
+import pytest
 
 import core.run.pipeline as pipeline
 from core import EEGTParams, untangle_and_smooth
@@ -74,3 +75,14 @@ def test_only_a_repairs_attempts_end_rounds_on_a_plateau(monkeypatch):
     _repair(c)
     assert seen and all(plateau for plateau, _ in seen)
     assert all(early for _, early in seen)  # the C-grid's fold opens in a region
+
+
+def test_an_unknown_attempt_is_refused_with_one_line():
+    """`attempt` is None, REGION or WHOLE; anything else is a ValueError naming the value,
+    before any work."""
+    from core.run.repair import REGION, WHOLE
+
+    p = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    with pytest.raises(ValueError, match=f"attempt must be None, '{REGION}' or '{WHOLE}', "
+                                         "got 'bogus'"):
+        untangle_and_smooth(p, [[0, 1, 2]], attempt="bogus")
