@@ -472,8 +472,7 @@ class _Continuation:
             if checked or it < TIGHT_CHECK:
                 return True
             checked = True
-            x, y = st.unpack(point())
-            return not self._tight_after_first(en.n_inverted(x, y), float(np.min(en.dets(x, y))))
+            return not self._tight_after_first(*_inverted_and_worst(en, *st.unpack(point())))
 
         return _chained(tick, watch)
 
@@ -492,8 +491,7 @@ class _Continuation:
             if it - measured_at < PLATEAU_EVERY:
                 return True
             measured_at = it
-            x, y = st.unpack(point())
-            n, d = en.n_inverted(x, y), float(np.min(en.dets(x, y)))
+            n, d = _inverted_and_worst(en, *st.unpack(point()))
             if not marks:
                 marks.append((n, d))
                 return True
@@ -572,9 +570,8 @@ class _Continuation:
         en, st = self.en, self.st
         x, y = st.unpack(self.v)
         e_end = en.value(x, y, self.eps)
-        dmin = float(np.min(en.dets(x, y)))
+        n_inv, dmin = _inverted_and_worst(en, x, y)
         self.valid = dmin > 0.0
-        n_inv = en.n_inverted(x, y)
         if n_inv <= self.best_inv:
             self.best_v, self.best_inv = self.v, n_inv
         if self.later and self.valid:  # valid now: the sliding nodes join (best_v is this)
@@ -600,6 +597,12 @@ class _Continuation:
         sigma = max(decrease, SIGMA_MIN)
         mu = (1.0 - sigma) * chi_scalar(dmin, self.eps)
         return max(2.0 * float(np.sqrt(mu * (mu - dmin))) if dmin < mu else EPS_MIN, EPS_MIN)
+
+
+def _inverted_and_worst(en: FoldoverEnergy, x: np.ndarray, y: np.ndarray) -> tuple[int, float]:
+    """(inverted elements, smallest corner det) at the node positions x, y: the marks the
+    continuation's rules (`_stalled`, `_too_tight`, the plateau) judge a point by."""
+    return en.n_inverted(x, y), float(np.min(en.dets(x, y)))
 
 
 def _chained(tick: Tick | None, watch: Tick) -> Tick:
