@@ -57,6 +57,15 @@ def _ls_tree(mirror: Path, pin: tuple[str, str], *options: str) -> str:
                            *options, pin[1]], capture_output=True, check=True).stdout.decode()
 
 
+def _listed(mirror: Path, pin: tuple[str, str], name: str) -> bytes:
+    """The bytes of a file `_ls_tree` listed; RuntimeError when its snapshot cannot show it
+    (a broken snapshot, not a file to leave out)."""
+    data = from_snapshot(mirror, pin, name)
+    if data is None:
+        raise RuntimeError(f"{pin[0]} at {pin[1]}: git show {name} failed")
+    return data
+
+
 def round_trip(path: str) -> str:
     """The outcome for one file: 'round trip', 'refused: ...', 'write refused: ...' or
     'differs'."""
@@ -95,8 +104,8 @@ def su2_files(mirror: Path, folder: Path) -> list[tuple[str, str]]:
         size = meta.split()[3]
         if not name.endswith(".su2") or not size.isdigit() or int(size) > MAX_BYTES:
             continue
-        data = from_snapshot(mirror, SU2_TESTCASES, name)
-        if not data or b"NDIME" not in data:  # a link to another test's mesh
+        data = _listed(mirror, SU2_TESTCASES, name)
+        if b"NDIME" not in data:  # a link to another test's mesh
             continue
         local = folder / name.replace("/", "+")
         local.write_bytes(data)
@@ -114,7 +123,7 @@ def gmsh_files(mirror: Path, folder: Path) -> tuple[list[tuple[str, str]], list[
     out, failed = [], []
     for name in names:
         geo = folder / Path(name).name
-        geo.write_bytes(from_snapshot(mirror, GMSH, name) or b"")
+        geo.write_bytes(_listed(mirror, GMSH, name))
         stem = str(folder / Path(name).stem)
         try:
             done = subprocess.run([sys.executable, str(script), geo.name, stem], cwd=folder,

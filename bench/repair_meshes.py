@@ -407,8 +407,6 @@ def _gmsh_bl_once(gmsh, body: str, h: float, first: float, quads: bool):
     return pts, groups, wall
 
 
-
-
 @dataclass(frozen=True)
 class Public:
     """A public SU2 mesh: its repository and commit, path, SHA-256's first 16 hex digits
