@@ -483,20 +483,20 @@ class _Continuation:
         at most PLATEAU_LEFT of the run's inverted elements left ends the round, whose point
         then goes on to the next eps as at the round's cap."""
         en, st, few = self.en, self.st, PLATEAU_LEFT * self.n_inv_in
-        marks: list[tuple[int, float]] = []  # (fewest inverted, best worst det) so far
+        marks: tuple[int, float] | None = None  # (fewest inverted, best worst det) so far
         measured_at = 0
 
         def watch(it: int, point: Callable[[], np.ndarray]) -> bool:
-            nonlocal measured_at
+            nonlocal marks, measured_at
             if it - measured_at < PLATEAU_EVERY:
                 return True
             measured_at = it
             n, d = _inverted_and_worst(en, *st.unpack(point()))
-            if not marks:
-                marks.append((n, d))
+            if marks is None:
+                marks = (n, d)
                 return True
-            fewest, top = marks[0]
-            marks[0] = (min(fewest, n), max(top, d))
+            fewest, top = marks
+            marks = (min(fewest, n), max(top, d))
             return n > few or n < fewest or d > top + PLATEAU_RISE * abs(top)
 
         return _chained(tick, watch)
