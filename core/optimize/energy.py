@@ -135,19 +135,21 @@ class _Blocks:
         self.one_theta = np.full(m, 1.0 - THETA)
         self.two_one_theta = np.full(m, 2.0 * (1.0 - THETA))
         self.two_theta = np.full(m, 2.0 * THETA)
-        self.pieces = [self._piece(slice(lo, min(m, lo + PIECE)), m, w00, w01, w11)
+        self.pieces = [self._piece(slice(lo, min(m, lo + PIECE)), m)
                        for lo in range(0, m, PIECE)]
         self.scatter_pieces = [self._scatter_piece(slice(lo, min(m, lo + PIECE)), m)
                                for lo in range(0, m, PIECE)]
 
-    def _piece(self, k: slice, m: int, w00, w01, w11) -> tuple[np.ndarray, ...]:
+    def _piece(self, k: slice, m: int) -> tuple[np.ndarray, ...]:
         """Views of one piece of corners k: its rows of c (6), e1, e2 (2 each), J (4), J
-        squared (4), d, t, tmp, and its W^-1 entries (one row, for both axes)."""
+        squared (4), d, t, tmp, and its W^-1 entries (two equal rows, for x and y: NumPy
+        multiplies two arrays of one shape faster than it broadcasts a row)."""
         c, j = self.c.reshape(6, m)[:, k], self.j.reshape(4, m)[:, k]
         sq = self.sq.reshape(4, m)[:, k]
         e1, e2 = self.e1.reshape(2, m)[:, k], self.e2.reshape(2, m)[:, k]
+        w00, w01, w11 = (w.reshape(2, m)[:, k] for w in (self.w00, self.w01, self.w11))
         return (k, c, c[0:2], c[2:4], c[4:6], e1, e2, j, j[0:2], j[2:4], sq, self.d[k], self.t[k],
-                self.tmp[k], w00[k], w01[k], w11[k])
+                self.tmp[k], w00, w01, w11)
 
     def _scatter_piece(self, k: slice, m: int) -> tuple[np.ndarray, ...]:
         """Views of one piece of corners k for `_scatter`: a, b, J (4 rows), dF/dJ (4 rows),
@@ -336,7 +338,7 @@ class FoldoverEnergy:
         if not at_point:
             self._jac(z, index)
         j, f = bk.j.reshape(4, m), bk.ge.reshape(6, m)  # f: scratch until the next `evaluate`
-        dz.take(index, None, bk.ge, "clip")  # = dz[index]
+        dz.take(index, None, bk.ge, "wrap")  # = dz[index]
         out = np.inf
         for lo in range(0, m, LIMIT_PIECE):
             hi = min(m, lo + LIMIT_PIECE)
@@ -353,7 +355,7 @@ class FoldoverEnergy:
         mul, sub, add = np.multiply, np.subtract, np.add
         rows = index.reshape(6, bk.m)
         for k, c, c1, c2, c0, e1, e2, j, ja, jb, sq, d, t, tmp, w00, w01, w11 in bk.pieces:
-            z.take(rows[:, k], None, c, "clip")  # = z[index]
+            z.take(rows[:, k], None, c, "wrap")  # = z[index] (in range: wrap checks least)
             sub(c1, c0, e1)  # e1x = x[i1] - x[i0], e1y = y[i1] - y[i0]
             sub(c2, c0, e2)  # e2x = x[i2] - x[i0], e2y
             mul(e1, w00, ja)  # j00 = e1x w00, j10 = e1y w00
@@ -498,9 +500,13 @@ class LiftEnergy(FoldoverEnergy):
     def _element_mean(self, u: np.ndarray, tmp: np.ndarray) -> np.ndarray:
         """(E,) mean over each element's corners of q_k = 1 / u_k (u_k = 0: inf)."""
         with np.errstate(divide="ignore"):  # a degenerate corner (u = 0): its element is bad
-            if self._one_each:  # the same bits: 0 + q and q / 1 are q (q >= 0, never -0)
-                return np.divide(1.0, u)
-            return np.bincount(self.eid, np.divide(1.0, u, tmp), self.n_elem) / self.n_corners
+            return self._positive_mean(u, tmp)
+
+    def _positive_mean(self, u: np.ndarray, tmp: np.ndarray) -> np.ndarray:
+        """`_element_mean` where every u_k is positive (no division by zero to silence)."""
+        if self._one_each:  # the same bits: 0 + q and q / 1 are q (q >= 0, never -0)
+            return np.divide(1.0, u)
+        return np.bincount(self.eid, np.divide(1.0, u, tmp), self.n_elem) / self.n_corners
 
     def _quality_of(self, q: np.ndarray, bad_corner: np.ndarray) -> np.ndarray:
         """The element means q, 0 for an element with a corner whose det is <= 0."""
@@ -550,8 +556,8 @@ class LiftEnergy(FoldoverEnergy):
         dmin = float(np.minimum.reduce(d))
         if not dmin > 0.0:  # only reached by rejected trial steps: infinite energy
             return float("inf"), dmin, False
-        np.divide(np.multiply(bk.half, bk.t, u), d, u)  # 1 / q_k = 0.5 t / d
-        q = self._element_mean(u, bk.tmp)
+        np.divide(np.multiply(bk.half, bk.t, u), d, u)  # 1 / q_k = 0.5 t / d, > 0 (d > 0)
+        q = self._positive_mean(u, bk.tmp)
         energy, self._gap = self._energy_of(u, q, self._qc_e, bk.tmp)
         return energy, dmin, True
 
