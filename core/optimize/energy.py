@@ -27,6 +27,7 @@ smallest det, and the new eps solves chi(D_-, eps_new) = mu, i.e. eps_new = 2 sq
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 
 import numpy as np
@@ -248,6 +249,34 @@ class FoldoverEnergy:
         self.idx = np.concatenate([self.i1, self.i2, self.i0])
         self.tick_every = max(1, min(TICK_EVERY, TICK_CORNERS // max(i0.size, 1)))
         self._blocks: _Blocks | None = None  # made on the first host evaluation
+
+    def stiffness_precond(self) -> np.ndarray:
+        """A per-node preconditioner that sees the targets' anisotropy: 1 / sqrt of the
+        Jacobi diagonal of sum w |J|_F^2 (J = E W^-1, so a node's entry adds w |its row of
+        W^-1|^2 over its corners), scaled to mean 1 over the nodes with corners (1 elsewhere).
+        `precond`, the squared smoothed edge length, is blind to a boundary layer's aspect
+        ratio: it scales a thin cell's nodes by its long edges (docs/global_untangle.md,
+        "Settle")."""
+        n, w, w00, w01, w11 = self.n_nodes, self.weight, self.w00, self.w01, self.w11
+        d = np.bincount(self.i1, w * (w00 * w00 + w01 * w01), n)  # e1 = x1 - x0: W^-1 row 0
+        d += np.bincount(self.i2, w * (w11 * w11), n)  # e2 = x2 - x0: row 1
+        a = w01 + w11
+        d += np.bincount(self.i0, w * (w00 * w00 + a * a), n)  # x0: minus both rows
+        pos = np.flatnonzero(d > 0.0)
+        pre = np.ones(n)
+        if pos.size:
+            inv = 1.0 / np.sqrt(d[pos])
+            pre[pos] = inv / (fpmath.add_reduce(inv) / pos.size)
+        return pre
+
+    def with_precond(self, precond: np.ndarray) -> FoldoverEnergy:
+        """This energy with another per-node preconditioner: a shallow copy (the corner
+        tables shared, its own scratch), so a device solver, which keeps the tables of the
+        energy it last solved, uploads this one's."""
+        other = copy.copy(self)
+        other.precond = precond
+        other._blocks = None
+        return other
 
     @property
     def _bk(self) -> _Blocks:

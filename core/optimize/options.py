@@ -35,7 +35,10 @@ class GlobalOptions:
     lift's settle stops after `SETTLE_WATCH` iterations whose q_min never reached the climb's
     (such a settle is not kept); end_round_on_plateau: an untangling round ends once a
     check finds neither its inverted count nor its worst corner det improved
-    (`stages.PLATEAU_EVERY`; a repair's attempts), instead of running to its cap.
+    (`stages.PLATEAU_EVERY`; a repair's attempts), instead of running to its cap;
+    stiff_settle: the lift's settle runs with the preconditioner of the targets' stiffness
+    (`FoldoverEnergy.stiffness_precond`) for at most `stages.SETTLE_ITER_SHAPED` iterations
+    (runs with target shapes: the size-based one is blind to their anisotropy).
     """
 
     max_iter: int = 3000
@@ -52,6 +55,7 @@ class GlobalOptions:
     solver: Solver | None = None
     give_up_early: bool = False
     end_round_on_plateau: bool = False
+    stiff_settle: bool = False
 
     def __post_init__(self) -> None:
         if not self.polish_power > 0.0:

@@ -72,6 +72,9 @@ LIFT_AVG_DROP = 0.03  # q_avg may not fall below (1 - this) x the best q_avg of 
 SETTLE_FLOOR = 1.01  # the lift's last whole-mesh run: its floor is this x the climb's
 # q_min (0: no such run); kept only when q_min and q_avg both rise (`_Lift._settle`)
 SETTLE_ITER = 1000  # ... at most this many L-BFGS iterations, until 5 lower its energy by
+SETTLE_ITER_SHAPED = 700  # ... or this many with `GlobalOptions.stiff_settle` (target
+# shapes: the stiffness preconditioner gets as far in 700 as the size-based one in 1000;
+# repair cases, medians: docs/global_untangle.md, "Settle")
 SETTLE_TOL = 1e-7  # less than this (relative): the climb's runs stop far from the optimum of
 # q_avg (300 iterations at 1e-5), and a converged run raises it by 0.003-0.02 at no q_min
 SETTLE_MAX_FREE = 10_000  # meshes with more free nodes skip it (its cost grows with the
@@ -796,7 +799,8 @@ class _Lift:
         """After local rounds, on meshes up to SETTLE_MAX_FREE free nodes: one whole-mesh run
         that maximises q_avg at a floor just above the climb's q_min (SETTLE_FLOOR x q_min),
         converged further than the climb's runs (SETTLE_ITER, SETTLE_TOL), kept only when
-        neither measure falls (docs/global_untangle.md, "Settle")."""
+        neither measure falls (docs/global_untangle.md, "Settle"). With options.stiff_settle
+        it runs with the stiffness preconditioner, at most SETTLE_ITER_SHAPED iterations."""
         if (SETTLE_FLOOR <= 0.0 or not self.info["rounds"] or self.best_v is None
                 or int(np.count_nonzero(self.mesh.free)) > SETTLE_MAX_FREE):
             return True
@@ -806,8 +810,10 @@ class _Lift:
         tick = self._tick(r, lambda v: _numbers(en.element_quality(*st.unpack(v))))
         if self.opt.give_up_early:
             tick = self._watched(tick)
-        opt = replace(self.opt, lift_first_iter=SETTLE_ITER, lift_rel_tol=SETTLE_TOL,
-                      lift_chunk=0)
+        cap = SETTLE_ITER
+        if self.opt.stiff_settle:
+            en, cap = en.with_precond(en.stiffness_precond()), SETTLE_ITER_SHAPED
+        opt = replace(self.opt, lift_first_iter=cap, lift_rel_tol=SETTLE_TOL, lift_chunk=0)
         vt, its, qt = _runs(self.run_lbfgs, en, st, self.best_v, opt, tick, self._show)
         self.total += its
         qm, qa = _numbers(qt)

@@ -881,6 +881,7 @@ class _Run:
             lift_rings=LOCAL_LIFT_RINGS,
             lift_grow=LOCAL_LIFT_GROW,
             solver=self.lbfgs,
+            stiff_settle=self.targets is not None,
         )
         try:
             pts = self.lift(start, options)
@@ -916,6 +917,7 @@ class _Run:
             solver=self.lbfgs,
             give_up_early=self.attempt == REGION,
             end_round_on_plateau=self.attempt is not None,
+            stiff_settle=self.targets is not None,
         )
         try:
             pts, info = untangle_global(

@@ -145,17 +145,18 @@ def _folds_run(p, faces, fixed, watch: int, monkeypatch):
 def test_repair_attempt_stops_a_settle_that_never_reaches_the_climbs_q_min(monkeypatch):
     """An O-grid of triangles with its cylinder slid 0.1 chords: the repair's region settles
     at a floor its q_min never reaches (so the settle is not kept); the attempt stops it after
-    SETTLE_WATCH iterations instead of SETTLE_ITER: the same points, bit for bit, and
-    SETTLE_ITER - SETTLE_WATCH fewer iterations."""
+    SETTLE_WATCH iterations instead of SETTLE_ITER_SHAPED (target shapes): the same points,
+    bit for bit, and SETTLE_ITER_SHAPED - SETTLE_WATCH fewer iterations."""
     from bench.repair_meshes import Spec, make
-    from core.optimize.stages import SETTLE_ITER, SETTLE_WATCH
+    from core.optimize.stages import SETTLE_ITER_SHAPED, SETTLE_WATCH
 
     c = make(Spec("ogridtri", 2000, "slide", {"dx": 0.1, "reach": 0.1}))
     watched = _folds_run(c.points, c.faces, c.fixed, SETTLE_WATCH, monkeypatch)
-    full = _folds_run(c.points, c.faces, c.fixed, SETTLE_ITER, monkeypatch)
+    full = _folds_run(c.points, c.faces, c.fixed, SETTLE_ITER_SHAPED, monkeypatch)
     assert watched.status == full.status == "untangled"
     assert np.array_equal(watched.points, full.points)
-    assert watched.global_iterations == full.global_iterations - (SETTLE_ITER - SETTLE_WATCH)
+    assert (watched.global_iterations
+            == full.global_iterations - (SETTLE_ITER_SHAPED - SETTLE_WATCH))
 
 
 def test_repair_attempt_leaves_a_settle_that_reaches_the_climbs_q_min(monkeypatch):
@@ -163,11 +164,11 @@ def test_repair_attempt_leaves_a_settle_that_reaches_the_climbs_q_min(monkeypatc
     climb's q_min within the watch and runs its full length: the same points and iterations
     with and without the watch."""
     from bench.repair_meshes import Spec, make
-    from core.optimize.stages import SETTLE_ITER, SETTLE_WATCH
+    from core.optimize.stages import SETTLE_ITER_SHAPED, SETTLE_WATCH
 
     c = make(Spec("ogrid", 2000, "slide", {"dx": 0.1, "reach": 0.1}))
     watched = _folds_run(c.points, c.faces, c.fixed, SETTLE_WATCH, monkeypatch)
-    full = _folds_run(c.points, c.faces, c.fixed, SETTLE_ITER, monkeypatch)
+    full = _folds_run(c.points, c.faces, c.fixed, SETTLE_ITER_SHAPED, monkeypatch)
     assert watched.status == full.status == "untangled"
     assert np.array_equal(watched.points, full.points)
     assert watched.global_iterations == full.global_iterations
