@@ -143,6 +143,8 @@ class EEGTParams:
             value, default = getattr(self, f.name), f.default
             if default is MISSING:
                 continue
+            # a NumPy scalar is shown as its Python number, alike under NumPy 1 and 2
+            shown = value.item() if hasattr(value, "dtype") and hasattr(value, "item") else value
             if isinstance(default, str):
                 ok = isinstance(value, str)
                 kind = "a string"
@@ -153,9 +155,9 @@ class EEGTParams:
                 ok = isinstance(value, Real) and not isinstance(value, bool)
                 kind = "a finite number"
                 if ok and not math.isfinite(float(value)):
-                    raise ValueError(f"invalid parameter: {f.name} must be finite, got {value!r}")
+                    raise ValueError(f"invalid parameter: {f.name} must be finite, got {shown!r}")
             if not ok:
-                raise ValueError(f"invalid parameter: {f.name} must be {kind}, got {value!r}")
+                raise ValueError(f"invalid parameter: {f.name} must be {kind}, got {shown!r}")
 
     @classmethod
     def paper(cls) -> EEGTParams:

@@ -153,7 +153,8 @@ def _integer_indices(flat: np.ndarray) -> np.ndarray:
         raise ValueError(f"face indices must be integers, got {bad!r}")
     whole = np.isfinite(flat) & (flat == np.round(flat))
     if not whole.all():
-        raise ValueError(f"face indices must be integers, got {flat[~whole][0]!r}")
+        # .item(): the Python number, shown alike under NumPy 1 and 2 (no "np.float64(...)")
+        raise ValueError(f"face indices must be integers, got {flat[~whole][0].item()!r}")
     return flat.astype(np.int64)
 
 

@@ -549,7 +549,7 @@ class LiftEnergy(FoldoverEnergy):
         whose dets are all positive; qc (E,) and tmp (corners) are scratch."""
         qc.fill(self.qc)
         gap = np.subtract(qc, q)  # (qc - q)_+ / qc
-        np.divide(np.maximum(gap, self._zero_e, gap), qc, gap)
+        np.divide(np.maximum(gap, self._zero_e, out=gap), qc, gap)
         w = np.multiply(self._pen_e, gap)  # PENALTY gap gap - q
         energy = fpmath.add_reduce(np.subtract(np.multiply(w, gap, w), q, w))
         energy += LIFT_BARRIER * fpmath.add_reduce(np.multiply(self.weight, u, tmp))

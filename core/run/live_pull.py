@@ -148,7 +148,7 @@ class GrabPull:
             t = np.zeros(base.shape[0]) if ln == 0.0 else \
                 np.clip((r[:, 0] * ab[i, 0] + r[:, 1] * ab[i, 1]) / ln, 0.0, 1.0)
             d = r - t[:, None] * ab[i]
-            np.minimum(near, d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1], near)
+            np.minimum(near, d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1], out=near)
         top = reach * reach
         if near.size > PULL_NODES:
             top = min(top, float(np.partition(near, PULL_NODES)[PULL_NODES]))

@@ -59,6 +59,23 @@ def test_faces_of_strings_or_none_raise_value_error(faces, message):
     assert np.array_equal(FAN_PTS, keep)
 
 
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"max_untangle_iterations": np.float64(2.5)},
+         "invalid parameter: max_untangle_iterations must be an integer, got 2.5$"),
+        ({"a": np.float64("nan")}, "invalid parameter: a must be finite, got nan$"),
+    ],
+)
+def test_bad_numpy_scalar_parameters_are_shown_as_plain_numbers(params, message):
+    """A NumPy scalar in a refused parameter reads as its number under NumPy 1 and 2 (NumPy
+    2's repr would say "np.float64(2.5)")."""
+    from core.params import EEGTParams
+
+    with pytest.raises(ValueError, match=message):
+        EEGTParams(**params)
+
+
 def test_quality_of_string_points_raises_value_error():
     with pytest.raises(ValueError, match="points must be an \\(N, 2\\) array of numbers"):
         quality([["a", "b"]] * 5, FAN)
