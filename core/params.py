@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from numbers import Integral, Real
+from typing import Any
 
 from .choices import BOUNDARY, PARAMETERS, TARGET, UNTANGLE, ids, violation
 
@@ -14,6 +15,12 @@ __all__ = ["BOUNDARY_MODES", "TARGETS", "UNTANGLE_METHODS", "EEGTParams"]
 UNTANGLE_METHODS = ids(UNTANGLE)
 BOUNDARY_MODES = ids(BOUNDARY)  # core.eegt.boundary
 TARGETS = ids(TARGET)
+
+
+def _plain(value: Any) -> Any:
+    """A NumPy scalar as its Python number (a message reads alike under NumPy 1 and 2, whose
+    repr says "np.float64(2.5)"); anything else as it is."""
+    return value.item() if hasattr(value, "dtype") and hasattr(value, "item") else value
 
 
 @dataclass(frozen=True)
@@ -143,8 +150,6 @@ class EEGTParams:
             value, default = getattr(self, f.name), f.default
             if default is MISSING:
                 continue
-            # a NumPy scalar is shown as its Python number, alike under NumPy 1 and 2
-            shown = value.item() if hasattr(value, "dtype") and hasattr(value, "item") else value
             if isinstance(default, str):
                 ok = isinstance(value, str)
                 kind = "a string"
@@ -155,9 +160,11 @@ class EEGTParams:
                 ok = isinstance(value, Real) and not isinstance(value, bool)
                 kind = "a finite number"
                 if ok and not math.isfinite(float(value)):
-                    raise ValueError(f"invalid parameter: {f.name} must be finite, got {shown!r}")
+                    raise ValueError(f"invalid parameter: {f.name} must be finite, "
+                                     f"got {_plain(value)!r}")
             if not ok:
-                raise ValueError(f"invalid parameter: {f.name} must be {kind}, got {shown!r}")
+                raise ValueError(f"invalid parameter: {f.name} must be {kind}, "
+                                 f"got {_plain(value)!r}")
 
     @classmethod
     def paper(cls) -> EEGTParams:

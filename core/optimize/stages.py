@@ -804,15 +804,14 @@ class _Lift:
         if (SETTLE_FLOOR <= 0.0 or not self.info["rounds"] or self.best_v is None
                 or int(np.count_nonzero(self.mesh.free)) > SETTLE_MAX_FREE):
             return True
-        en, st = self.en, self.st
+        en, st, cap = self.en, self.st, SETTLE_ITER
         en.qc = SETTLE_FLOOR * self.best_m
+        if self.opt.stiff_settle:  # a copy: the climb's energy keeps its preconditioner
+            en, cap = en.with_precond(en.stiffness_precond()), SETTLE_ITER_SHAPED
         r = self.opt.lift_rounds + 1
         tick = self._tick(r, lambda v: _numbers(en.element_quality(*st.unpack(v))))
         if self.opt.give_up_early:
             tick = self._watched(tick)
-        cap = SETTLE_ITER
-        if self.opt.stiff_settle:
-            en, cap = en.with_precond(en.stiffness_precond()), SETTLE_ITER_SHAPED
         opt = replace(self.opt, lift_first_iter=cap, lift_rel_tol=SETTLE_TOL, lift_chunk=0)
         vt, its, qt = _runs(self.run_lbfgs, en, st, self.best_v, opt, tick, self._show)
         self.total += its

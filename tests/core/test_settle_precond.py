@@ -62,12 +62,14 @@ def test_with_precond_is_a_copy_with_its_own_scratch():
     p, groups, free, factors = _quad_hole(3.0)
     en = LiftEnergy(p, groups, free, factors)
     en.qc = 0.25
-    en.element_quality(p[:, 0], p[:, 1])
+    x, y = p[:, 0], p[:, 1]
+    dets = en.dets(x, y)  # a host evaluation: en now holds its corner scratch
+    assert en._blocks is not None
     pre = en.stiffness_precond()
     other = en.with_precond(pre)
     assert other is not en and other.precond is pre and en.precond is not pre
     assert other.qc == 0.25 and other.i0 is en.i0 and other._blocks is None
-    x, y = p[:, 0], p[:, 1]
+    assert np.array_equal(other.dets(x, y), dets) and other._blocks is not en._blocks
     assert other.value(x, y, 0.0) == en.value(x, y, 0.0)
 
 
