@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..fpmath import add_reduce, add_reduce_rows
+from ..fpmath import add_reduce_rows, add_reducer
 from .state import (
     ARMIJO,
     CURVATURE,
@@ -50,11 +50,11 @@ def lbfgs(
     Written for few NumPy calls per iteration, same arithmetic as the plain formulas in the
     comments: the energy sees z = [v, fixed coordinates] (`FoldoverEnergy.packed`), whose first
     2 nf gradient entries are the packed gradient, and only accepted points get a gradient;
-    a dot product dot(a, b) is `fpmath.add_reduce(a * b)`, NumPy's pairwise sum in one order
-    under every NumPy, never BLAS's `a @ b`, whose result depends on its thread count (one
-    scratch buffer; the four of a new pair as the rows of one array, each row summed exactly
-    as alone); a scalar factor is filled into an array first (a cheaper NumPy operand than a
-    float or a 0-d array).
+    a dot product dot(a, b) is `fpmath.add_reduce(a * b)` (through `fpmath.add_reducer`),
+    NumPy's pairwise sum in one order under every NumPy, never BLAS's `a @ b`, whose result
+    depends on its thread count (one scratch buffer; the four of a new pair as the rows of
+    one array, each row summed exactly as alone); a scalar factor is filled into an array
+    first (a cheaper NumPy operand than a float or a 0-d array).
     """
     run = _Run(en, st, v0, eps, guard)
     it, _ = _iterate(run, max_it, guard, rel_tol, tick, en.tick_every)
@@ -126,6 +126,7 @@ class _Run:
         self.z = np.concatenate([v0, fixed])  # the energy's input: trial points go in z[:n2]
         self.zv = self.z[:n2]
         self.tmp = np.empty(n2)  # scratch: a product before its sum, a scaled vector
+        self.sum = add_reducer(n2)
         self.c0 = np.empty(n2)  # scratch: a scalar factor, filled in (faster than a float)
         self.prods = np.empty((4, n2))  # s y, s s, y y, y (dpre y) of a new pair
         # the step limit (guarded runs; not with sliding nodes, whose positions are not
@@ -146,7 +147,7 @@ class _Run:
 
     def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
         """dot(a, b) as fpmath.add_reduce's pairwise sum (never BLAS)."""
-        return add_reduce(np.multiply(a, b, self.tmp))
+        return self.sum(np.multiply(a, b, self.tmp))
 
     def _two_loop(self) -> tuple[np.ndarray, float]:
         """-H g by the two-loop recursion (H: the memory's inverse Hessian, dpre scaled by

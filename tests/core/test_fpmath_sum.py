@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from core.fpmath import PAIRWISE_BLOCK, REDUCE_CHUNK, add_reduce, add_reduce_rows
+from core.fpmath import PAIRWISE_BLOCK, REDUCE_CHUNK, add_reduce, add_reduce_rows, add_reducer
 
 
 def pairwise(a: list[float]) -> float:
@@ -48,6 +48,15 @@ def test_add_reduce_is_chunked_pairwise_bit_for_bit(n: int) -> None:
     rng = np.random.default_rng(n)
     a = rng.standard_normal(n) * 10.0 ** rng.integers(-6, 7, n)
     assert add_reduce(a).hex() == reference_sum(a).hex()
+
+
+@pytest.mark.parametrize("n", [1, 9, 300, 8192, 8193, 20000])
+def test_add_reducer_sums_like_add_reduce_and_returns_a_float(n: int) -> None:
+    rng = np.random.default_rng(n + 1)
+    a = rng.standard_normal(n) * 10.0 ** rng.integers(-6, 7, n)
+    got = add_reducer(n)(a)
+    assert type(got) is float
+    assert got.hex() == add_reduce(a).hex() == reference_sum(a).hex()
 
 
 def test_add_reduce_rows_sums_each_row_like_add_reduce() -> None:
