@@ -172,3 +172,19 @@ def test_repair_attempt_leaves_a_settle_that_reaches_the_climbs_q_min(monkeypatc
     assert watched.status == full.status == "untangled"
     assert np.array_equal(watched.points, full.points)
     assert watched.global_iterations == full.global_iterations
+
+
+def test_repair_attempt_stops_a_settle_whose_q_avg_falls_from_the_start(monkeypatch):
+    """An O-grid of quads with its cylinder turned 60 degrees: the region's settle lifts
+    q_min above the climb's at once but lowers q_avg from the start, so it is not kept; the
+    attempt stops it after SETTLE_WATCH iterations: the same points, bit for bit, and fewer
+    iterations than the settle run to its end."""
+    from bench.repair_meshes import Spec, make
+    from core.optimize.stages import SETTLE_ITER_SHAPED, SETTLE_WATCH
+
+    c = make(Spec("ogrid", 1000, "turn", {"angle": 60.0, "reach": 0.3}))
+    watched = _folds_run(c.points, c.faces, c.fixed, SETTLE_WATCH, monkeypatch)
+    full = _folds_run(c.points, c.faces, c.fixed, SETTLE_ITER_SHAPED, monkeypatch)
+    assert watched.status == full.status == "untangled"
+    assert np.array_equal(watched.points, full.points)
+    assert watched.global_iterations < full.global_iterations
