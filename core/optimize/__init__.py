@@ -17,7 +17,8 @@ Where things live (NumPy and OpenCL twins side by side; the kernels are in `core
   `SMALL_CORNERS`); the device solver of a run: `device.solver_for`.
 - step limit (the first det root along a search direction: guarded line searches skip the
   trial steps past it, same iterates): `energy.FoldoverEnergy.step_limit`,
-  `state.skipped_trials`; OpenCL: `lbfgs_parallel.cl` `limit_corner`, `finish_limit`.
+  `state.skipped_trials`, computed after an iteration with a `state.folded_trial`; OpenCL:
+  `lbfgs_parallel.cl` `limit_corner`, `finish_limit`.
 - active sub-mesh (rings around seed elements): `submesh.Neighbourhood` (node -> element
   incidence built once, each sub-mesh costs its own size), `submesh.active_submesh`.
 - stage drivers (eps continuation and polish, the lift; giving up on a fold that makes no

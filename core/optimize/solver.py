@@ -17,6 +17,7 @@ from .state import (
     TRIALS,
     State,
     Tick,
+    folded_trial,
     skipped_trials,
     stops,
 )
@@ -142,7 +143,7 @@ class _Run:
         self.mem: list[tuple[np.ndarray, np.ndarray, float, float, float]] = []
         self.e_hist = [self.e]
         self.h0 = 0.1 * en.h_mean  # first step: the fastest node moves a tenth of an edge
-        self.rejected = 0  # trial steps the last iteration rejected (or skipped)
+        self.folded = 0  # trial steps the last iteration rejected for a det <= 0 (or skipped)
         self.et = self.dmin_t = 0.0  # the accepted trial's energy and smallest det
 
     def _dot(self, a: np.ndarray, b: np.ndarray) -> float:
@@ -195,14 +196,15 @@ class _Run:
         to fail); the accepted trial stays in z[:n2]."""
         skip = 0
         zv, tmp, c0 = self.zv, self.tmp, self.c0
-        if self.limit is not None and self.rejected:  # steps that make a det <= 0 are
+        if self.limit is not None and self.folded:  # steps that make a det <= 0 are
             # rejected: skip them (the limit costs about two trials: worth it after an
-            # iteration with some)
+            # iteration that had such trials, not after one whose trials only missed
+            # sufficient decrease, after which it skipped 1-4 % of the trials it could)
             zv[:] = self.v
             self.dz[: self.n2] = q
             step, skip = skipped_trials(step, self.limit(self.z, self.dz, self.layout[0], step,
                                                          self.at_v))
-        self.rejected = skip
+        self.folded = skip
         for _ in range(TRIALS - skip):
             c0.fill(step)
             np.add(self.v, np.multiply(q, c0, tmp), zv)  # vt = v + step q
@@ -215,7 +217,7 @@ class _Run:
                 self.et, self.dmin_t = et, dmin_t
                 return True
             step *= 0.5
-            self.rejected += 1
+            self.folded += folded_trial(et, dmin_t, self.guard)
         self.at_v = False  # the last evaluation was a rejected trial
         return False
 

@@ -31,6 +31,7 @@ from .state import (
     TRIALS,
     State,
     Tick,
+    folded_trial,
     line_search_defines,
     stops,
 )
@@ -522,14 +523,13 @@ class ParallelLbfgs:
         # the accepted one: computed with the first trial while first trials get accepted
         # (one pass), else in a pass of their own after the accepted trial. Bits unchanged.
         first_ok = not tb.lift
-        rejected = 0  # trial steps the last iteration rejected (or skipped)
+        folded = 0  # trial steps the last iteration rejected for a det <= 0 (or skipped)
         while it < max_it:
             it += 1
-            found = self._search(tb, pairs, first_ok, bool(guard and rejected))
+            found = self._search(tb, pairs, first_ok, bool(guard and folded), guard)
             if found is None:  # no descent direction, not even from plain descent
                 break
-            rb, n_pairs, trials, grad = found
-            rejected = trials - 1
+            rb, n_pairs, trials, folded, grad = found
             first_ok = not tb.lift and trials == 1
             if rb[_STATUS] != _ACCEPTED:
                 if n_pairs:  # drop the memory and retry once from plain descent
@@ -574,12 +574,12 @@ class ParallelLbfgs:
         cl.enqueue_copy(queue, self._rb, self.S)
         return float(self._rb[_ET])
 
-    def _search(self, tb: _Tables, pairs: int, grad: bool, limit: bool
-                ) -> tuple[np.ndarray, int, int, bool] | None:
+    def _search(self, tb: _Tables, pairs: int, grad: bool, limit: bool, guard: bool
+                ) -> tuple[np.ndarray, int, int, int, bool] | None:
         """One iteration's direction (over at most `pairs` pairs) and line search, the step
-        limit first when `limit`: (status block, pairs held, trials, whether the last trial
-        computed the gradient terms); None when neither the memory's direction nor plain
-        descent descends."""
+        limit first when `limit`: (status block, pairs held, trials, trials skipped or
+        rejected as `state.folded_trial`, whether the last trial computed the gradient
+        terms); None when neither the memory's direction nor plain descent descends."""
         self._direction(tb, pairs)
         skip = self._limit(tb) if limit else 0
         if skip >= TRIALS:  # every trial step makes a det <= 0: all rejected
@@ -595,12 +595,16 @@ class ParallelLbfgs:
             if rb[_STATUS] == _NOT_DESCENT:
                 return None
         n_pairs = int(rb[_LEN])
-        trials = 1 + skip
-        while rb[_STATUS] == _REJECTED and trials < TRIALS:
+        trials, folded = 1 + skip, skip
+        while rb[_STATUS] == _REJECTED and trials <= TRIALS:  # a trial's status (not the
+            # limit's "every step fails", which leaves trials above TRIALS)
+            folded += folded_trial(float(rb[_ET]), float(rb[_DMIN]), guard)
+            if trials == TRIALS:
+                break
             grad = False
             rb = self._trial(tb, grad)
             trials += 1
-        return rb, n_pairs, trials, grad
+        return rb, n_pairs, trials, folded, grad
 
     def _solution(self, tb: _Tables, en: FoldoverEnergy, st: State, trial: bool) -> np.ndarray:
         """The solve's last accepted point: the free rows of Z after an accepted trial that

@@ -5,6 +5,7 @@ so none of them imports another for them."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -20,6 +21,7 @@ __all__ = [
     "TRIALS",
     "State",
     "Tick",
+    "folded_trial",
     "line_search_defines",
     "skipped_trials",
     "stops",
@@ -44,6 +46,13 @@ def line_search_defines() -> dict[str, float]:
     """The line search's and the memory update's constants under their kernel names (build
     defines of both device solvers)."""
     return {"TRIALS": TRIALS, "ARMIJO": ARMIJO, "CURVATURE": CURVATURE}
+
+
+def folded_trial(et: float, dmin: float, guard: bool) -> bool:
+    """Whether a rejected trial step failed on what the step limit foresees (an energy that
+    is not finite, or, guarded, a det <= 0) rather than on sufficient decrease: the solvers
+    compute the limit after an iteration with such a trial."""
+    return not math.isfinite(et) or (guard and dmin <= 0.0)
 
 
 def skipped_trials(step: float, limit: float) -> tuple[float, int]:

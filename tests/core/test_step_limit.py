@@ -11,10 +11,11 @@ from meshdata import load2d
 from core.mesh.faces import as_faceset
 from core.optimize import GlobalOptions, lift_min_quality, untangle_global
 from core.optimize import energy as energy_mod
+from core.optimize import solver as solver_mod
 from core.optimize.energy import FoldoverEnergy, LiftEnergy, _corner_limit
 from core.optimize.solver import lbfgs
 from core.optimize.stages import EPS_MIN
-from core.optimize.state import LIMIT_MARGIN, TRIALS, State, skipped_trials
+from core.optimize.state import LIMIT_MARGIN, TRIALS, State, folded_trial, skipped_trials
 from core.run.pipeline import free_nodes
 
 
@@ -105,6 +106,65 @@ def test_lift_same_bits_with_and_without_the_limit_and_fewer_evaluations(name, m
     assert n_with <= len(calls)
     if name == "tri_two_holes":  # its unit steps fold corners: the limit saves trials there
         assert n_with < len(calls), (n_with, len(calls))
+
+
+def test_folded_trial_is_an_infinite_energy_or_a_guarded_non_positive_det():
+    assert folded_trial(np.inf, 0.5, True) and folded_trial(np.nan, 0.5, False)
+    assert folded_trial(1.0, 0.0, True) and folded_trial(1.0, -1e-9, True)
+    assert not folded_trial(1.0, -1e-9, False)  # unguarded: dets may be negative
+    assert not folded_trial(1.0, 1e-9, True)  # only sufficient decrease missed
+
+
+def test_limit_only_after_folded_trials_same_bits_as_after_every_rejection(monkeypatch):
+    """The limit is computed after an iteration with a trial rejected for a det <= 0, not
+    after one whose trials only missed sufficient decrease (it skips only trials of the
+    first kind): the same points and iterations as computing it after every rejected
+    trial, and fewer limits."""
+    p, f = load2d("tri_two_holes")
+    fs = as_faceset(f, len(p))
+    groups, free = fs.by_arity(), free_nodes(len(p), fs)
+    start, _ = untangle_global(p, groups, free, GlobalOptions(polish_iter=0))
+    en = LiftEnergy(start, groups, free)
+    en.qc = float(en.element_quality(start[:, 0], start[:, 1]).min())
+    st = State(start, free)
+    v0 = st.pack(st.x, st.y)
+    limits = []
+    original = FoldoverEnergy.step_limit
+    monkeypatch.setattr(FoldoverEnergy, "step_limit",
+                        lambda *a, **k: limits.append(1) or original(*a, **k))
+    v_folded, it_folded = lbfgs(en, st, v0, EPS_MIN, max_it=150, guard=True)
+    n_folded = len(limits)
+    monkeypatch.setattr(solver_mod, "folded_trial", lambda *a: True)
+    limits.clear()
+    v_every, it_every = lbfgs(en, st, v0, EPS_MIN, max_it=150, guard=True)
+    assert it_folded == it_every
+    assert np.array_equal(v_folded, v_every)
+    assert 0 < n_folded < len(limits), (n_folded, len(limits))
+
+
+def test_repair_computes_a_twentieth_of_the_limits_same_points(monkeypatch):
+    """A repair ("folds", target "keep") of an O-grid of triangles with its cylinder slid:
+    its lift's trials mostly miss sufficient decrease, after which a limit skips nothing;
+    the same points and iterations as with a limit after every rejection, and under a
+    twentieth of the limits."""
+    from bench.repair_meshes import Spec, make
+    from core import EEGTParams, untangle_and_smooth
+
+    c = make(Spec("ogridtri", 1000, "slide", {"dx": 0.2, "reach": 0.2}))
+    limits = []
+    original = FoldoverEnergy.step_limit
+    monkeypatch.setattr(FoldoverEnergy, "step_limit",
+                        lambda *a, **k: limits.append(1) or original(*a, **k))
+    params = EEGTParams(region="folds", target="keep")
+    folded = untangle_and_smooth(c.points, c.faces, fixed=c.fixed, params=params)
+    n_folded = len(limits)
+    monkeypatch.setattr(solver_mod, "folded_trial", lambda *a: True)
+    limits.clear()
+    every = untangle_and_smooth(c.points, c.faces, fixed=c.fixed, params=params)
+    assert folded.status == every.status == "untangled"
+    assert np.array_equal(folded.points, every.points)
+    assert folded.global_iterations == every.global_iterations
+    assert 0 < 20 * n_folded < len(limits), (n_folded, len(limits))
 
 
 def test_lift_stage_result_unchanged_without_the_limit(monkeypatch):

@@ -473,6 +473,37 @@ def test_lift_on_a_large_jittered_mesh_bit_identical_with_fewer_trials(solver, m
     assert len(trials) < 2 * its, (len(trials), its)
 
 
+def test_device_repair_computes_the_step_limit_after_the_same_iterations_as_the_host(
+        device, monkeypatch):
+    """A repair ("folds", target "keep") whose lift's trials mostly miss sufficient decrease
+    (after which a limit skips nothing), every solve on the parallel solver: the host's
+    points, and the device computes the limit exactly as often as the host (after an
+    iteration with a trial rejected for a det <= 0: `state.folded_trial`)."""
+    from bench.repair_meshes import Spec, make
+    from core import EEGTParams, untangle_and_smooth
+    from core.run import pipeline
+
+    c = make(Spec("ogridtri", 1000, "slide", {"dx": 0.2, "reach": 0.2}))
+    params = EEGTParams(region="folds", target="keep")
+    host_limits, dev_limits = [], []
+    host_limit = FoldoverEnergy.step_limit
+    monkeypatch.setattr(FoldoverEnergy, "step_limit",
+                        lambda *a, **k: host_limits.append(1) or host_limit(*a, **k))
+    host = untangle_and_smooth(c.points, c.faces, fixed=c.fixed, params=params)
+    n_host = len(host_limits)
+    everywhere = lp.ParallelLbfgs(small_corners=0)  # every problem on it, however small
+    device_limit = everywhere._limit
+    monkeypatch.setattr(everywhere, "_limit",
+                        lambda *a: dev_limits.append(1) or device_limit(*a))
+    monkeypatch.setattr(pipeline, "solver_for", lambda *a, **k: everywhere)
+    dev = untangle_and_smooth(c.points, c.faces, fixed=c.fixed, params=params)
+    assert np.array_equal(host.points, dev.points)
+    assert host.global_iterations == dev.global_iterations
+    assert len(host_limits) == n_host  # no solve of the device run went to the host
+    assert 0 < len(dev_limits) == n_host, (len(dev_limits), n_host)
+    everywhere.release()
+
+
 def test_device_lift_holds_no_host_corner_scratch(solver, monkeypatch):
     """A lift whose solves run on the device (whole-mesh run and rounds) never makes the
     host's per-corner scratch (its measures work in pieces), and keeps the host's bits."""
