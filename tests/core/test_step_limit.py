@@ -72,15 +72,16 @@ def test_every_skipped_step_has_a_non_positive_det(seed):
     assert np.any((below > 0.0) & (above <= 0.0))
 
 
-def count_evals(monkeypatch, cls):
+def count_calls(monkeypatch, cls, name):
+    """A list that gets an entry at every call of cls.<name> (the method still runs)."""
     calls = []
-    original = cls.evaluate
+    original = getattr(cls, name)
 
     def counted(self, *a, **k):
         calls.append(1)
         return original(self, *a, **k)
 
-    monkeypatch.setattr(cls, "evaluate", counted)
+    monkeypatch.setattr(cls, name, counted)
     return calls
 
 
@@ -95,7 +96,7 @@ def test_lift_same_bits_with_and_without_the_limit_and_fewer_evaluations(name, m
     en.qc = float(en.element_quality(start[:, 0], start[:, 1]).min())  # the lift's first floor
     st = State(start, free)
     v0 = st.pack(st.x, st.y)
-    calls = count_evals(monkeypatch, LiftEnergy)
+    calls = count_calls(monkeypatch, LiftEnergy, "evaluate")
     v_with, it_with = lbfgs(en, st, v0, EPS_MIN, max_it=150, guard=True)
     n_with = len(calls)
     monkeypatch.setattr(FoldoverEnergy, "step_limit", lambda *a: np.inf)
@@ -128,10 +129,7 @@ def test_limit_only_after_folded_trials_same_bits_as_after_every_rejection(monke
     en.qc = float(en.element_quality(start[:, 0], start[:, 1]).min())
     st = State(start, free)
     v0 = st.pack(st.x, st.y)
-    limits = []
-    original = FoldoverEnergy.step_limit
-    monkeypatch.setattr(FoldoverEnergy, "step_limit",
-                        lambda *a, **k: limits.append(1) or original(*a, **k))
+    limits = count_calls(monkeypatch, FoldoverEnergy, "step_limit")
     v_folded, it_folded = lbfgs(en, st, v0, EPS_MIN, max_it=150, guard=True)
     n_folded = len(limits)
     monkeypatch.setattr(solver_mod, "folded_trial", lambda *a: True)
@@ -151,10 +149,7 @@ def test_repair_computes_a_twentieth_of_the_limits_same_points(monkeypatch):
     from core import EEGTParams, untangle_and_smooth
 
     c = make(Spec("ogridtri", 1000, "slide", {"dx": 0.2, "reach": 0.2}))
-    limits = []
-    original = FoldoverEnergy.step_limit
-    monkeypatch.setattr(FoldoverEnergy, "step_limit",
-                        lambda *a, **k: limits.append(1) or original(*a, **k))
+    limits = count_calls(monkeypatch, FoldoverEnergy, "step_limit")
     params = EEGTParams(region="folds", target="keep")
     folded = untangle_and_smooth(c.points, c.faces, fixed=c.fixed, params=params)
     n_folded = len(limits)
