@@ -49,8 +49,9 @@ BUDGET_MIN = 400  # EEGT iterations per face of the region, at least BUDGET_MIN,
 # a repair's attempts, as `untangle_and_smooth(attempt=...)` takes them: on a region smaller
 # than the mesh (gives up early, `attempt_budget`), on the whole mesh
 REGION, WHOLE = "region", "whole"
-ROOM = 0.5  # a region below the whole mesh is tried only when its inverted faces' area is
-# at most this x its other faces' (`_has_room`); else the margin doubles first
+ROOM = 0.4  # a region below the whole mesh is tried only when its inverted faces' area is
+# at most this x its other faces' (`_has_room`); else the margin doubles first (no first
+# margin over 0.36 opened its fold on the repair benchmark: docs/repair.md)
 
 
 def touching(fs: FaceSet, nodes: np.ndarray) -> np.ndarray:
@@ -171,9 +172,9 @@ def _has_room(p: np.ndarray, fs: FaceSet) -> bool:
     areas add up to the area their rim encloses whatever their free nodes do, so with the
     inverted area as large as the valid one no positions make them all valid
     (core/run/hopeless_groups.py); well before that the valid faces cannot take the fold
-    in: on the repair benchmark's 24 cases, every first margin whose inverted area was
-    over 0.36 x the valid one failed, and those over 0.5 (6 of 19) failed in 680-1 810
-    optimizer iterations each."""
+    in: on the repair benchmark's 40 cases, every first margin that opened its fold was at
+    0.36 or less and every one tried from 0.37 up failed, after 725-3 079 optimizer
+    iterations (docs/repair.md)."""
     a = signed_face_areas(p, fs)
     valid = add_reduce(np.maximum(a, 0.0))
     return valid > 0.0 and -add_reduce(np.minimum(a, 0.0)) <= ROOM * valid

@@ -142,11 +142,13 @@ def _inverted_share(p, fs, free, rings: int) -> float:
     return float(-a[a < 0].sum() / a[a > 0].sum())
 
 
-@pytest.mark.parametrize(("radius", "rings"), [(3.5, FIRST_RINGS), (6.5, 2 * FIRST_RINGS)])
+@pytest.mark.parametrize(("radius", "rings"),
+                         [(2.5, FIRST_RINGS), (4.0, 2 * FIRST_RINGS), (6.5, 4 * FIRST_RINGS)])
 def test_the_first_attempt_is_on_a_margin_with_room_for_the_fold(radius, rings):
     """A region whose inverted area is over ROOM x its valid area is not tried: the margin
-    doubles first. The mirrored disk of radius 6.5 has 0.59 at FIRST_RINGS rings (its one
-    attempt is on twice the rings), that of radius 3.5 has 0.40 (tried there)."""
+    doubles first. The mirrored disk of radius 2.5 has 0.32 at FIRST_RINGS rings (tried
+    there), that of radius 4.0 0.46 there and 0.28 on twice the rings (its one attempt),
+    that of radius 6.5 0.59 and 0.44 (its one attempt on four times the rings)."""
     p, fs, free = _mirrored_disk(radius)
     assert (_inverted_share(p, fs, free, FIRST_RINGS) > ROOM) == (rings > FIRST_RINGS)
     seen = []
