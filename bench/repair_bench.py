@@ -307,10 +307,19 @@ def _ours_child(case: rm.Case, col: str, out) -> None:
     out.close()
 
 
+def _start_method() -> str:
+    """How a run's process starts: forked (at once, nothing imported again), unless this
+    process has loaded pyopencl: a forked child cannot use an OpenCL runtime its parent
+    made (pocl's worker threads are not copied: the child waits for ever), so then it is
+    spawned. The bench itself never runs OpenCL in its own process; a test session may."""
+    return "spawn" if "pyopencl" in sys.modules else "fork"
+
+
 def _ours(case: rm.Case, col: str, timeout: float):
-    """(points, moved, status, message, seconds) of our run in a forked process (one at a
-    time: the bench stays single-process), None when it runs past `timeout` seconds."""
-    ctx = mp.get_context("fork")
+    """(points, moved, status, message, seconds) of our run in a child process (one at a
+    time: the bench stays single-process; `_start_method`), None when it runs past
+    `timeout` seconds."""
+    ctx = mp.get_context(_start_method())
     here, there = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_ours_child, args=(case, col, there))
     proc.start()

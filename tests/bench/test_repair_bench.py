@@ -59,6 +59,20 @@ def test_keep_on_the_device_repairs_like_keep_or_is_left_out_without_one():
         assert 0.0 < by["keep-cl"].moved < 0.5
 
 
+def test_keep_on_the_device_finishes_in_a_process_whose_device_is_already_set_up():
+    """A child forked from a process with an OpenCL runtime cannot use it (pocl's threads
+    are not copied: it waits for ever), so the bench then spawns its runs. The device is
+    set up here first, as in a test session that ran the OpenCL tests before."""
+    from core.eegt import warm_up
+
+    why = warm_up("auto")
+    if why is not None:
+        pytest.skip(why)
+    rows = rb.run_case(rm.load(TINY), ("keep-cl",), timeout=60.0)
+    assert [r.column for r in rows] == ["input", "keep-cl"]
+    assert rows[1].inverted == 0, rows[1].note
+
+
 def test_a_gmsh_boundary_layer_mesh_is_the_same_whatever_was_made_before_it():
     pytest.importorskip("gmsh", reason="gmsh is not installed")
     first = rm.fresh_gmsh_bl("cylinder", 1000)
