@@ -7,6 +7,8 @@ Columns (one row each per case):
 - `keep`: ours, the solver-mesh default: EEGTParams(target="keep", region="folds");
 - `keep-cl`: the same with backend "auto" (the region's optimizer on the OpenCL device when
   pyopencl finds one, as `--backend auto` does; skipped without one);
+- `keep-fast`: `keep` without the lift's rounds (`lift_rounds=0`, the command's
+  `--lift-rounds 0`): no rounds that raise the worst cell against the targets;
 - `ref`: ours with the reference: EEGTParams(target="reference", region="folds"),
   reference_points = the undeformed mesh;
 - `whole`: ours, today's whole-mesh default (target "regular", region "mesh"), only on
@@ -21,8 +23,10 @@ area over its wall edge, twice that for a triangle) after / undeformed, median a
 input, and the worst over all wall cells; per cell |log| of the area ratio and of the
 aspect-ratio ratio (aspect: the square root of the ratio of the corners' second moments'
 eigenvalues, 1 for a regular polygon) against the undeformed mesh, median and p95 (an
-inverted or flat cell counts as infinite); the share of nodes moved (any bit); our
-region's margin in rings; seconds (wall clock, single process).
+inverted or flat cell counts as infinite); the mean ratio of each cell against its own
+undeformed shape (1: similar to the cell as built, 0: inverted), worst cell and 1st
+percentile; the share of nodes moved (any bit); our region's margin in rings; seconds
+(wall clock, single process).
 
 Run: `python -m bench.repair_bench` (the default table, about 10k cells), `--more` (other
 angles, seeds and sizes, 10k-60k), `--scale` (the 200k-1M cases), `--testcases` (SU2's
@@ -48,11 +52,12 @@ import numpy as np
 
 from bench import repair_meshes as rm
 from bench.peer_invertible_maps import PeerMissing, run_peer
-from core import EEGTParams, FaceSet, mesh_stats, untangle_and_smooth
+from core import EEGTParams, FaceSet, mesh_stats, quality, untangle_and_smooth
 from core.choices import global_stage_on_device
+from core.metrics.targets import Targets, prepare_targets
 
 AWAY = 6  # wall cells this many rings or more from every folded cell: "away from the fold"
-COLUMNS = ("keep", "keep-cl", "ref", "whole", "peer")
+COLUMNS = ("keep", "keep-cl", "keep-fast", "ref", "whole", "peer")
 
 __all__ = ["AWAY", "COLUMNS", "Row", "default_specs", "measure", "more_specs", "run_case",
            "scale_specs", "testcases_specs"]
@@ -210,6 +215,7 @@ class Geometry:
     wall_factor: np.ndarray  # 2 for a triangle, 1 otherwise
     away: np.ndarray  # (len(wall_faces),) bool
     folded: int
+    built: Targets  # every cell's undeformed shape (the mean ratio's targets)
 
 
 def geometry(case: rm.Case) -> Geometry:
@@ -224,7 +230,7 @@ def geometry(case: rm.Case) -> Geometry:
     del area_in
     return Geometry(signed_areas(ref, fs), aspects(ref, fs), f,
                     np.hypot(*(ref[a] - ref[b]).T), np.where(counts[f] == 3, 2.0, 1.0),
-                    dist[f] >= AWAY, int(seed.sum()))
+                    dist[f] >= AWAY, int(seed.sum()), prepare_targets(ref[fs.indices], fs))
 
 
 @dataclass
@@ -242,6 +248,8 @@ class Row:
     area_p95: float = float("nan")
     aspect_med: float = float("nan")
     aspect_p95: float = float("nan")
+    built_min: float = float("nan")  # mean ratio against the undeformed cell: worst cell
+    built_p1: float = float("nan")  # ... and 1st percentile
     moved: float = float("nan")
     rings: int | None = None
     seconds: float = float("nan")
@@ -274,6 +282,8 @@ def measure(case: rm.Case, geo: Geometry, pts: np.ndarray, row: Row) -> Row:
     lr = abs_log_ratio(aspects(pts, fs), geo.aspect0)
     row.area_med, row.area_p95 = _percentiles(la)
     row.aspect_med, row.aspect_p95 = _percentiles(lr)
+    qb = quality(pts, fs, targets=geo.built)
+    row.built_min, row.built_p1 = float(qb.min()), float(np.percentile(qb, 1))
     h = geo.wall_factor * area[geo.wall_faces] / geo.wall_len
     h0 = geo.wall_factor * geo.area0[geo.wall_faces] / geo.wall_len
     ratio = h / h0
@@ -291,6 +301,7 @@ PARAMS = {
     "keep": EEGTParams(target="keep", region="folds"),
     "keep-cl": EEGTParams(target="keep", region="folds"),
     "ref": EEGTParams(target="reference", region="folds"),
+    "keep-fast": EEGTParams(target="keep", region="folds", lift_rounds=0),
     "whole": EEGTParams(),
 }
 BACKENDS = {"keep-cl": "auto"}  # the others: "numpy"
@@ -437,11 +448,12 @@ def _g(v: float) -> str:
 
 HEAD = ("| case | cells | folded | column | inverted | 1st layer after/before: median, worst "
         f"(>= {AWAY} rings from the fold) | worst (all wall cells) | area abs log: median, p95 "
-        "| aspect abs log: median, p95 | nodes moved | rings | s |")
+        "| aspect abs log: median, p95 | mean ratio vs undeformed: worst, 1st pct "
+        "| nodes moved | rings | s |")
 
 
 def table(rows: list[Row]) -> list[str]:
-    out = [HEAD, "|" + "---|" * 12]
+    out = [HEAD, "|" + "---|" * 13]
     for r in rows:
         name = r.case + (" (held out)" if r.held_out else "")
         inv = "-" if r.inverted is None else str(r.inverted)
@@ -449,7 +461,7 @@ def table(rows: list[Row]) -> list[str]:
             f"| {name} | {r.cells} | {r.folded} | {r.column} | {inv} | "
             f"{_r(r.layer_med)}, {_r(r.layer_worst_away)} | {_r(r.layer_worst_all)} | "
             f"{_g(r.area_med)}, {_g(r.area_p95)} | {_g(r.aspect_med)}, {_g(r.aspect_p95)} | "
-            f"{100 * r.moved:.1f} % | {'' if r.rings is None else r.rings} | "
+            f"{_g(r.built_min)}, {_g(r.built_p1)} | {100 * r.moved:.1f} % | {'' if r.rings is None else r.rings} | "
             f"{r.seconds:.2f} |" + (f" {r.note}" if r.note else ""))
     return out
 
@@ -470,7 +482,8 @@ def summary(rows: list[Row]) -> list[str]:
     """Medians per family and column (the targets of issue 37 are medians over families)."""
     cols = [c for c in ("input", *COLUMNS) if any(r.column == c for r in rows)]
     out = ["| family | cases | column | inverted (max) | 1st layer median | 1st layer worst "
-           "away | area p95 | aspect p95 | nodes moved | s |", "|" + "---|" * 10]
+           "away | area p95 | aspect p95 | vs undeformed: worst, 1st pct | nodes moved | s |",
+           "|" + "---|" * 11]
     fams = sorted({family_of(r) for r in rows})
     for fam in fams:
         n_cases = len({r.case for r in rows if family_of(r) == fam})
@@ -483,6 +496,7 @@ def summary(rows: list[Row]) -> list[str]:
             out.append(f"| {fam} | {n_cases} | {c} | {max(inv) if inv else '-'} | "
                        f"{_r(_med(rs, 'layer_med'))} | {_r(worst)} | "
                        f"{_g(_med(rs, 'area_p95'))} | {_g(_med(rs, 'aspect_p95'))} | "
+                       f"{_g(_med(rs, 'built_min'))}, {_g(_med(rs, 'built_p1'))} | "
                        f"{100 * _med(rs, 'moved'):.1f} % | {_med(rs, 'seconds'):.2f} |")
     return out
 

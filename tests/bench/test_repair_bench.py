@@ -49,6 +49,26 @@ def test_repair_row_leaves_nothing_inverted_and_the_input_row_measures_the_defor
     assert len(rb.summary(rows)) == 4
 
 
+def test_the_undeformed_mesh_measures_1_against_itself_and_the_folded_input_0():
+    case = rm.load(TINY)
+    geo = rb.geometry(case)
+    built = rb.measure(case, geo, case.reference, rb.Row("tiny", "ogrid", "x", case.n_faces, 0))
+    assert np.isclose(built.built_min, 1.0) and np.isclose(built.built_p1, 1.0)
+    assert built.area_p95 == 0.0 and built.aspect_p95 == 0.0
+    given = rb.measure(case, geo, case.points, rb.Row("tiny", "ogrid", "x", case.n_faces, 0))
+    assert given.built_min == 0.0 and given.inverted > 0
+
+
+def test_keep_fast_repairs_without_the_lift_rounds_and_keeps_the_rest():
+    assert rb.PARAMS["keep-fast"].lift_rounds == 0 and rb.PARAMS["keep"].lift_rounds > 0
+    case = rm.load(TINY)
+    rows = rb.run_case(case, ("keep", "keep-fast"), timeout=120.0)
+    inp, keep, fast = rows
+    assert fast.column == "keep-fast" and fast.inverted == 0 and fast.note == ""
+    assert 0.0 < fast.moved < 0.5 and fast.rings == keep.rings
+    assert fast.layer_med == inp.layer_med and 0.0 < fast.built_min <= 1.0
+
+
 def test_keep_on_the_device_repairs_like_keep_or_is_left_out_without_one():
     case = rm.load(TINY)
     rows = rb.run_case(case, ("keep", "keep-cl"), timeout=120.0)
