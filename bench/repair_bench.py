@@ -44,7 +44,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -297,11 +297,12 @@ def measure(case: rm.Case, geo: Geometry, pts: np.ndarray, row: Row) -> Row:
 
 # ------------------------------------------------------------------------------ runs
 
+KEEP = EEGTParams(target="keep", region="folds")  # the solver-mesh default
 PARAMS = {
-    "keep": EEGTParams(target="keep", region="folds"),
-    "keep-cl": EEGTParams(target="keep", region="folds"),
+    "keep": KEEP,
+    "keep-cl": KEEP,
+    "keep-fast": replace(KEEP, lift_rounds=0),
     "ref": EEGTParams(target="reference", region="folds"),
-    "keep-fast": EEGTParams(target="keep", region="folds", lift_rounds=0),
     "whole": EEGTParams(),
 }
 BACKENDS = {"keep-cl": "auto"}  # the others: "numpy"
