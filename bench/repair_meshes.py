@@ -34,9 +34,11 @@ from __future__ import annotations
 import hashlib
 import json
 import multiprocessing as mp
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -56,6 +58,7 @@ from core.mesh.topology import boundary_nodes
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "build" / "repair_bench"
 VERSION = 2  # part of every cache name: bump when a generator changes its output
+T = TypeVar("T")
 
 __all__ = ["CACHE", "PUBLIC", "Case", "Spec", "load", "make"]
 
@@ -328,9 +331,14 @@ def fresh_gmsh_bl(body: str, n: int, first: float = 1e-4, quads: bool = True
     address, and the same call from another checkout path (or in a first run that writes
     the bytecode cache) placed and numbered the nodes of the 10k cylinder differently, with
     the same counts; the case cache keeps the mesh first made (docs/repair.md)."""
+    return in_fresh_process(gmsh_bl, body, n, first, quads)
+
+
+def in_fresh_process(fn: Callable[..., T], *args: Any) -> T:
+    """fn(*args) in a new spawned process of its own (none of this process's state)."""
     ctx = mp.get_context("spawn")
     with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
-        return pool.submit(gmsh_bl, body, n, first, quads).result()
+        return pool.submit(fn, *args).result()
 
 
 def _gmsh_bl_once(gmsh, body: str, h: float, first: float, quads: bool):
