@@ -23,7 +23,9 @@ area over its wall edge, twice that for a triangle) after / undeformed, median a
 input, and the worst over all wall cells; per cell |log| of the area ratio and of the
 aspect-ratio ratio (aspect: the square root of the ratio of the corners' second moments'
 eigenvalues, 1 for a regular polygon) against the undeformed mesh, median and p95 (an
-inverted or flat cell counts as infinite); the mean ratio of each cell against its own
+inverted or flat cell counts as infinite), and the floor under those p95s that the nodes a
+run moved leave (`floors`: the input's values with every cell around a moved node counted 0:
+no run that moves only those nodes does better); the mean ratio of each cell against its own
 undeformed shape (1: similar to the cell as built, 0: inverted), worst cell and 1st
 percentile; the share of nodes moved (any bit); our region's margin in rings; seconds
 (wall clock, single process).
@@ -216,21 +218,24 @@ class Geometry:
     away: np.ndarray  # (len(wall_faces),) bool
     folded: int
     built: Targets  # every cell's undeformed shape (the mean ratio's targets)
+    area_in: np.ndarray  # the input's per-cell |log| area and aspect ratio against the
+    aspect_in: np.ndarray  # undeformed mesh (what a run leaves where it moves nothing)
 
 
 def geometry(case: rm.Case) -> Geometry:
     fs, ref = case.faces, case.reference
     f, a, b = wall_cells(fs, case.wall)
     counts = np.diff(fs.offsets)
-    area_in = signed_areas(case.points, fs)
     from core.run import folded_faces  # the core's own rule: a corner that does not turn left
 
     seed = folded_faces(case.points, fs, ~case.fixed)
     dist = ring_distance(fs, ref.shape[0], seed, AWAY)
-    del area_in
-    return Geometry(signed_areas(ref, fs), aspects(ref, fs), f,
+    area0, aspect0 = signed_areas(ref, fs), aspects(ref, fs)
+    return Geometry(area0, aspect0, f,
                     np.hypot(*(ref[a] - ref[b]).T), np.where(counts[f] == 3, 2.0, 1.0),
-                    dist[f] >= AWAY, int(seed.sum()), prepare_targets(ref[fs.indices], fs))
+                    dist[f] >= AWAY, int(seed.sum()), prepare_targets(ref[fs.indices], fs),
+                    abs_log_ratio(signed_areas(case.points, fs), area0),
+                    abs_log_ratio(aspects(case.points, fs), aspect0))
 
 
 @dataclass
@@ -248,6 +253,8 @@ class Row:
     area_p95: float = float("nan")
     aspect_med: float = float("nan")
     aspect_p95: float = float("nan")
+    area_floor: float = float("nan")  # `floors`: the p95s no run that moves only the nodes
+    aspect_floor: float = float("nan")  # this one moved can beat
     built_min: float = float("nan")  # mean ratio against the undeformed cell: worst cell
     built_p1: float = float("nan")  # ... and 1st percentile
     moved: float = float("nan")
@@ -270,7 +277,8 @@ def _worst(r: np.ndarray) -> float:
 
 def _percentiles(v: np.ndarray) -> tuple[float, float]:
     """Median and p95 (between two infinite values: infinite, not NaN)."""
-    out = np.percentile(v, [50, 95])
+    with np.errstate(invalid="ignore"):  # inf - inf between two infinite values
+        out = np.percentile(v, [50, 95])
     return tuple(float(np.inf if x != x else x) for x in out)
 
 
@@ -291,8 +299,22 @@ def measure(case: rm.Case, geo: Geometry, pts: np.ndarray, row: Row) -> Row:
     row.layer_med = float(np.median(pick)) if pick.size else float("nan")
     row.layer_worst_away = _worst(pick)
     row.layer_worst_all = _worst(ratio)
-    row.moved = float(np.any(pts != case.points, axis=1).mean())
+    moved = np.any(pts != case.points, axis=1)
+    row.moved = float(moved.mean())
+    row.area_floor, row.aspect_floor = floors(geo, fs, moved)
     return row
+
+
+def floors(geo: Geometry, fs: FaceSet, moved: np.ndarray) -> tuple[float, float]:
+    """(area, aspect) p95 floors of a run that moved the nodes `moved`: the p95 of the
+    input's per-cell |log| ratios with every cell that has a moved node counted 0 (as if
+    the run had made it its undeformed shape). Cells with no moved node keep the input's
+    values whatever the run does, so no run that moves only these nodes gets below it: a
+    repair whose margin is ours, whatever its targets and optimizer."""
+    touched = np.zeros(fs.n_faces, dtype=bool)
+    for g in fs.groups:
+        touched[g.ids] = moved[g.nodes].any(axis=0)
+    return tuple(_percentiles(np.where(touched, 0.0, v))[1] for v in (geo.area_in, geo.aspect_in))
 
 
 # ------------------------------------------------------------------------------ runs
@@ -502,6 +524,27 @@ def summary(rows: list[Row]) -> list[str]:
     return out
 
 
+def floor_table(rows: list[Row], ours: str = "keep") -> list[str]:
+    """Per case with a finished peer row: the area and aspect p95 of `ours`, the floor its
+    moved nodes leave (`floors`) and the peer's; "(below)" marks a peer p95 under that
+    floor, which no repair with our margin can reach."""
+    out = ["| case | area p95: ours, floor, peer | aspect p95: ours, floor, peer |",
+           "|---|---|---|"]
+    by = {(r.case, r.column): r for r in rows}
+    for case in dict.fromkeys(r.case for r in rows):
+        us, peer = by.get((case, ours)), by.get((case, "peer"))
+        if us is None or peer is None or peer.inverted is None:
+            continue
+        cells = []
+        for p95, floor, theirs in ((us.area_p95, us.area_floor, peer.area_p95),
+                                   (us.aspect_p95, us.aspect_floor, peer.aspect_p95)):
+            mark = " (below)" if theirs < floor else ""
+            cells.append(f"{_g(p95)}, {_g(floor)}, {_g(theirs)}{mark}")
+        name = case + (" (held out)" if us.held_out else "")
+        out.append(f"| {name} | {cells[0]} | {cells[1]} |")
+    return out
+
+
 PICTURE = S("public", "n0012c", "turn", {"angle": 15.0, "reach": 0.1})
 
 
@@ -604,6 +647,9 @@ def main(argv: list[str] | None = None) -> int:
             args.json.write_text(json.dumps([r.__dict__ for r in rows], indent=1))
     print()
     print("\n".join(summary(rows)))
+    if any(r.column == "peer" for r in rows):
+        print()
+        print("\n".join(floor_table(rows)))
     return 0
 
 

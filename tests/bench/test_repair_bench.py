@@ -61,6 +61,41 @@ def test_the_undeformed_mesh_measures_1_against_itself_and_the_folded_input_0():
     assert given.built_min == 0.0 and given.inverted > 0
 
 
+def test_the_p95_floor_counts_every_cell_around_a_moved_node_as_undeformed():
+    """floors: the input's per-cell values, those of the cells with a moved node set to 0.
+    Constant values make the p95 exact: nothing moved keeps them, everything moved gives 0,
+    one face's nodes (under 5 % of the cells) leave the p95 where it was."""
+    from dataclasses import replace
+
+    case = rm.load(TINY)
+    geo = rb.geometry(case)
+    flat = replace(geo, area_in=np.full(case.n_faces, 2.0), aspect_in=np.full(case.n_faces, 3.0))
+    n = case.points.shape[0]
+    assert rb.floors(flat, case.faces, np.zeros(n, dtype=bool)) == (2.0, 3.0)
+    assert rb.floors(flat, case.faces, np.ones(n, dtype=bool)) == (0.0, 0.0)
+    one = np.zeros(n, dtype=bool)
+    one[case.faces.to_lists()[0]] = True
+    assert rb.floors(flat, case.faces, one) == (2.0, 3.0)
+
+
+def test_the_floor_is_the_input_p95_where_nothing_moved_and_under_a_repair_p95():
+    case = rm.load(TINY)
+    inp, keep = rb.run_case(case, ("keep",), timeout=120.0)
+    assert (inp.area_floor, inp.aspect_floor) == (inp.area_p95, inp.aspect_p95)
+    assert keep.area_floor <= keep.area_p95 and keep.aspect_floor <= keep.aspect_p95
+    assert keep.area_floor < inp.area_p95  # the repair moved the folded cells
+
+
+def test_the_floor_table_marks_a_peer_p95_below_our_floor():
+    base = dict(case="c", family="f", cells=10, folded=1)
+    keep = rb.Row(column="keep", inverted=0, area_p95=1.5, area_floor=0.9, aspect_p95=1.2,
+                  aspect_floor=0.5, **base)
+    peer = rb.Row(column="peer", inverted=0, area_p95=0.8, aspect_p95=0.6, **base)
+    stopped = rb.Row(column="peer", **{**base, "case": "d"})
+    lines = rb.floor_table([keep, peer, rb.Row(column="keep", **{**base, "case": "d"}), stopped])
+    assert lines[2:] == ["| c | 1.5, 0.9, 0.8 (below) | 1.2, 0.5, 0.6 |"]
+
+
 def test_keep_fast_repairs_without_the_lift_rounds_and_keeps_the_rest():
     assert rb.PARAMS["keep-fast"].lift_rounds == 0 and rb.PARAMS["keep"].lift_rounds > 0
     case = rm.load(TINY)
