@@ -56,7 +56,9 @@ from bench import repair_meshes as rm
 from bench.peer_invertible_maps import PeerMissing, run_peer
 from core import EEGTParams, FaceSet, mesh_stats, quality, untangle_and_smooth
 from core.choices import global_stage_on_device
+from core.metrics.face_quality import signed_face_areas as signed_areas
 from core.metrics.targets import Targets, prepare_targets
+from core.run.repair import touching
 
 AWAY = 6  # wall cells this many rings or more from every folded cell: "away from the fold"
 COLUMNS = ("keep", "keep-cl", "keep-fast", "ref", "whole", "peer")
@@ -142,15 +144,6 @@ def scale_specs() -> list[rm.Spec]:
 
 
 # ------------------------------------------------------------------------------ measures
-
-
-def signed_areas(p: np.ndarray, fs: FaceSet) -> np.ndarray:
-    out = np.empty(fs.n_faces)
-    for g in fs.groups:
-        x, y = p[g.nodes, 0], p[g.nodes, 1]
-        out[g.ids] = 0.5 * np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y,
-                                  axis=0)
-    return out
 
 
 def aspects(p: np.ndarray, fs: FaceSet) -> np.ndarray:
@@ -311,9 +304,7 @@ def floors(geo: Geometry, fs: FaceSet, moved: np.ndarray) -> tuple[float, float]
     the run had made it its undeformed shape). Cells with no moved node keep the input's
     values whatever the run does, so no run that moves only these nodes gets below it: a
     repair whose margin is ours, whatever its targets and optimizer."""
-    touched = np.zeros(fs.n_faces, dtype=bool)
-    for g in fs.groups:
-        touched[g.ids] = moved[g.nodes].any(axis=0)
+    touched = touching(fs, moved)
     return tuple(_percentiles(np.where(touched, 0.0, v))[1] for v in (geo.area_in, geo.aspect_in))
 
 
@@ -563,7 +554,7 @@ def picture(path: Path, mirror: Path | None = None) -> None:
     res = untangle_and_smooth(case.points, case.faces, fixed=case.fixed, params=PARAMS["keep"])
     fs = case.faces
     polys = [np.asarray(f) for f in fs.to_lists()]
-    moved_faces = np.array([res.moved[f].any() for f in polys])
+    moved_faces = touching(fs, np.asarray(res.moved, dtype=bool))
     folded = signed_areas(case.points, fs) <= 0
     from core.run import folded_faces
 
