@@ -32,7 +32,8 @@ percentile; the share of nodes moved (any bit); our region's margin in rings; se
 
 Run: `python -m bench.repair_bench` (the default table, about 10k cells), `--more` (other
 angles, seeds and sizes, 10k-60k), `--scale` (the 200k-1M cases), `--testcases` (SU2's
-regression test meshes, held out), `--only TEXT`, `--columns keep,ref,whole,peer`,
+regression test meshes, held out), `--unseen` (more of them, held out and run last),
+`--only TEXT`, `--columns keep,ref,whole,peer`,
 `--json FILE`.
 """
 
@@ -64,7 +65,7 @@ AWAY = 6  # wall cells this many rings or more from every folded cell: "away fro
 COLUMNS = ("keep", "keep-cl", "keep-fast", "ref", "whole", "peer")
 
 __all__ = ["AWAY", "COLUMNS", "Row", "default_specs", "measure", "more_specs", "run_case",
-           "scale_specs", "testcases_specs"]
+           "scale_specs", "testcases_specs", "unseen_specs"]
 
 S = rm.Spec
 
@@ -127,6 +128,23 @@ def testcases_specs() -> list[rm.Spec]:
         S("public", "tc-naca4412", "turn", {"angle": 35.0, "reach": 0.5}, held_out=True),
         S("public", "tc-naca4412", "slide", {"dx": 0.4, "reach": 0.5}, held_out=True),
     ]
+
+
+def unseen_specs() -> list[rm.Spec]:
+    """--unseen, all held out and run last: seven more of SU2's test meshes (a square
+    cylinder's hybrid RANS mesh, a pitching NACA 64A010's triangles, a laminar hybrid NACA
+    0012, a coarse RANS C-mesh, a rounded flat plate, a transonic stator blade between
+    periodic boundaries, a blunt body), deformed by `testcases_specs`' rule (a bluff body
+    turns about its centre; the stator's chord is its leading to trailing edge, the plate's
+    its length) and run only once the repair they check was final."""
+    cases = [("un-square", 35.0, 0.3), ("un-n64a010tri", 30.0, 0.35),
+             ("un-n0012hyb", 30.0, 0.4), ("un-n0012c113", 40.0, 0.35),
+             ("un-plate", 30.0, 0.35), ("un-stator", 40.0, 0.3), ("un-blunt", 50.0, 0.75)]
+    out = []
+    for key, angle, dx in cases:
+        out += [S("public", key, "turn", {"angle": angle, "reach": 0.5}, held_out=True),
+                S("public", key, "slide", {"dx": dx, "reach": 0.5}, held_out=True)]
+    return out
 
 
 def scale_specs() -> list[rm.Spec]:
@@ -595,6 +613,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--more", action="store_true", help="the other seeds, angles and sizes")
     ap.add_argument("--testcases", action="store_true",
                     help="SU2's regression test meshes instead (held out)")
+    ap.add_argument("--unseen", action="store_true",
+                    help="more of SU2's test meshes instead (held out, run last)")
     ap.add_argument("--only", default="", help="only cases whose name contains this")
     ap.add_argument("--columns", default=",".join(COLUMNS))
     ap.add_argument("--whole-max", type=int, default=20_000,
@@ -618,7 +638,8 @@ def main(argv: list[str] | None = None) -> int:
     if bad:
         ap.error(f"unknown column {bad[0]!r} (choose from {', '.join(COLUMNS)})")
     specs = [s for s in (scale_specs() if args.scale else more_specs() if args.more
-                       else testcases_specs() if args.testcases else default_specs())
+                       else testcases_specs() if args.testcases
+                       else unseen_specs() if args.unseen else default_specs())
              if args.only in s.name]
     rows: list[Row] = []
     print(table([])[0])

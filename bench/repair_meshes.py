@@ -418,13 +418,15 @@ def _gmsh_bl_once(gmsh, body: str, h: float, first: float, quads: bool):
 @dataclass(frozen=True)
 class Public:
     """A public SU2 mesh: its repository and commit, path, SHA-256's first 16 hex digits
-    ("" unchecked), the markers of its moving wall and its chord."""
+    ("" unchecked), the markers of its moving wall, its chord and whether it turns about
+    its centre (a bluff body) instead of its quarter chord."""
 
     repo: tuple[str, str]
     path: str
     digest: str
     wall: tuple[str, ...]
     chord: float = 1.0
+    centred: bool = False
 
 
 PUBLIC: dict[str, Public] = {
@@ -451,6 +453,24 @@ PUBLIC: dict[str, Public] = {
                           "67769badbccc20a3", ("Cylinder",)),
     "tc-naca4412": Public(SU2_TESTCASES, "deformation/naca4412/mesh_NACA4412_turb.su2",
                           "5c2a91605b5d0d9a", ("pressure", "TE", "suction")),
+    # `--unseen`: more of SU2's test meshes, run only once the code they check was final
+    "un-square": Public(SU2_TESTCASES, "unsteady/square_cylinder/mesh_square_turb_hybrid.su2",
+                        "f966f166f58eadcf", ("square",), centred=True),
+    "un-n64a010tri": Public(SU2_TESTCASES,
+                            "unsteady/pitching_naca64a010_euler/mesh_NACA64A010_inv.su2",
+                            "fdf038360ffb3724", ("airfoil",)),
+    "un-n0012hyb": Public(SU2_TESTCASES, "navierstokes/naca0012/mesh_NACA0012_lam_hybrid_v1.su2",
+                          "5d44d67319dba2c5", ("airfoil",)),
+    "un-n0012c113": Public(SU2_TESTCASES, "disc_adj_rans/naca0012/n0012_113-33.su2",
+                           "9a872a3de5a1b6b6", ("airfoil",)),
+    "un-plate": Public(SU2_TESTCASES,
+                       "py_wrapper/flatPlate_rigidMotion/2D_FlatPlate_Rounded.su2",
+                       "9ebf9edc75058ec8", ("plate",), chord=0.035),
+    "un-stator": Public(SU2_TESTCASES,
+                        "turbomachinery/transonic_stator_2D/mesh_stator_turb.su2",
+                        "08c74dd9617f66f6", ("airfoil",), chord=0.068),
+    "un-blunt": Public(SU2_TESTCASES, "euler/bluntbody/blunt_91.su2", "ed9020437ac45665",
+                       ("wall",), centred=True),
 }
 
 
@@ -527,7 +547,8 @@ def make(spec: Spec, mirror: Path | None = None) -> Case:
     params = {k: v for k, v in spec.params.items() if k != "first"}
     lo, hi = ref[wall].min(axis=0), ref[wall].max(axis=0)
     round_body = spec.mesh.startswith("ogrid") or spec.mesh.endswith("cyl") or \
-        str(spec.size).endswith("cylinder")
+        str(spec.size).endswith("cylinder") or \
+        (spec.mesh == "public" and PUBLIC[str(spec.size)].centred)
     # turned about the body's centre (a cylinder) or its quarter chord (an airfoil)
     params.setdefault("centre", (float(lo[0] + (0.5 if round_body else 0.25) * (hi[0] - lo[0])),
                                  float(0.5 * (lo[1] + hi[1]))))

@@ -206,3 +206,33 @@ def test_a_repeated_run_that_stops_is_named_and_left_out_of_the_median(monkeypat
     row = {r.column: r for r in rb.run_case(case, ("keep",), timeout=120.0, repeat=3)}["keep"]
     assert row.seconds == 2.0 and row.inverted == 0
     assert row.note == " 1 of 3 runs stopped or raised (not in the median)"
+
+
+def test_unseen_cases_are_held_out_pinned_and_named_once():
+    specs = rb.unseen_specs()
+    names = [s.name for s in specs]
+    assert len(names) == len(set(names)) == 14
+    assert all(s.held_out and s.mesh == "public" for s in specs)
+    assert all(len(rm.PUBLIC[str(s.size)].digest) == 16 for s in specs)
+    assert {s.motion for s in specs} == {"turn", "slide"}
+
+
+def _folded(spec: rm.Spec) -> tuple[int, int]:
+    from core.run import folded_faces
+
+    case = rm.make(spec)
+    return int(folded_faces(case.points, case.faces, ~case.fixed).sum()), case.n_faces
+
+
+@pytest.mark.parametrize("spec", rb.unseen_specs(), ids=lambda s: s.name)
+def test_unseen_case_takes_the_smallest_step_that_folds_one_percent(spec):
+    try:
+        rm.public_file(str(spec.size))
+    except FileNotFoundError as exc:
+        pytest.skip(str(exc))
+    key, step = ("angle", 5.0) if spec.motion == "turn" else ("dx", 0.05)
+    folded, cells = _folded(spec)
+    assert folded >= max(20, 0.01 * cells)
+    smaller = {**spec.params, key: round(spec.params[key] - step, 2)}
+    folded, cells = _folded(rm.Spec(spec.mesh, spec.size, spec.motion, smaller, True))
+    assert folded < max(20, 0.01 * cells)
