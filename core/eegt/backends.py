@@ -107,8 +107,10 @@ def make_engine(
         raise ValueError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend in ("opencl", "auto"):
         cls, why = _opencl_engine_class()
-        if cls is not None and not uses_device_engine(backend, faces.n_faces):
-            # the global stage's device solver runs on CPU devices only (one work-item)
+        if cls is not None and (not uses_device_engine(backend, faces.n_faces)
+                                or not np.any(free)):
+            # the global stage's device solver runs on CPU devices only (one work-item);
+            # with every node held (a hopeless part) the device has nothing to move
             name = HYBRID if _device_is_cpu() else SMALL_ON_GPU
             return NumpyEngine(*setup), name
         if cls is not None:

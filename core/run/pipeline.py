@@ -50,6 +50,7 @@ from .algorithm1 import smooth_loop, untangle_loop
 from .harmonic import harmonic_positions
 from .hopeless import hopeless_nodes, hopeless_note
 from .hopeless_groups import hopeless_groups, hopeless_groups_note
+from .hopeless_winding import hopeless_winding, hopeless_winding_note
 from .repair import REGION, WHOLE, Repaired, keep_targets, repair_folds, touching
 
 __all__ = ["LOCAL_MIN_FACES", "Cancelled", "EEGTResult", "as_given", "free_nodes",
@@ -304,9 +305,14 @@ def _prepare(points, faces, fixed, params: EEGTParams, targets, reference_points
     if rims.nodes.size:
         free = free.copy()
         free[rims.nodes] = False
+    # ... and parts whose fixed boundary crosses itself and winds negatively somewhere
+    wound = hopeless_winding(p, fs, free, edges if kept is None else None)
+    if wound.nodes.size:
+        free = free.copy()
+        free[wound.nodes] = False
     frozen = frozen_faces(given, fs, free)
-    why = "; ".join(w for w in (hopeless_note(held), hopeless_groups_note(rims, scale * scale))
-                    if w)
+    why = "; ".join(w for w in (hopeless_note(held), hopeless_groups_note(rims, scale * scale),
+                                hopeless_winding_note(wound)) if w)
     return _Mesh(p, fs, tg, free, center, scale, work, motion, frozen, renumbered, why, kept,
                  corners)
 
@@ -357,6 +363,12 @@ def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
     center, scale = normalisation(p, fs)
     _check_orientation((p - center) / scale, fs)
     bad = inverted_corners(p, fs)
+    # a part whose fixed boundary winds negatively somewhere is held before any attempt
+    # (each attempt's run would find it again, margin after margin)
+    wound = hopeless_winding(p, fs, movable, edges)
+    if wound.nodes.size:
+        movable = movable.copy()
+        movable[wound.nodes] = False
     seed = bad & touching(fs, movable)
     keep = params.target == "keep"
     if not seed.any():
@@ -364,6 +376,8 @@ def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
         before = stats_of(_outside_stats(p, fs, region, bad, movable, whole, keep,
                                          keep_as_given, params))
         text = "no folded face a move can change: nothing moved (region 'folds')"
+        if wound.nodes.size:
+            text += f"; {hopeless_winding_note(wound)}"
         return EEGTResult(p.copy(), "valid" if before.n_inverted == 0 else "failed", before,
                           before, 0, 0, time.perf_counter() - t0, backend, text,
                           np.zeros(n, dtype=bool))
@@ -384,6 +398,8 @@ def _untangle_folds(points, faces, fixed, params: EEGTParams, backend: str,
     message = (f"folds only: {int(done.region.sum())} of {fs.n_faces} faces ({done.rings} "
                f"rings around the folded ones) may move, every other vertex kept; "
                f"{res.message}")
+    if wound.nodes.size:
+        message += f"; {hopeless_winding_note(wound)}"
     return EEGTResult(done.points, status, before, after, res.untangle_iterations,
                       res.smooth_iterations, time.perf_counter() - t0, res.backend, message,
                       moved, res.global_iterations, res.n_frozen, res.n_target_fallback,
@@ -589,8 +605,8 @@ def stuck_note(ids: np.ndarray) -> str:
     shown = ", ".join(str(int(i)) for i in ids[:5]) + (", ..." if ids.size > 5 else "")
     what = (f"face {shown} stays inverted" if ids.size == 1
             else f"{ids.size} faces stay inverted (faces {shown})")
-    return (f"{what}: a corner made of fixed vertices only (boundary, pinned or a slide "
-            "corner) is straight or inverted, so no move can fix it")
+    return (f"{what}: a corner made of fixed vertices only (boundary, pinned, a slide "
+            "corner or held as hopeless) is straight or inverted, so no move can fix it")
 
 
 def frozen_faces(p: np.ndarray, faces, free: np.ndarray) -> np.ndarray:

@@ -991,3 +991,19 @@ def test_restarted_engine_moves_nothing_on_a_fixed_boundary(cpu_device):
     out = again.points()
     assert np.array_equal(out[~free], p[~free])
     assert np.any(out[free] != p[free])
+
+
+def test_a_run_whose_free_nodes_are_all_held_as_hopeless_gives_numpys_answer(device):
+    """A boundary node dragged through the far side of a strip: its part is certified
+    hopeless and every free node held (core/run/hopeless_winding.py). The device has nothing
+    to move; the run fails at once as on NumPy instead of asking for empty buffers."""
+    m = 7
+    xs, ys = np.meshgrid(np.arange(m, dtype=float), np.arange(4, dtype=float))
+    p = np.column_stack([xs.ravel(), ys.ravel()])
+    p[3] = [3.0, 4.0]
+    f = [[m * j + i, m * j + i + 1, m * j + i + m + 1, m * j + i + m]
+         for j in range(3) for i in range(6)]
+    ref = untangle_and_smooth(p, f, backend="numpy")
+    res = untangle_and_smooth(p, f, backend="opencl")
+    assert res.status == ref.status == "failed"
+    assert np.array_equal(res.points, ref.points) and res.message == ref.message
