@@ -9,9 +9,9 @@ where the chain winds negatively, no valid mesh exists with that boundary. When 
 on the boundary of a connected part is held, the chain is fixed and one such point
 certifies the part hopeless: a wall slid through the far field or a periodic boundary, a
 border dragged across itself. Its free nodes are held (its inverted faces frozen and
-reported with the point), and the rest of the mesh is run as usual; without the
-certificate the optimizer searches until it gives up (a 22 766-cell stator whose blade was
-slid across its periodic boundary: 457 s, docs/repair.md).
+reported with two of its boundary edges that cross), and the rest of the mesh is run as
+usual; without the certificate the optimizer searches until it gives up (a 22 766-cell
+stator whose blade was slid across its periodic boundary: 457 s, docs/repair.md).
 
 Only crossings of the boundary are examined, and only those of boundary edges with a node
 on an inverted face (`MAX_PAIRS` edge pairs at most): the four points around each crossing,
@@ -46,11 +46,12 @@ CLEAR = 1e-9  # ... used only this far or farther from every boundary edge (boun
 
 @dataclass(frozen=True)
 class HopelessWinding:
-    """The held nodes (ascending) and, per certified part, a point (x, y) in the caller's
-    coordinates, the boundary's winding number around it (< 0) and the part's face count."""
+    """The held nodes (ascending) and, per certified part, two of its boundary edges that
+    cross (node ids a, b, c, d: edges a - b and c - d, in the caller's numbering), the
+    boundary's winding number beside that crossing (< 0) and the part's face count."""
 
     nodes: np.ndarray
-    parts: tuple[tuple[float, float, int, int], ...]
+    parts: tuple[tuple[int, int, int, int, int, int], ...]
 
 
 _NONE = HopelessWinding(np.zeros(0, dtype=np.int64), ())
@@ -78,14 +79,13 @@ def hopeless_winding(p: np.ndarray, fs: FaceSet, free: np.ndarray,
     if cand.size == 0 or cand.size * lo.size > MAX_PAIRS:
         return _NONE
     a, b = (p[lo] - origin) / unit, (p[hi] - origin) / unit
-    pts = _beside_crossings(a, b, cand)
-    if pts.shape[0] == 0:
-        return _NONE
-    pts = pts[_clear_of(pts, a, b, CLEAR)]
+    pts, pairs = _beside_crossings(a, b, cand)
+    clear = _clear_of(pts, a, b, CLEAR)
+    pts, pairs = pts[clear], pairs[clear]
     w = _winding(pts, a, b, net)
     if not (w < 0).any():
         return _NONE
-    return _certified(fs, free, lo, hi, a, b, net, pts[w < 0] * unit + origin, pts[w < 0])
+    return _certified(fs, free, lo, hi, a, b, net, pts[w < 0], pairs[w < 0])
 
 
 def _near_inverted(p: np.ndarray, fs: FaceSet, lo: np.ndarray, hi: np.ndarray,
@@ -104,10 +104,12 @@ def _near_inverted(p: np.ndarray, fs: FaceSet, lo: np.ndarray, hi: np.ndarray,
     return near
 
 
-def _beside_crossings(a: np.ndarray, b: np.ndarray, cand: np.ndarray) -> np.ndarray:
-    """(K, 2) points around the proper crossings of the edges `cand` with every edge a -> b:
-    four per crossing, STEP x the shorter edge from it along each edge, either way."""
-    out = []
+def _beside_crossings(a: np.ndarray, b: np.ndarray, cand: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """((K, 2) points, (K, 2) the two crossing edges of each): points around the proper
+    crossings of the edges `cand` with every edge a -> b, four per crossing, STEP x the
+    shorter edge from it along each edge, either way."""
+    out, pairs = [], []
     rows = max(1, MAX_PAIRS // max(a.shape[0], 1) // 16)
     for lo in range(0, cand.size, rows):
         i = cand[lo:lo + rows][:, None]
@@ -129,7 +131,10 @@ def _beside_crossings(a: np.ndarray, b: np.ndarray, cand: np.ndarray) -> np.ndar
         h = (STEP * np.minimum(l1, l2))[:, None]
         u1, u2 = h * e1 / l1[:, None], h * e2 / l2[:, None]
         out += [x + u1 + u2, x + u1 - u2, x - u1 + u2, x - u1 - u2]
-    return np.concatenate(out) if out else np.zeros((0, 2))
+        pairs += [np.column_stack([cand[lo:lo + rows][ii], jj])] * 4
+    if not out:
+        return np.zeros((0, 2)), np.zeros((0, 2), dtype=np.int64)
+    return np.concatenate(out), np.concatenate(pairs)
 
 
 def _chunks(k: int, e: int):
@@ -173,11 +178,11 @@ def _winding(q: np.ndarray, a: np.ndarray, b: np.ndarray, net: np.ndarray,
 
 
 def _certified(fs: FaceSet, free: np.ndarray, lo: np.ndarray, hi: np.ndarray, a: np.ndarray,
-               b: np.ndarray, net: np.ndarray, where: np.ndarray, pts: np.ndarray
+               b: np.ndarray, net: np.ndarray, pts: np.ndarray, pairs: np.ndarray
                ) -> HopelessWinding:
     """The parts (connected through their faces) whose own boundary is held and winds
-    negatively around one of the points `pts` (the boundary's frame, edges a -> b; `where`:
-    the same points in the caller's coordinates): their free nodes and a witness each."""
+    negatively around one of the points `pts` (the boundary's frame, edges a -> b; `pairs`:
+    the two boundary edges crossing beside each): their free nodes and a witness each."""
     n = free.size
     ea = np.concatenate([g.nodes.ravel() for g in fs.groups])
     eb = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in fs.groups])
@@ -197,7 +202,9 @@ def _certified(fs: FaceSet, free: np.ndarray, lo: np.ndarray, hi: np.ndarray, a:
         if members.size == 0:
             continue
         nodes.append(members)
-        parts.append((float(where[i, 0]), float(where[i, 1]), int(w[i, c]), int(n_faces[c])))
+        e, f = pairs[i]
+        parts.append((int(lo[e]), int(hi[e]), int(lo[f]), int(hi[f]), int(w[i, c]),
+                      int(n_faces[c])))
     if not nodes:
         return _NONE
     return HopelessWinding(np.sort(np.concatenate(nodes)), tuple(parts))
@@ -208,11 +215,12 @@ def hopeless_winding_note(h: HopelessWinding) -> str:
     if not h.parts:
         return ""
 
-    def one(x: float, y: float, w: int, faces: int) -> str:
-        return (f"the fixed boundary of {faces} faces crosses itself and winds {w} times "
-                f"around ({x:.6g}, {y:.6g}): faces that are all valid cover each point as "
-                "many times as their boundary winds around it, so no positions of their free "
-                "vertices make them valid (their free vertices are held)")
+    def one(a: int, b: int, c: int, d: int, w: int, faces: int) -> str:
+        return (f"the fixed boundary of {faces} faces crosses itself (its edges {a}-{b} and "
+                f"{c}-{d}) and winds {w} times beside that crossing: faces that are all "
+                "valid cover each point as many times as their boundary winds around it, so "
+                "no positions of their free vertices make them valid (their free vertices "
+                "are held)")
 
     more = len(h.parts) - 2
     return "; ".join(one(*t) for t in h.parts[:2]) + (f"; {more} more such parts"

@@ -88,3 +88,20 @@ def test_gmsh41_file_without_physical_groups_is_repaired_and_written_back(bpy, e
         la, lb = a.splitlines(), b.splitlines()
         assert len(la) == len(lb)
         assert sum(x != y for x, y in zip(la, lb)) == moved.sum()
+
+
+def test_cylinder_moved_through_the_outlet_exits_3_at_once_naming_where(bpy, ext, tmp_path):
+    """The cylinder's held wall slid across the held outlet: the boundary winds -1 times
+    inside the part of the cylinder beyond the outlet, so no positions make the mesh valid
+    (core/run/hopeless_winding.py). The repair says so before any iteration and moves
+    nothing."""
+    src = channel_msh(tmp_path / "c.msh", shift=2.95)
+    out, rep = tmp_path / "r.msh", tmp_path / "r.json"
+    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
+                                          "--quiet"])[0]
+    (o,) = json.loads(rep.read_text())["objects"]
+    assert code == 3, o
+    assert o["status"] == "failed" and o["after"]["n_inverted"] == o["before"]["n_inverted"] > 0
+    assert "crosses itself (its edges " in o["message"], o["message"]
+    assert ") and winds -1 times beside that crossing" in o["message"]
+    assert not _moved(src, out).any()
