@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..mesh.faces import FaceSet, face_subset
+from ..mesh.faces import FaceSet, face_subset, next_corner
 from ..mesh.topology import EdgeInfo
 from ..metrics.face_quality import inverted_corners
 from ..uv.uv_layout import components
@@ -110,9 +110,8 @@ def _beside_crossings(a: np.ndarray, b: np.ndarray, cand: np.ndarray
     crossings of the edges `cand` with every edge a -> b, four per crossing, STEP x the
     shorter edge from it along each edge, either way."""
     out, pairs = [], []
-    rows = max(1, MAX_PAIRS // max(a.shape[0], 1) // 16)
-    for lo in range(0, cand.size, rows):
-        i = cand[lo:lo + rows][:, None]
+    for sl in _chunks(cand.size, a.shape[0]):
+        i = cand[sl][:, None]
         j = np.arange(a.shape[0])[None, :]
         d1, d2 = b[i] - a[i], b[j] - a[j]  # (I, 1, 2), (1, E, 2)
         r = a[j] - a[i]
@@ -125,20 +124,21 @@ def _beside_crossings(a: np.ndarray, b: np.ndarray, cand: np.ndarray
         if ii.size == 0:
             continue
         e1, e2 = d1[ii, 0], d2[0, jj]
-        x = a[cand[lo:lo + rows]][ii] + s[ii, jj][:, None] * e1
+        x = a[cand[sl]][ii] + s[ii, jj][:, None] * e1
         l1 = np.sqrt(e1[:, 0] * e1[:, 0] + e1[:, 1] * e1[:, 1])
         l2 = np.sqrt(e2[:, 0] * e2[:, 0] + e2[:, 1] * e2[:, 1])
         h = (STEP * np.minimum(l1, l2))[:, None]
         u1, u2 = h * e1 / l1[:, None], h * e2 / l2[:, None]
         out += [x + u1 + u2, x + u1 - u2, x - u1 + u2, x - u1 - u2]
-        pairs += [np.column_stack([cand[lo:lo + rows][ii], jj])] * 4
+        pairs += [np.column_stack([cand[sl][ii], jj])] * 4
     if not out:
         return np.zeros((0, 2)), np.zeros((0, 2), dtype=np.int64)
     return np.concatenate(out), np.concatenate(pairs)
 
 
 def _chunks(k: int, e: int):
-    """Slices of k points, so that each holds about MAX_PAIRS / 16 point-edge pairs."""
+    """Slices of k items (points, edges) met with each of e edges, so that each slice holds
+    about MAX_PAIRS / 16 pairs."""
     rows = max(1, MAX_PAIRS // 16 // max(e, 1))
     return (slice(lo, min(k, lo + rows)) for lo in range(0, k, rows))
 
@@ -183,18 +183,12 @@ def _certified(fs: FaceSet, free: np.ndarray, lo: np.ndarray, hi: np.ndarray, a:
     """The parts (connected through their faces) whose own boundary is held and winds
     negatively around one of the points `pts` (the boundary's frame, edges a -> b; `pairs`:
     the two boundary edges crossing beside each): their free nodes and a witness each."""
-    n = free.size
-    ea = np.concatenate([g.nodes.ravel() for g in fs.groups])
-    eb = np.concatenate([np.roll(g.nodes, -1, axis=0).ravel() for g in fs.groups])
-    part = components(n, ea, eb)
+    part = components(free.size, fs.indices, fs.indices[next_corner(fs)])  # by face edges
     k = int(part.max()) + 1
     w = _winding(pts, a, b, net, part[lo], k)  # (K, parts)
     # every boundary node of the part held (an edge's two nodes are in one part)
     whole = np.bincount(part[lo], free[lo] | free[hi], k) == 0
-    face_part = np.empty(fs.n_faces, dtype=np.int64)
-    for g in fs.groups:
-        face_part[g.ids] = part[g.nodes[0]]
-    n_faces = np.bincount(face_part, minlength=k)
+    n_faces = np.bincount(part[fs.indices[fs.offsets[:-1]]], minlength=k)  # first corners
     nodes, parts = [], []
     for c in np.flatnonzero(whole & (w < 0).any(axis=0)):
         i = int(np.argmin(w[:, c]))
