@@ -118,3 +118,22 @@ def spun_hole(rings: int, around: int, degrees: float, triangles: bool):
     if triangles:
         return pts, {3: np.concatenate([np.column_stack([a, c, b]), np.column_stack([a, d, c])])}
     return pts, {4: np.column_stack([a, d, c, b])}
+
+
+def quad_strip(nx: int = 6, ny: int = 3, x0: float = 0.0) -> tuple[np.ndarray, list[list[int]]]:
+    """nx x ny unit quads from (x0, 0), counterclockwise; node (i, j) is j (nx + 1) + i."""
+    m = nx + 1
+    xs, ys = np.meshgrid(np.arange(m, dtype=float) + x0, np.arange(ny + 1, dtype=float))
+    p = np.column_stack([xs.ravel(), ys.ravel()])
+    return p, [[m * j + i, m * j + i + 1, m * j + i + m + 1, m * j + i + m]
+               for j in range(ny) for i in range(nx)]
+
+
+def spiked_strip(x0: float = 0.0) -> tuple[np.ndarray, list[list[int]]]:
+    """The 6 x 3 `quad_strip` with bottom boundary node 3 dragged up through the top
+    boundary to (x0 + 3, 4): inside the spike, above the top edge, the boundary winds -1
+    times, so no positions of the interior nodes make the faces valid."""
+    p, f = quad_strip(x0=x0)
+    p[3] = [x0 + 3.0, 4.0]
+    return p, f
+

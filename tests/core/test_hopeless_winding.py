@@ -1,40 +1,25 @@
 """Parts whose fixed boundary crosses itself and winds negatively somewhere are held before
 the run (core/run/hopeless_winding.py): no optimizer iteration is spent on them, the
-message gives the point and the winding number, the rest of the mesh runs as usual."""
+message names two boundary edges that cross and the winding number, the rest of the mesh
+runs as usual."""
 
 import numpy as np
+from meshdata import quad_strip, spiked_strip
 
 from core import EEGTParams, mesh_stats, untangle_and_smooth
 from core.mesh.faces import as_faceset
 from core.run.hopeless_winding import hopeless_winding
 
 
-def _strip(nx: int = 6, ny: int = 3, x0: float = 0.0) -> tuple[np.ndarray, list[list[int]]]:
-    """nx x ny unit quads from (x0, 0), counterclockwise."""
-    m = nx + 1
-    xs, ys = np.meshgrid(np.arange(m, dtype=float) + x0, np.arange(ny + 1, dtype=float))
-    p = np.column_stack([xs.ravel(), ys.ravel()])
-    return p, [[m * j + i, m * j + i + 1, m * j + i + m + 1, m * j + i + m]
-               for j in range(ny) for i in range(nx)]
-
-
-def _spiked(x0: float = 0.0) -> tuple[np.ndarray, list[list[int]]]:
-    """The strip with bottom boundary node 3 dragged up through the top boundary to (3, 4):
-    inside the spike, above the top edge, the boundary winds -1 times."""
-    p, f = _strip(x0=x0)
-    p[3] = [x0 + 3.0, 4.0]
-    return p, f
-
-
 def _folded(x0: float = 0.0) -> tuple[np.ndarray, list[list[int]]]:
     """The strip with interior node (2, 1) pushed across its neighbour: a fold a move fixes."""
-    p, f = _strip(x0=x0)
+    p, f = quad_strip(x0=x0)
     p[7 + 2] = [x0 + 3.6, 1.4]
     return p, f
 
 
 def test_a_boundary_node_dragged_through_the_far_side_is_held_at_once_with_the_point():
-    p, f = _spiked()
+    p, f = spiked_strip()
     before = mesh_stats(p, f).n_inverted
     assert before > 0
     res = untangle_and_smooth(p, f)
@@ -48,7 +33,7 @@ def test_a_boundary_node_dragged_through_the_far_side_is_held_at_once_with_the_p
 
 
 def test_the_witness_is_a_spike_edge_crossing_the_far_edge():
-    p, f = _spiked()
+    p, f = spiked_strip()
     fs = as_faceset(f, p.shape[0])
     free = np.zeros(p.shape[0], dtype=bool)
     free[[8, 9, 10, 11, 12, 15, 16, 17, 18, 19]] = True  # the interior nodes
@@ -62,7 +47,7 @@ def test_the_witness_is_a_spike_edge_crossing_the_far_edge():
 
 
 def test_a_fold_beside_the_crossed_part_is_untangled_and_the_part_kept():
-    a, fa = _spiked()
+    a, fa = spiked_strip()
     b, fb = _folded(x0=10.0)
     p = np.vstack([a, b])
     f = fa + [[v + len(a) for v in face] for face in fb]
@@ -76,7 +61,7 @@ def test_a_fold_beside_the_crossed_part_is_untangled_and_the_part_kept():
 
 
 def test_a_boundary_with_a_free_node_is_not_examined():
-    p, f = _spiked()
+    p, f = spiked_strip()
     fs = as_faceset(f, p.shape[0])
     free = np.zeros(p.shape[0], dtype=bool)
     free[[8, 9, 10, 11, 12, 15, 16, 17, 18, 19]] = True
@@ -112,7 +97,7 @@ def test_a_self_overlapping_ring_that_winds_twice_is_not_held_and_is_untangled()
 
 
 def test_the_repair_of_a_crossed_boundary_fails_at_once_and_moves_nothing():
-    p, f = _spiked()
+    p, f = spiked_strip()
     res = untangle_and_smooth(p, f, params=EEGTParams(target="keep", region="folds"))
     assert res.status == "failed" and not res.moved.any()
     assert res.global_iterations == 0
@@ -120,7 +105,7 @@ def test_the_repair_of_a_crossed_boundary_fails_at_once_and_moves_nothing():
 
 
 def test_a_repair_beside_a_crossed_part_repairs_the_fold_and_names_the_part():
-    a, fa = _spiked()
+    a, fa = spiked_strip()
     b, fb = _folded(x0=10.0)
     p = np.vstack([a, b])
     f = fa + [[v + len(a) for v in face] for face in fb]

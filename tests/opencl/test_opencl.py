@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
-from meshdata import load, load2d
+from meshdata import load, load2d, spiked_strip
 
 from bench.fuzz import merge_faces
 from core.eegt import backends
@@ -997,12 +997,7 @@ def test_a_run_whose_free_nodes_are_all_held_as_hopeless_gives_numpys_answer(dev
     """A boundary node dragged through the far side of a strip: its part is certified
     hopeless and every free node held (core/run/hopeless_winding.py). The device has nothing
     to move; the run fails at once as on NumPy instead of asking for empty buffers."""
-    m = 7
-    xs, ys = np.meshgrid(np.arange(m, dtype=float), np.arange(4, dtype=float))
-    p = np.column_stack([xs.ravel(), ys.ravel()])
-    p[3] = [3.0, 4.0]
-    f = [[m * j + i, m * j + i + 1, m * j + i + m + 1, m * j + i + m]
-         for j in range(3) for i in range(6)]
+    p, f = spiked_strip()
     ref = untangle_and_smooth(p, f, backend="numpy")
     res = untangle_and_smooth(p, f, backend="opencl")
     assert res.status == ref.status == "failed"
