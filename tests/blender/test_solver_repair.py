@@ -17,24 +17,29 @@ def _moved(src, out) -> np.ndarray:
     return (meshio.read(src).points != meshio.read(out).points).any(axis=1)
 
 
+def _run(ext, src, out, *flags: str) -> tuple[int, dict]:
+    """The command on `src` into `out` (quiet, its JSON report beside it): (exit code, the
+    report's one object)."""
+    rep = out.with_suffix(".json")
+    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
+                                          "--quiet", *flags])[0]
+    (o,) = json.loads(rep.read_text())["objects"]
+    return code, o
+
+
 def test_solver_mesh_default_is_a_repair_that_keeps_every_node_outside_the_margin(
         bpy, ext, tmp_path):
     src = channel_msh(tmp_path / "c.msh", shift=0.15)
-    out, rep = tmp_path / "r.msh", tmp_path / "r.json"
-    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
-                                          "--quiet"])[0]
-    (o,) = json.loads(rep.read_text())["objects"]
+    out = tmp_path / "r.msh"
+    code, o = _run(ext, src, out)
     assert code == 0, o
     assert o["status"] == "untangled" and o["after"]["n_inverted"] == 0
     assert o["message"].startswith("folds only: ")
     moved = _moved(src, out)
     n_points = moved.size
     assert 0 < moved.sum() < 0.25 * n_points  # the margin around the cylinder only
-    whole_out, whole_rep = tmp_path / "w.msh", tmp_path / "w.json"
-    code = ext.operators.command.cli.run([str(src), "-o", str(whole_out), "--report",
-                                          str(whole_rep), "--quiet", "--target", "regular",
-                                          "--region", "mesh"])[0]
-    (w,) = json.loads(whole_rep.read_text())["objects"]
+    whole_out = tmp_path / "w.msh"
+    code, w = _run(ext, src, whole_out, "--target", "regular", "--region", "mesh")
     assert code == 0 and w["after"]["n_inverted"] == 0
     assert not w["message"].startswith("folds only")
     assert _moved(src, whole_out).sum() > 0.5 * n_points  # every free node moved
@@ -58,10 +63,8 @@ def test_repair_report_line_gives_the_regular_mean_ratio_beside_the_targets(bpy,
 
 def test_repair_of_a_valid_solver_mesh_writes_it_unchanged(bpy, ext, tmp_path):
     src = channel_msh(tmp_path / "v.msh", shift=0.0)
-    out, rep = tmp_path / "o.msh", tmp_path / "o.json"
-    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
-                                          "--quiet"])[0]
-    (o,) = json.loads(rep.read_text())["objects"]
+    out = tmp_path / "o.msh"
+    code, o = _run(ext, src, out)
     assert code == 0 and o["status"] == "valid"
     assert not _moved(src, out).any()
 
@@ -73,10 +76,8 @@ def test_gmsh41_file_without_physical_groups_is_repaired_and_written_back(bpy, e
     no face inverted, the file's bytes but the moved nodes' coordinates (meshio's 4.1
     writer refused it: 'gmsh:physical')."""
     src = channel_msh(tmp_path / "p.msh", binary=binary, shift=0.15, groups=False)
-    out, rep = tmp_path / "r.msh", tmp_path / "r.json"
-    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
-                                          "--quiet"])[0]
-    (o,) = json.loads(rep.read_text())["objects"]
+    out = tmp_path / "r.msh"
+    code, o = _run(ext, src, out)
     assert code == 0, o
     assert o["before"]["n_inverted"] > 0 and o["after"]["n_inverted"] == 0
     moved = _moved(src, out)
@@ -96,12 +97,11 @@ def test_cylinder_moved_through_the_outlet_exits_3_at_once_naming_where(bpy, ext
     (core/run/hopeless_winding.py). The repair says so before any iteration and moves
     nothing."""
     src = channel_msh(tmp_path / "c.msh", shift=2.95)
-    out, rep = tmp_path / "r.msh", tmp_path / "r.json"
-    code = ext.operators.command.cli.run([str(src), "-o", str(out), "--report", str(rep),
-                                          "--quiet"])[0]
-    (o,) = json.loads(rep.read_text())["objects"]
+    out = tmp_path / "r.msh"
+    code, o = _run(ext, src, out)
     assert code == 3, o
     assert o["status"] == "failed" and o["after"]["n_inverted"] == o["before"]["n_inverted"] > 0
     assert "crosses itself (its edges " in o["message"], o["message"]
     assert ") and winds -1 times beside that crossing" in o["message"]
+    assert o["untangle_iterations"] == o["global_iterations"] == 0
     assert not _moved(src, out).any()
