@@ -439,7 +439,7 @@ PUBLIC: dict[str, Public] = {
                         "incompressible_flow/Inc_Inviscid_Hydrofoil/mesh_NACA0012_5deg_6814.su2",
                         "26d0d1dcfdfb2643", ("airfoil",)),
     "cylinder": Public(SU2_TUTORIALS, "compressible_flow/Laminar_Cylinder/mesh_cylinder_lam.su2",
-                       "", ("cylinder",)),
+                       "", ("cylinder",), centred=True),
     "rae2822": Public(SU2_TUTORIALS,
                       "design/Turbulent_2D_Constrained_RAE2822/mesh_RAE2822_turb.su2", "",
                       ("AIRFOIL",)),
@@ -450,7 +450,7 @@ PUBLIC: dict[str, Public] = {
                              "harmonic_balance/hb_rans_preconditioning/n64a010_turb.su2",
                              "279a08566f5d6f92", ("airfoil",)),
     "tc-cylinder": Public(SU2_TESTCASES, "disc_adj_rans/cylinder/mesh_cylinder.su2",
-                          "67769badbccc20a3", ("Cylinder",)),
+                          "67769badbccc20a3", ("Cylinder",), centred=True),
     "tc-naca4412": Public(SU2_TESTCASES, "deformation/naca4412/mesh_NACA4412_turb.su2",
                           "5c2a91605b5d0d9a", ("pressure", "TE", "suction")),
     # `--unseen`: more of SU2's test meshes, run only once the code they check was final
@@ -547,7 +547,6 @@ def make(spec: Spec, mirror: Path | None = None) -> Case:
     params = {k: v for k, v in spec.params.items() if k != "first"}
     lo, hi = ref[wall].min(axis=0), ref[wall].max(axis=0)
     round_body = spec.mesh.startswith("ogrid") or spec.mesh.endswith("cyl") or \
-        str(spec.size).endswith("cylinder") or \
         (spec.mesh == "public" and PUBLIC[str(spec.size)].centred)
     # turned about the body's centre (a cylinder) or its quarter chord (an airfoil)
     params.setdefault("centre", (float(lo[0] + (0.5 if round_body else 0.25) * (hi[0] - lo[0])),
